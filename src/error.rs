@@ -1,0 +1,75 @@
+//! The crate's error type.
+
+use thiserror::Error as ThisError;
+
+/// Everything that can go wrong in `rdlidar`, as a typed value.
+///
+/// Building an operator expression whose shapes do not fit, invalid parameters and failed checks
+/// are reported here; applying an operator to buffers of the wrong length is a programming error and
+/// panics instead (see [`crate::operator::LinearOperator`]).
+#[derive(Debug, Clone, PartialEq, ThisError)]
+#[non_exhaustive]
+pub enum Error {
+    /// Two parts of an expression (or an operator and a buffer) disagree on a length.
+    #[error("shape mismatch in {context}: expected {expected}, found {found}")]
+    ShapeMismatch {
+        /// Where the mismatch was found, e.g. `"compose: ncols of left vs nrows of right"`.
+        context: String,
+        /// The length that was required.
+        expected: usize,
+        /// The length that was given.
+        found: usize,
+    },
+    /// A parameter is outside its valid range.
+    #[error("invalid parameter `{name}`: {reason}")]
+    InvalidParameter {
+        /// The parameter's name.
+        name: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// An index is not below the length it indexes.
+    #[error("index {index} out of bounds for length {len} in {context}")]
+    IndexOutOfBounds {
+        /// Where the index was used.
+        context: &'static str,
+        /// The offending index.
+        index: usize,
+        /// The length it must be below.
+        len: usize,
+    },
+    /// A value that must be finite is NaN or infinite.
+    #[error("non-finite value in {what}")]
+    NonFinite {
+        /// What contained it.
+        what: String,
+    },
+    /// The adjoint identity ⟨Ax, y⟩ = ⟨x, A*y⟩ does not hold within tolerance.
+    #[error("dot test failed: relative gap {gap:.3e} above tolerance {tolerance:.3e}")]
+    DotTestFailed {
+        /// The measured relative gap.
+        gap: f64,
+        /// The tolerance it was compared with.
+        tolerance: f64,
+    },
+}
+
+/// `Result` with the crate's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    pub(crate) fn shape(context: impl Into<String>, expected: usize, found: usize) -> Self {
+        Error::ShapeMismatch {
+            context: context.into(),
+            expected,
+            found,
+        }
+    }
+
+    pub(crate) fn param(name: &'static str, reason: impl Into<String>) -> Self {
+        Error::InvalidParameter {
+            name,
+            reason: reason.into(),
+        }
+    }
+}
