@@ -31,8 +31,9 @@
 //! assert!(report.gap < 1e-12);
 //!
 //! let normal = op.normal();
+//! let x: Vec<f64> = (0..20).map(|i| 1.0 / (1.0 + i as f64)).collect(); // D·x is constant
 //! let mut y = vec![0.0; 20];
-//! normal.apply(&vec![1.0; 20], &mut y); // a constant image has zero gradient
+//! normal.apply(&x, &mut y); // and a constant image has zero gradient
 //! assert!(y.iter().all(|v| v.abs() < 1e-12));
 //! # Ok(())
 //! # }

@@ -1,0 +1,48 @@
+//! `operator_norm` against the largest singular value from nalgebra's SVD.
+
+use proptest::prelude::*;
+use rdlidar::operator::{operator_norm, BoxedOperator, NormStop, PowerIteration, Zero};
+
+use crate::common::{any_expr, build, random_vec, reference};
+
+fn sigma_max(a: &ndarray::Array2<f64>) -> f64 {
+    let m = nalgebra::DMatrix::from_fn(a.nrows(), a.ncols(), |i, j| a[[i, j]]);
+    m.singular_values().iter().fold(0.0f64, |s, &v| s.max(v))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    #[test]
+    fn agrees_with_the_svd_on_dense_matrices(m in 1..=32usize, n in 1..=32usize, seed in any::<u64>()) {
+        let a = ndarray::Array2::from_shape_vec((m, n), random_vec(m * n, seed)).unwrap();
+        let op = rdlidar::operator::DenseMatrix::new(a.clone()).unwrap();
+        let est = operator_norm(&op, &PowerIteration { max_iter: 1000, seed, ..PowerIteration::default() }).unwrap();
+        let s = sigma_max(&a);
+        prop_assert!((est.value - s).abs() <= 0.01 * s, "estimate {} vs σ_max {s} ({:?})", est.value, est.stop);
+        prop_assert!(est.value <= s * (1.0 + 1e-12));
+    }
+
+    #[test]
+    fn agrees_with_the_svd_on_expressions(s in any_expr(2), seed in any::<u64>()) {
+        let op: BoxedOperator<f64> = build(&s);
+        let est = operator_norm(&op, &PowerIteration { max_iter: 1000, seed, ..PowerIteration::default() }).unwrap();
+        let want = sigma_max(&reference(&s));
+        prop_assert!((est.value - want).abs() <= 0.01 * want + 1e-12, "estimate {} vs σ_max {want}", est.value);
+    }
+}
+
+#[test]
+fn reports_how_it_stopped() {
+    let z = Zero::<f64>::new(3, 4);
+    let est = operator_norm(&z, &PowerIteration::default()).unwrap();
+    assert_eq!((est.value, est.stop), (0.0, NormStop::ZeroOperator));
+
+    let a = ndarray::Array2::from_shape_vec((6, 6), random_vec(36, 3)).unwrap();
+    let op = rdlidar::operator::DenseMatrix::new(a).unwrap();
+    let one = operator_norm(&op, &PowerIteration { max_iter: 1, ..PowerIteration::default() }).unwrap();
+    assert_eq!((one.iterations, one.stop), (1, NormStop::MaxIterations));
+    let full = operator_norm(&op, &PowerIteration::default()).unwrap();
+    assert_eq!(full.stop, NormStop::Converged);
+    assert!(full.iterations > 1 && full.value >= one.value);
+}
