@@ -44,6 +44,12 @@ pub enum Error {
         /// What contained it.
         what: String,
     },
+    /// A dense linear-algebra routine failed (e.g. LAPACK did not converge).
+    #[error("linear algebra failure: {reason}")]
+    LinearAlgebra {
+        /// What the routine reported.
+        reason: String,
+    },
     /// The adjoint identity ⟨Ax, y⟩ = ⟨x, A*y⟩ does not hold within tolerance.
     #[error("dot test failed: relative gap {gap:.3e} above tolerance {tolerance:.3e}")]
     DotTestFailed {

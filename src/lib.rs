@@ -39,6 +39,8 @@
 #![warn(missing_docs)]
 
 pub mod error;
+#[cfg(feature = "lapack")]
+pub mod lapack;
 pub mod linalg;
 pub mod operator;
 pub mod real;
@@ -46,3 +48,8 @@ pub mod real;
 pub use error::{Error, Result};
 pub use operator::{LinearOperator, OperatorExt};
 pub use real::Real;
+
+/// The README's example, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -11,7 +11,13 @@ use crate::real::Real;
 /// If the slices have different lengths.
 #[inline]
 pub fn dot<T: Real>(a: &[T], b: &[T]) -> f64 {
-    assert_eq!(a.len(), b.len(), "dot: lengths {} and {} differ", a.len(), b.len());
+    assert_eq!(
+        a.len(),
+        b.len(),
+        "dot: lengths {} and {} differ",
+        a.len(),
+        b.len()
+    );
     let mut acc = [0.0f64; 4];
     let mut ca = a.chunks_exact(4);
     let mut cb = b.chunks_exact(4);
@@ -58,7 +64,13 @@ pub fn norm_inf<T: Real>(a: &[T]) -> f64 {
 /// If the slices have different lengths.
 #[inline]
 pub fn axpy<T: Real>(alpha: T, x: &[T], y: &mut [T]) {
-    assert_eq!(x.len(), y.len(), "axpy: lengths {} and {} differ", x.len(), y.len());
+    assert_eq!(
+        x.len(),
+        y.len(),
+        "axpy: lengths {} and {} differ",
+        x.len(),
+        y.len()
+    );
     for (yi, &xi) in y.iter_mut().zip(x) {
         *yi = *yi + alpha * xi;
     }

@@ -28,7 +28,10 @@ fn apply_adj<T: Real>(op: &dyn LinearOperator<T>, y: &[f64]) -> Vec<T> {
 /// Entrywise |a − b| ≤ tol·max(1, ‖b‖∞).
 fn close<T: Real>(a: &[T], b: &[T], tol: f64) -> bool {
     let scale = b.iter().fold(1.0f64, |m, v| m.max(v.as_f64().abs()));
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x.as_f64() - y.as_f64()).abs() <= tol * scale)
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| (x.as_f64() - y.as_f64()).abs() <= tol * scale)
 }
 
 fn config() -> ProptestConfig {
@@ -44,7 +47,12 @@ fn dense_matches<T: Real>(s: &Spec, tol: f64) -> Result<(), TestCaseError> {
     let want = reference(s);
     prop_assert_eq!(got.dim(), want.dim());
     let d = rel_max_diff(&got, &want);
-    prop_assert!(d <= tol, "{}: to_dense differs from the reference by {d:e} ({})", T::NAME, op.describe());
+    prop_assert!(
+        d <= tol,
+        "{}: to_dense differs from the reference by {d:e} ({})",
+        T::NAME,
+        op.describe()
+    );
     Ok(())
 }
 
@@ -165,7 +173,9 @@ fn dot_test_catches_a_wrong_adjoint() {
 
 #[test]
 fn counted_counts_applications_through_an_expression() {
-    let d = rdlidar::operator::Diagonal::new(vec![1.0f64, 2.0, 3.0]).unwrap().counted();
+    let d = rdlidar::operator::Diagonal::new(vec![1.0f64, 2.0, 3.0])
+        .unwrap()
+        .counted();
     let expr = (&d).compose(&d).unwrap().normal();
     let mut y = vec![0.0; 3];
     expr.apply(&[1.0, 1.0, 1.0], &mut y);

@@ -18,17 +18,50 @@ pub const MAX_DIM: usize = 32;
 
 #[derive(Debug, Clone)]
 pub enum Spec {
-    Dense { m: usize, n: usize, vals: Vec<f64> },
-    Nalgebra { m: usize, n: usize, vals: Vec<f64> },
-    Sparse { m: usize, n: usize, trip: Vec<(usize, usize, f64)> },
-    Zero { m: usize, n: usize },
-    Identity { n: usize },
-    Diagonal { d: Vec<f64> },
-    Restriction { n: usize, idx: Vec<usize> },
+    Dense {
+        m: usize,
+        n: usize,
+        vals: Vec<f64>,
+    },
+    Nalgebra {
+        m: usize,
+        n: usize,
+        vals: Vec<f64>,
+    },
+    Sparse {
+        m: usize,
+        n: usize,
+        trip: Vec<(usize, usize, f64)>,
+    },
+    Zero {
+        m: usize,
+        n: usize,
+    },
+    Identity {
+        n: usize,
+    },
+    Diagonal {
+        d: Vec<f64>,
+    },
+    Restriction {
+        n: usize,
+        idx: Vec<usize>,
+    },
     /// Restriction (rows `idx` of the 2ab gradient outputs) ∘ Gradient2D(a, b).
-    Gradient { a: usize, b: usize, idx: Vec<usize> },
+    Gradient {
+        a: usize,
+        b: usize,
+        idx: Vec<usize>,
+    },
     /// Restriction (rows `idx`) ∘ Convolve1D(batch, len, kernel, mode, method).
-    Conv { batch: usize, len: usize, kernel: Vec<f64>, mode: ConvMode, fft: bool, idx: Vec<usize> },
+    Conv {
+        batch: usize,
+        len: usize,
+        kernel: Vec<f64>,
+        mode: ConvMode,
+        fft: bool,
+        idx: Vec<usize>,
+    },
     Compose(Box<Spec>, Box<Spec>),
     Adjoint(Box<Spec>),
     Scaled(f64, Box<Spec>),
@@ -64,13 +97,19 @@ fn conv_out(len: usize, l: usize, mode: ConvMode) -> Option<usize> {
 /// A leaf of shape `m × n`.
 pub fn leaf(m: usize, n: usize) -> BoxedStrategy<Spec> {
     let mut options: Vec<BoxedStrategy<Spec>> = vec![
-        values(m * n).prop_map(move |vals| Spec::Dense { m, n, vals }).boxed(),
-        values(m * n).prop_map(move |vals| Spec::Nalgebra { m, n, vals }).boxed(),
+        values(m * n)
+            .prop_map(move |vals| Spec::Dense { m, n, vals })
+            .boxed(),
+        values(m * n)
+            .prop_map(move |vals| Spec::Nalgebra { m, n, vals })
+            .boxed(),
         prop::collection::vec((0..m, 0..n, -2.0f64..2.0), 0..=2 * (m + n))
             .prop_map(move |trip| Spec::Sparse { m, n, trip })
             .boxed(),
         Just(Spec::Zero { m, n }).boxed(),
-        indices(m, n).prop_map(move |idx| Spec::Restriction { n, idx }).boxed(),
+        indices(m, n)
+            .prop_map(move |idx| Spec::Restriction { n, idx })
+            .boxed(),
         prop::sample::select(divisors(n))
             .prop_flat_map(move |a| {
                 let b = n / a;
@@ -127,7 +166,9 @@ pub fn spec(m: usize, n: usize, depth: u32) -> BoxedStrategy<Spec> {
                     .prop_flat_map(move |p| (spec(m, p, d), spec(p, n, d)))
                     .prop_map(|(a, b)| Spec::Compose(Box::new(a), Box::new(b)))
                     .boxed(),
-                3 => spec(n, m, d).prop_map(|a| Spec::Adjoint(Box::new(a))).boxed(),
+                3 => spec(n, m, d)
+                    .prop_map(|a| Spec::Adjoint(Box::new(a)))
+                    .boxed(),
                 4 => (-3.0f64..3.0, spec(m, n, d))
                     .prop_map(|(al, a)| Spec::Scaled(al, Box::new(a)))
                     .boxed(),
@@ -153,8 +194,12 @@ pub fn spec(m: usize, n: usize, depth: u32) -> BoxedStrategy<Spec> {
                     .prop_flat_map(move |(m1, n1)| (spec(m1, n1, d), spec(m - m1, n - n1, d)))
                     .prop_map(|(a, b)| Spec::BlockDiag(vec![a, b]))
                     .boxed(),
-                11 => spec(m, n, d).prop_map(|a| Spec::Counted(Box::new(a))).boxed(),
-                _ => spec(m, n, d).prop_map(|a| Spec::Adjoint(Box::new(Spec::Adjoint(Box::new(a))))).boxed(),
+                11 => spec(m, n, d)
+                    .prop_map(|a| Spec::Counted(Box::new(a)))
+                    .boxed(),
+                _ => spec(m, n, d)
+                    .prop_map(|a| Spec::Adjoint(Box::new(Spec::Adjoint(Box::new(a)))))
+                    .boxed(),
             }
         })
         .boxed()
@@ -183,11 +228,15 @@ fn conv_mode_method(fft: bool) -> ConvMethod {
 pub fn build<T: Real>(spec: &Spec) -> BoxedOperator<T> {
     match spec {
         Spec::Dense { m, n, vals } => {
-            DenseMatrix::new(Array2::from_shape_vec((*m, *n), cast::<T>(vals)).unwrap()).unwrap().boxed()
+            DenseMatrix::new(Array2::from_shape_vec((*m, *n), cast::<T>(vals)).unwrap())
+                .unwrap()
+                .boxed()
         }
         Spec::Nalgebra { m, n, vals } => {
             // vals are row-major; nalgebra's from_row_slice reads them in that order.
-            NalgebraMatrix::new(nalgebra::DMatrix::from_row_slice(*m, *n, &cast::<T>(vals))).unwrap().boxed()
+            NalgebraMatrix::new(nalgebra::DMatrix::from_row_slice(*m, *n, &cast::<T>(vals)))
+                .unwrap()
+                .boxed()
         }
         Spec::Sparse { m, n, trip } => {
             let mut t = sprs::TriMat::new((*m, *n));
@@ -202,10 +251,28 @@ pub fn build<T: Real>(spec: &Spec) -> BoxedOperator<T> {
         Spec::Restriction { n, idx } => Restriction::<T>::new(*n, idx.clone()).unwrap().boxed(),
         Spec::Gradient { a, b, idx } => {
             let g = Gradient2D::<T>::new(*a, *b).unwrap();
-            Restriction::<T>::new(2 * a * b, idx.clone()).unwrap().compose(g).unwrap().boxed()
+            Restriction::<T>::new(2 * a * b, idx.clone())
+                .unwrap()
+                .compose(g)
+                .unwrap()
+                .boxed()
         }
-        Spec::Conv { batch, len, kernel, mode, fft, idx } => {
-            let c = Convolve1D::new(*batch, *len, cast::<T>(kernel), *mode, conv_mode_method(*fft)).unwrap();
+        Spec::Conv {
+            batch,
+            len,
+            kernel,
+            mode,
+            fft,
+            idx,
+        } => {
+            let c = Convolve1D::new(
+                *batch,
+                *len,
+                cast::<T>(kernel),
+                *mode,
+                conv_mode_method(*fft),
+            )
+            .unwrap();
             let r = Restriction::<T>::new(c.nrows(), idx.clone()).unwrap();
             r.compose(c).unwrap().boxed()
         }
@@ -215,9 +282,15 @@ pub fn build<T: Real>(spec: &Spec) -> BoxedOperator<T> {
         Spec::Sum(a, b) => build::<T>(a).plus(build::<T>(b)).unwrap().boxed(),
         Spec::Diff(a, b) => build::<T>(a).minus(build::<T>(b)).unwrap().boxed(),
         Spec::Normal(a) => build::<T>(a).normal().boxed(),
-        Spec::VStack(v) => VStack::new(v.iter().map(build::<T>).collect()).unwrap().boxed(),
-        Spec::HStack(v) => HStack::new(v.iter().map(build::<T>).collect()).unwrap().boxed(),
-        Spec::BlockDiag(v) => BlockDiag::new(v.iter().map(build::<T>).collect()).unwrap().boxed(),
+        Spec::VStack(v) => VStack::new(v.iter().map(build::<T>).collect())
+            .unwrap()
+            .boxed(),
+        Spec::HStack(v) => HStack::new(v.iter().map(build::<T>).collect())
+            .unwrap()
+            .boxed(),
+        Spec::BlockDiag(v) => BlockDiag::new(v.iter().map(build::<T>).collect())
+            .unwrap()
+            .boxed(),
         Spec::Counted(a) => build::<T>(a).counted().boxed(),
     }
 }
@@ -289,8 +362,17 @@ pub fn reference(spec: &Spec) -> Array2<f64> {
         Spec::Identity { n } => Array2::eye(*n),
         Spec::Diagonal { d } => Array2::from_diag(&ndarray::Array1::from(d.clone())),
         Spec::Restriction { n, idx } => restriction_matrix(*n, idx),
-        Spec::Gradient { a, b, idx } => restriction_matrix(2 * a * b, idx).dot(&gradient_matrix(*a, *b)),
-        Spec::Conv { batch, len, kernel, mode, idx, .. } => {
+        Spec::Gradient { a, b, idx } => {
+            restriction_matrix(2 * a * b, idx).dot(&gradient_matrix(*a, *b))
+        }
+        Spec::Conv {
+            batch,
+            len,
+            kernel,
+            mode,
+            idx,
+            ..
+        } => {
             let c = conv_matrix(*batch, *len, kernel, *mode);
             restriction_matrix(c.nrows(), idx).dot(&c)
         }
@@ -320,7 +402,8 @@ pub fn reference(spec: &Spec) -> Array2<f64> {
             let mut out = Array2::zeros((m, n));
             let (mut r, mut c) = (0, 0);
             for p in &parts {
-                out.slice_mut(s![r..r + p.nrows(), c..c + p.ncols()]).assign(p);
+                out.slice_mut(s![r..r + p.nrows(), c..c + p.ncols()])
+                    .assign(p);
                 r += p.nrows();
                 c += p.ncols();
             }
@@ -341,5 +424,8 @@ pub fn random_vec(len: usize, seed: u64) -> Vec<f64> {
 pub fn rel_max_diff(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
     assert_eq!(a.dim(), b.dim());
     let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-    a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
 }

@@ -22,8 +22,23 @@ fn naive(x: &[f64], h: &[f64], mode: ConvMode) -> Vec<f64> {
     }
 }
 
-fn check<T: Real>(batch: usize, len: usize, h: &[f64], mode: ConvMode, method: ConvMethod, seed: u64, tol: f64) -> Result<(), TestCaseError> {
-    let c = Convolve1D::new(batch, len, h.iter().map(|&v| T::of_f64(v)).collect(), mode, method).unwrap();
+fn check<T: Real>(
+    batch: usize,
+    len: usize,
+    h: &[f64],
+    mode: ConvMode,
+    method: ConvMethod,
+    seed: u64,
+    tol: f64,
+) -> Result<(), TestCaseError> {
+    let c = Convolve1D::new(
+        batch,
+        len,
+        h.iter().map(|&v| T::of_f64(v)).collect(),
+        mode,
+        method,
+    )
+    .unwrap();
     prop_assert_eq!(c.method(), method);
     let x = random_vec(batch * len, seed);
     let xt: Vec<T> = x.iter().map(|&v| T::of_f64(v)).collect();
@@ -36,7 +51,13 @@ fn check<T: Real>(batch: usize, len: usize, h: &[f64], mode: ConvMode, method: C
         prop_assert_eq!(want.len(), out);
         for (i, w) in want.iter().enumerate() {
             let g = y[r * out + i].as_f64();
-            prop_assert!((g - w).abs() <= tol * scale, "{} {:?} {:?} row {r} sample {i}: {g} vs {w}", T::NAME, method, mode);
+            prop_assert!(
+                (g - w).abs() <= tol * scale,
+                "{} {:?} {:?} row {r} sample {i}: {g} vs {w}",
+                T::NAME,
+                method,
+                mode
+            );
         }
     }
     // The adjoint against the transpose of the reference matrix.
@@ -44,9 +65,17 @@ fn check<T: Real>(batch: usize, len: usize, h: &[f64], mode: ConvMode, method: C
     let yt: Vec<T> = yr.iter().map(|&v| T::of_f64(v)).collect();
     let mut xa = vec![T::zero(); c.ncols()];
     c.apply_adjoint(&yt, &mut xa);
-    let want = conv_matrix(batch, len, h, mode).t().dot(&ndarray::Array1::from(yr));
+    let want = conv_matrix(batch, len, h, mode)
+        .t()
+        .dot(&ndarray::Array1::from(yr));
     for (g, w) in xa.iter().zip(&want) {
-        prop_assert!((g.as_f64() - w).abs() <= tol * scale, "{} {:?} {:?} adjoint: {g} vs {w}", T::NAME, method, mode);
+        prop_assert!(
+            (g.as_f64() - w).abs() <= tol * scale,
+            "{} {:?} {:?} adjoint: {g} vs {w}",
+            T::NAME,
+            method,
+            mode
+        );
     }
     Ok(())
 }
@@ -76,22 +105,44 @@ proptest! {
 
 #[test]
 fn auto_picks_direct_for_short_kernels_and_fft_for_long_ones() {
-    let short = Convolve1D::new(4, 10_000, vec![1.0f32; 4], ConvMode::Full, ConvMethod::Auto).unwrap();
+    let short =
+        Convolve1D::new(4, 10_000, vec![1.0f32; 4], ConvMode::Full, ConvMethod::Auto).unwrap();
     assert_eq!(short.method(), ConvMethod::Direct);
-    let long = Convolve1D::new(4, 10_000, vec![1.0f32; 2_000], ConvMode::Full, ConvMethod::Auto).unwrap();
+    let long = Convolve1D::new(
+        4,
+        10_000,
+        vec![1.0f32; 2_000],
+        ConvMode::Full,
+        ConvMethod::Auto,
+    )
+    .unwrap();
     assert_eq!(long.method(), ConvMethod::Fft);
 }
 
 #[test]
 fn a_long_pulse_convolution_is_accurate_in_f32_via_fft() {
     // A 0/1 pulse of length 20 000 against 40 depth bins: the lidar's convolution P.
-    let pulse: Vec<f64> = random_vec(20_000, 4).iter().map(|&v| if v > 0.0 { 1.0 } else { 0.0 }).collect();
+    let pulse: Vec<f64> = random_vec(20_000, 4)
+        .iter()
+        .map(|&v| if v > 0.0 { 1.0 } else { 0.0 })
+        .collect();
     let x = random_vec(40, 8);
-    let c = Convolve1D::new(1, 40, pulse.iter().map(|&v| v as f32).collect(), ConvMode::Full, ConvMethod::Fft).unwrap();
+    let c = Convolve1D::new(
+        1,
+        40,
+        pulse.iter().map(|&v| v as f32).collect(),
+        ConvMode::Full,
+        ConvMethod::Fft,
+    )
+    .unwrap();
     let mut y = vec![0.0f32; c.nrows()];
     c.apply(&x.iter().map(|&v| v as f32).collect::<Vec<_>>(), &mut y);
     let want = naive(&x, &pulse, ConvMode::Full);
-    let err = y.iter().zip(&want).map(|(g, w)| (*g as f64 - w).abs()).fold(0.0, f64::max);
+    let err = y
+        .iter()
+        .zip(&want)
+        .map(|(g, w)| (*g as f64 - w).abs())
+        .fold(0.0, f64::max);
     let peak = want.iter().map(|w| w.abs()).fold(0.0, f64::max);
     assert!(err <= 1e-5 * peak, "max error {err} vs peak {peak}");
 }

@@ -5,5 +5,7 @@ mod common;
 mod algebra;
 mod convolution;
 mod errors;
+#[cfg(feature = "lapack")]
+mod lapack;
 mod norm;
 mod operators;

@@ -40,7 +40,14 @@ fn reports_how_it_stopped() {
 
     let a = ndarray::Array2::from_shape_vec((6, 6), random_vec(36, 3)).unwrap();
     let op = rdlidar::operator::DenseMatrix::new(a).unwrap();
-    let one = operator_norm(&op, &PowerIteration { max_iter: 1, ..PowerIteration::default() }).unwrap();
+    let one = operator_norm(
+        &op,
+        &PowerIteration {
+            max_iter: 1,
+            ..PowerIteration::default()
+        },
+    )
+    .unwrap();
     assert_eq!((one.iterations, one.stop), (1, NormStop::MaxIterations));
     let full = operator_norm(&op, &PowerIteration::default()).unwrap();
     assert_eq!(full.stop, NormStop::Converged);

@@ -24,8 +24,12 @@ where
     F: Fn(bool) -> (BoxedOperator<f32>, BoxedOperator<f64>),
 {
     let (a32, a64) = make(true);
-    let g32 = dot_test(&a32, seed).unwrap_or_else(|e| panic!("f32 {}: {e}", a32.describe())).gap;
-    let g64 = dot_test(&a64, seed).unwrap_or_else(|e| panic!("f64 {}: {e}", a64.describe())).gap;
+    let g32 = dot_test(&a32, seed)
+        .unwrap_or_else(|e| panic!("f32 {}: {e}", a32.describe()))
+        .gap;
+    let g64 = dot_test(&a64, seed)
+        .unwrap_or_else(|e| panic!("f64 {}: {e}", a64.describe()))
+        .gap;
     (g32, g64)
 }
 
@@ -99,7 +103,9 @@ fn gradient_of_a_ramp_and_adjoint_is_negative_divergence() {
     let (m, n) = (4, 6);
     let g = Gradient2D::<f64>::new(m, n).unwrap();
     // x[i, j] = 2i + 3j: vertical differences 2 and horizontal 3, except on the boundary.
-    let x: Vec<f64> = (0..m * n).map(|k| (2 * (k / n) + 3 * (k % n)) as f64).collect();
+    let x: Vec<f64> = (0..m * n)
+        .map(|k| (2 * (k / n) + 3 * (k % n)) as f64)
+        .collect();
     let mut y = vec![0.0; 2 * m * n];
     g.apply(&x, &mut y);
     for i in 0..m {
@@ -115,11 +121,28 @@ fn gradient_of_a_ramp_and_adjoint_is_negative_divergence() {
     for i in 0..m {
         for j in 0..n {
             let k = i * n + j;
-            let dv = if i == 0 { p[k] } else if i + 1 == m { -p[k - n] } else { p[k] - p[k - n] };
+            let dv = if i == 0 {
+                p[k]
+            } else if i + 1 == m {
+                -p[k - n]
+            } else {
+                p[k] - p[k - n]
+            };
             let q = &p[m * n..];
-            let dh = if j == 0 { q[k] } else if j + 1 == n { -q[k - 1] } else { q[k] - q[k - 1] };
+            let dh = if j == 0 {
+                q[k]
+            } else if j + 1 == n {
+                -q[k - 1]
+            } else {
+                q[k] - q[k - 1]
+            };
             let div = if m == 1 { 0.0 } else { dv } + if n == 1 { 0.0 } else { dh };
-            assert!((adj[k] + div).abs() < 1e-12, "at ({i}, {j}): {} vs {}", adj[k], -div);
+            assert!(
+                (adj[k] + div).abs() < 1e-12,
+                "at ({i}, {j}): {} vs {}",
+                adj[k],
+                -div
+            );
         }
     }
 }
@@ -135,9 +158,16 @@ fn matrix_wrappers_agree_with_each_other_and_accept_any_layout() {
     let ops: Vec<BoxedOperator<f64>> = vec![
         DenseMatrix::new(a.clone()).unwrap().boxed(),
         DenseMatrix::new(af).unwrap().boxed(),
-        DenseMatrix::new(a.t().to_owned()).unwrap().adjoint().boxed(),
-        NalgebraMatrix::new(nalgebra::DMatrix::from_row_slice(m, n, &v)).unwrap().boxed(),
-        SparseMatrix::new(sprs::CsMat::csr_from_dense(a.view(), 0.0)).unwrap().boxed(),
+        DenseMatrix::new(a.t().to_owned())
+            .unwrap()
+            .adjoint()
+            .boxed(),
+        NalgebraMatrix::new(nalgebra::DMatrix::from_row_slice(m, n, &v))
+            .unwrap()
+            .boxed(),
+        SparseMatrix::new(sprs::CsMat::csr_from_dense(a.view(), 0.0))
+            .unwrap()
+            .boxed(),
     ];
     let x = random_vec(n, 1);
     let y = random_vec(m, 2);
@@ -167,7 +197,11 @@ fn f32_matrix_products_accumulate_in_f64() {
     let a = DenseMatrix::new(Array2::from_shape_vec((1, n), row).unwrap()).unwrap();
     let mut y = [0.0f32];
     a.apply(&vec![1.0f32; n], &mut y);
-    assert!(((y[0] as f64) - exact).abs() <= exact * f32::EPSILON as f64, "{} vs {exact}", y[0]);
+    assert!(
+        ((y[0] as f64) - exact).abs() <= exact * f32::EPSILON as f64,
+        "{} vs {exact}",
+        y[0]
+    );
 }
 
 #[test]
@@ -217,5 +251,8 @@ fn descriptions_name_the_expression() {
     let e = (&d).compose(Identity::new(5)).unwrap().adjoint();
     assert_eq!(e.describe(), "Adjoint(Compose(Diagonal(5), Identity(5)))");
     let s = (&d).minus(&d).unwrap().scaled(2.0).unwrap();
-    assert_eq!(s.describe(), "Scaled(2, Difference(Diagonal(5), Diagonal(5)))");
+    assert_eq!(
+        s.describe(),
+        "Scaled(2, Difference(Diagonal(5), Diagonal(5)))"
+    );
 }

@@ -126,7 +126,10 @@ impl<A, T: Real> Scaled<A, T> {
     /// [`Error::InvalidParameter`] if `alpha` is NaN or infinite.
     pub fn new(a: A, alpha: T) -> Result<Self> {
         if !alpha.is_finite() {
-            return Err(Error::param("alpha", format!("scale factor must be finite, got {alpha}")));
+            return Err(Error::param(
+                "alpha",
+                format!("scale factor must be finite, got {alpha}"),
+            ));
         }
         Ok(Scaled { a, alpha })
     }
@@ -188,13 +191,20 @@ impl<A, B, T: Real> Sum<A, B, T> {
         }
         if a.ncols() != b.ncols() {
             return Err(Error::shape(
-                format!("sum: columns of {} vs columns of {}", a.describe(), b.describe()),
+                format!(
+                    "sum: columns of {} vs columns of {}",
+                    a.describe(),
+                    b.describe()
+                ),
                 a.ncols(),
                 b.ncols(),
             ));
         }
         if !beta.is_finite() {
-            return Err(Error::param("beta", format!("coefficient must be finite, got {beta}")));
+            return Err(Error::param(
+                "beta",
+                format!("coefficient must be finite, got {beta}"),
+            ));
         }
         Ok(Sum { a, b, beta })
     }
@@ -230,7 +240,12 @@ impl<T: Real, A: LinearOperator<T>, B: LinearOperator<T>> LinearOperator<T> for 
         } else if self.beta == -T::one() {
             format!("Difference({}, {})", self.a.describe(), self.b.describe())
         } else {
-            format!("Sum({}, {}·{})", self.a.describe(), self.beta, self.b.describe())
+            format!(
+                "Sum({}, {}·{})",
+                self.a.describe(),
+                self.beta,
+                self.b.describe()
+            )
         }
     }
 }

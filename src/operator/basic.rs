@@ -122,7 +122,7 @@ impl<T: Real> LinearOperator<T> for Diagonal<T> {
     }
 }
 
-/// Selection of entries: y[i] = x[idx[i]]. Its adjoint embeds back, x[idx[i]] += y[i] starting from
+/// Selection of entries: `y[i] = x[idx[i]]`. Its adjoint embeds back, `x[idx[i]] += y[i]` starting from
 /// zero, so repeated indices add up.
 #[derive(Debug, Clone)]
 pub struct Restriction<T> {

@@ -139,7 +139,10 @@ impl DotTest {
 /// let r = dot_test(&d, 42).unwrap();
 /// assert!(r.gap < 1e-6);
 /// ```
-pub fn dot_test<T: Real, A: LinearOperator<T> + ?Sized>(op: &A, seed: u64) -> Result<DotTestReport> {
+pub fn dot_test<T: Real, A: LinearOperator<T> + ?Sized>(
+    op: &A,
+    seed: u64,
+) -> Result<DotTestReport> {
     DotTest::new().seed(seed).run(op)
 }
 

@@ -107,7 +107,10 @@ impl<T: Real> Convolve1D<T> {
         }
         let l = kernel.len();
         if l == 0 {
-            return Err(Error::param("kernel", "convolution kernel must not be empty"));
+            return Err(Error::param(
+                "kernel",
+                "convolution kernel must not be empty",
+            ));
         }
         if let Some(i) = kernel.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
@@ -306,9 +309,7 @@ impl<T: Real> LinearOperator<T> for Convolve1D<T> {
         self.batch * self.n
     }
     fn scratch_len(&self) -> usize {
-        self.fft
-            .as_ref()
-            .map_or(0, |p| 2 * (p.len + p.fft_scratch))
+        self.fft.as_ref().map_or(0, |p| 2 * (p.len + p.fft_scratch))
     }
     fn forward_kernel(&self, x: &[T], y: &mut [T], scratch: &mut [T]) {
         let (n, m, off) = (self.n, self.out_len, self.offset);

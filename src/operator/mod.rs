@@ -54,8 +54,10 @@ use ndarray::Array2;
 
 pub use algebra::{Adjoint, Compose, Normal, Scaled, Sum};
 pub use basic::{Diagonal, Identity, Restriction, Zero};
-pub use check::{dot_test, operator_norm, DotTest, DotTestReport, NormEstimate, NormStop, PowerIteration};
-pub use convolve::{ConvMode, ConvMethod, Convolve1D};
+pub use check::{
+    dot_test, operator_norm, DotTest, DotTestReport, NormEstimate, NormStop, PowerIteration,
+};
+pub use convolve::{ConvMethod, ConvMode, Convolve1D};
 pub use counted::Counted;
 pub use gradient::Gradient2D;
 pub use matrix::{DenseMatrix, NalgebraMatrix, SparseMatrix};
@@ -170,7 +172,10 @@ pub trait LinearOperator<T: Real>: Send + Sync {
                 e[j] = T::one();
                 self.forward_kernel(&e, &mut col, &mut scratch);
                 e[j] = T::zero();
-                out.column_mut(j).iter_mut().zip(&col).for_each(|(o, &c)| *o = c);
+                out.column_mut(j)
+                    .iter_mut()
+                    .zip(&col)
+                    .for_each(|(o, &c)| *o = c);
             }
         } else {
             let mut e = vec![T::zero(); m];
@@ -179,7 +184,10 @@ pub trait LinearOperator<T: Real>: Send + Sync {
                 e[i] = T::one();
                 self.adjoint_kernel(&e, &mut row, &mut scratch);
                 e[i] = T::zero();
-                out.row_mut(i).iter_mut().zip(&row).for_each(|(o, &r)| *o = r);
+                out.row_mut(i)
+                    .iter_mut()
+                    .zip(&row)
+                    .for_each(|(o, &r)| *o = r);
             }
         }
         out

@@ -52,7 +52,10 @@ impl<A> VStack<A> {
         for (i, op) in ops.iter().enumerate().skip(1) {
             if op.ncols() != n {
                 return Err(Error::shape(
-                    format!("vstack: columns of block {i} ({}) vs block 0", op.describe()),
+                    format!(
+                        "vstack: columns of block {i} ({}) vs block 0",
+                        op.describe()
+                    ),
                     n,
                     op.ncols(),
                 ));
