@@ -3,6 +3,7 @@
 mod common;
 
 mod algebra;
+mod cli;
 mod convolution;
 mod errors;
 #[cfg(feature = "lapack")]
