@@ -74,26 +74,29 @@ impl<T: Real> LinearOperator<T> for Gradient2D<T> {
         }
     }
     fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
-        // x = −div(g): each difference b − a sends +g to b and −g to a.
+        // x = −div(g): each difference b − a sends +g to b and −g to a. Row by row, so that the
+        // inner loops are branch-free and contiguous.
         let (m, n) = (self.m, self.n);
         let (gv, gh) = y.split_at(m * n);
         for i in 0..m {
-            for j in 0..n {
-                let k = i * n + j;
-                let mut v = T::zero();
-                if i + 1 < m {
-                    v = v - gv[k];
+            let xr = &mut x[i * n..(i + 1) * n];
+            let hr = &gh[i * n..(i + 1) * n];
+            // Horizontal part: x[j] = g[j − 1]·[j > 0] − g[j]·[j < n − 1].
+            xr[0] = -hr[0];
+            for j in 1..n {
+                xr[j] = hr[j - 1] - hr[j];
+            }
+            xr[n - 1] = xr[n - 1] + hr[n - 1];
+            // Vertical part: + g[i − 1] for i > 0, − g[i] for i < m − 1.
+            if i + 1 < m {
+                for (xv, &g) in xr.iter_mut().zip(&gv[i * n..(i + 1) * n]) {
+                    *xv = *xv - g;
                 }
-                if i > 0 {
-                    v = v + gv[k - n];
+            }
+            if i > 0 {
+                for (xv, &g) in xr.iter_mut().zip(&gv[(i - 1) * n..i * n]) {
+                    *xv = *xv + g;
                 }
-                if j + 1 < n {
-                    v = v - gh[k];
-                }
-                if j > 0 {
-                    v = v + gh[k - 1];
-                }
-                x[k] = v;
             }
         }
     }
