@@ -41,6 +41,7 @@
 pub mod error;
 #[cfg(feature = "lapack")]
 pub mod lapack;
+pub mod lidar;
 pub mod linalg;
 pub mod operator;
 pub mod real;

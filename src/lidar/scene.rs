@@ -1,0 +1,174 @@
+//! Scenes: reflectivity cubes (M, N, K_s) and their depth-map form.
+
+use ndarray::{Array2, Array3};
+
+use crate::error::{Error, Result};
+use crate::real::Real;
+
+use super::geometry::Geometry;
+
+/// Depth bin marking a pixel with no return.
+pub const NO_RETURN: i32 = -1;
+
+/// A reflectivity cube `x[m, n, j]` (C order, depth last), the unknown of the lidar model.
+///
+/// Its flat slice ([`Scene::as_slice`]) is the operator's input vector: index
+/// `(m·N + n)·K_s + j`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene<T> {
+    data: Array3<T>,
+}
+
+impl<T: Real> Scene<T> {
+    /// Wraps a cube, making it C-contiguous.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if a dimension is zero, [`Error::NonFinite`] for NaN or
+    /// infinite values.
+    pub fn new(data: Array3<T>) -> Result<Self> {
+        let (m, n, ks) = data.dim();
+        Geometry::new(m, n, ks)?;
+        if let Some(v) = data.iter().find(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: format!("scene value {v}"),
+            });
+        }
+        let data = if data.is_standard_layout() {
+            data
+        } else {
+            data.as_standard_layout().to_owned()
+        };
+        Ok(Scene { data })
+    }
+
+    /// The empty scene.
+    pub fn zeros(g: Geometry) -> Self {
+        Scene {
+            data: Array3::zeros((g.m, g.n, g.ks)),
+        }
+    }
+
+    /// A scene from a flat C-order vector of length M·N·K_s.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if the length is wrong, [`Error::NonFinite`] for NaN or infinite
+    /// values.
+    pub fn from_vec(g: Geometry, v: Vec<T>) -> Result<Self> {
+        if v.len() != g.voxels() {
+            return Err(Error::shape(
+                format!("scene vector for {g}"),
+                g.voxels(),
+                v.len(),
+            ));
+        }
+        Scene::new(Array3::from_shape_vec((g.m, g.n, g.ks), v).expect("length checked"))
+    }
+
+    /// The grid.
+    pub fn geometry(&self) -> Geometry {
+        let (m, n, ks) = self.data.dim();
+        Geometry { m, n, ks }
+    }
+
+    /// The cube.
+    pub fn data(&self) -> &Array3<T> {
+        &self.data
+    }
+
+    /// The cube, mutably.
+    pub fn data_mut(&mut self) -> &mut Array3<T> {
+        &mut self.data
+    }
+
+    /// Unwraps the cube.
+    pub fn into_inner(self) -> Array3<T> {
+        self.data
+    }
+
+    /// The flat C-order values: the operator's input vector.
+    pub fn as_slice(&self) -> &[T] {
+        self.data.as_slice().expect("scenes are C-contiguous")
+    }
+
+    /// Number of nonzero voxels.
+    pub fn nnz(&self) -> usize {
+        self.data.iter().filter(|v| **v != T::zero()).count()
+    }
+
+    /// The strongest return of each pixel as a depth map: the bin of largest |x| (the first one on
+    /// ties) and its value; pixels whose column is all zero get [`NO_RETURN`] and amplitude 0.
+    pub fn depth_map(&self) -> DepthMap<T> {
+        let g = self.geometry();
+        let mut depth = Array2::from_elem((g.m, g.n), NO_RETURN);
+        let mut amp = Array2::zeros((g.m, g.n));
+        for ((i, j), col) in self
+            .data
+            .lanes(ndarray::Axis(2))
+            .into_iter()
+            .enumerate()
+            .map(|(k, c)| ((k / g.n, k % g.n), c))
+        {
+            let mut best = T::zero();
+            let mut at = NO_RETURN;
+            for (d, &v) in col.iter().enumerate() {
+                if num_traits::Float::abs(v) > num_traits::Float::abs(best) {
+                    best = v;
+                    at = d as i32;
+                }
+            }
+            depth[[i, j]] = at;
+            amp[[i, j]] = best;
+        }
+        DepthMap {
+            depth,
+            amplitude: amp,
+        }
+    }
+}
+
+/// An opaque scene as a depth map: one return per pixel at most.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthMap<T> {
+    /// Depth bin per pixel, [`NO_RETURN`] (−1) for none.
+    pub depth: Array2<i32>,
+    /// Reflectivity of the return (0 where there is none).
+    pub amplitude: Array2<T>,
+}
+
+impl<T: Real> DepthMap<T> {
+    /// The scene with one voxel per lit pixel.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if the two maps differ in shape, [`Error::InvalidParameter`] if a
+    /// depth is outside `[-1, ks)`, [`Error::NonFinite`] for a NaN or infinite amplitude.
+    pub fn to_scene(&self, ks: usize) -> Result<Scene<T>> {
+        let (m, n) = self.depth.dim();
+        if self.amplitude.dim() != (m, n) {
+            return Err(Error::shape(
+                "depth map: amplitude rows×columns vs depth",
+                m * n,
+                self.amplitude.len(),
+            ));
+        }
+        let g = Geometry::new(m, n, ks)?;
+        let mut x = Array3::zeros((g.m, g.n, g.ks));
+        for ((i, j), &d) in self.depth.indexed_iter() {
+            if d == NO_RETURN {
+                continue;
+            }
+            if d < 0 || d as usize >= ks {
+                return Err(Error::param(
+                    "depth",
+                    format!("depth bin {d} at pixel ({i}, {j}) is outside [-1, {ks})"),
+                ));
+            }
+            x[[i, j, d as usize]] = self.amplitude[[i, j]];
+        }
+        Scene::new(x)
+    }
+
+    /// Number of pixels with a return.
+    pub fn lit(&self) -> usize {
+        self.depth.iter().filter(|&&d| d != NO_RETURN).count()
+    }
+}
