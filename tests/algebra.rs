@@ -35,10 +35,7 @@ fn close<T: Real>(a: &[T], b: &[T], tol: f64) -> bool {
 }
 
 fn config() -> ProptestConfig {
-    ProptestConfig {
-        cases: 160,
-        ..ProptestConfig::default()
-    }
+    crate::common::config(160)
 }
 
 fn dense_matches<T: Real>(s: &Spec, tol: f64) -> Result<(), TestCaseError> {

@@ -81,7 +81,7 @@ fn check<T: Real>(
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+    #![proptest_config(crate::common::config(96))]
 
     #[test]
     fn direct_and_fft_match_the_naive_reference(

@@ -8,5 +8,9 @@ mod convolution;
 mod errors;
 #[cfg(feature = "lapack")]
 mod lapack;
+mod metrics;
+mod noise;
 mod norm;
 mod operators;
+mod rdop;
+mod scenes;

@@ -34,7 +34,7 @@ where
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    #![proptest_config(crate::common::config(64))]
 
     #[test]
     fn identity_zero_diagonal(n in 1..=64usize, m in 1..=64usize, seed in any::<u64>()) {

@@ -10,6 +10,20 @@ use crate::real::Real;
 
 use super::LinearOperator;
 
+/// ChaCha stream of the dot test's vectors (the bytes of "dot").
+pub(crate) const DOT_STREAM: u64 = 0x00646f74;
+/// ChaCha stream of the power iteration's start vector (the bytes of "norm").
+pub(crate) const NORM_STREAM: u64 = 0x6e6f726d;
+
+/// A ChaCha8 generator for `seed` on its own stream, so that the checks never reuse the random
+/// numbers a caller drew from the same seed on the default stream (a start vector built from the
+/// matrix's own stream can be orthogonal to its top singular vector).
+pub(crate) fn check_rng(seed: u64, stream: u64) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(stream);
+    rng
+}
+
 /// A seeded vector of i.i.d. standard normal entries (ChaCha8, drawn in `f64`, rounded to `T`).
 pub(crate) fn gaussian_vector<T: Real>(len: usize, rng: &mut ChaCha8Rng) -> Vec<T> {
     (0..len)
@@ -45,7 +59,7 @@ impl DotTestReport {
 /// `dottest`).
 ///
 /// x and y have i.i.d. standard normal entries drawn from a ChaCha8 generator seeded with
-/// [`seed`](Self::seed); inner products are accumulated in `f64` even for `f32` operators. The gap is
+/// [`seed`](Self::seed) (on a stream of its own); inner products are accumulated in `f64` even for `f32` operators. The gap is
 /// normalized by `max(‖Ax‖‖y‖, ‖x‖‖A*y‖)` rather than by the inner products themselves, which can be
 /// small by cancellation. The default tolerance depends on the scalar type
 /// ([`Real::DOT_TEST_TOL`]: 1e-4 for `f32`, 1e-10 for `f64`).
@@ -84,7 +98,7 @@ impl DotTest {
 
     /// Measures the gap without judging it.
     pub fn measure<T: Real, A: LinearOperator<T> + ?Sized>(&self, op: &A) -> DotTestReport {
-        let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
+        let mut rng = check_rng(self.seed, DOT_STREAM);
         let x: Vec<T> = gaussian_vector(op.ncols(), &mut rng);
         let y: Vec<T> = gaussian_vector(op.nrows(), &mut rng);
         let mut ax = vec![T::zero(); op.nrows()];
@@ -220,7 +234,7 @@ pub fn operator_norm<T: Real, A: LinearOperator<T> + ?Sized>(
     if m == 0 || n == 0 {
         return Ok(zero);
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
+    let mut rng = check_rng(params.seed, NORM_STREAM);
     let mut v: Vec<T> = gaussian_vector(n, &mut rng);
     let nv = norm2(&v);
     v.iter_mut().for_each(|e| *e = T::of_f64(e.as_f64() / nv));

@@ -1,0 +1,280 @@
+//! Per-pixel modulation codes s[p, k], bit-packed.
+//!
+//! Pixels are taken eight at a time (`group g` holds pixels 8g … 8g+7, in the row-major order of
+//! the scene) and, for every sample k, the codes of a group are one byte whose bit i belongs to
+//! pixel 8g + i. A ±1 code needs one such bit plane (bit set ⇔ s = +1); a ternary code needs two
+//! (s = +1 and s = −1; neither ⇔ s = 0). This is the layout the fused operator's table lookups
+//! read directly: 1 bit per ±1 entry (37.5 MB at 100×100 pixels and K = 30 039), never a dense
+//! float array.
+
+use ndarray::{Array2, ArrayView2};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::error::{Error, Result};
+
+/// The values a code takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CodeAlphabet {
+    /// s ∈ {−1, +1}: one bit per entry.
+    Binary,
+    /// s ∈ {−1, 0, +1}: two bits per entry.
+    Ternary,
+}
+
+/// Bit-packed codes for `pixels` pixels and `len` samples (K).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Codes {
+    pixels: usize,
+    len: usize,
+    /// Byte `g·len + k`, bit i: s[8g + i, k] = +1.
+    plus: Vec<u8>,
+    /// Ternary only. Byte `g·len + k`, bit i: s[8g + i, k] = −1.
+    minus: Option<Vec<u8>>,
+}
+
+/// Bits of the last group that belong to real pixels.
+fn tail_mask(pixels: usize) -> u8 {
+    match pixels % 8 {
+        0 => 0xff,
+        r => (1u8 << r) - 1,
+    }
+}
+
+fn check_dims(pixels: usize, len: usize) -> Result<()> {
+    if pixels == 0 || len == 0 {
+        return Err(Error::param(
+            "codes",
+            format!("need at least one pixel and one sample, got {pixels} pixels × {len} samples"),
+        ));
+    }
+    Ok(())
+}
+
+impl Codes {
+    /// Number of 8-pixel groups, ⌈pixels / 8⌉.
+    pub fn groups(&self) -> usize {
+        self.pixels.div_ceil(8)
+    }
+
+    /// Number of pixels.
+    pub fn pixels(&self) -> usize {
+        self.pixels
+    }
+
+    /// Number of samples K.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Always `false`: codes have at least one sample.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The alphabet.
+    pub fn alphabet(&self) -> CodeAlphabet {
+        if self.minus.is_some() {
+            CodeAlphabet::Ternary
+        } else {
+            CodeAlphabet::Binary
+        }
+    }
+
+    /// Bytes held (the codes' memory footprint).
+    pub fn memory_bytes(&self) -> usize {
+        self.plus.len() + self.minus.as_ref().map_or(0, Vec::len)
+    }
+
+    /// The +1 plane: `len` bytes per group, group after group.
+    pub fn plus_plane(&self) -> &[u8] {
+        &self.plus
+    }
+
+    /// The −1 plane of ternary codes.
+    pub fn minus_plane(&self) -> Option<&[u8]> {
+        self.minus.as_deref()
+    }
+
+    /// The +1 bytes of group `g` (one per sample).
+    pub fn plus_group(&self, g: usize) -> &[u8] {
+        &self.plus[g * self.len..(g + 1) * self.len]
+    }
+
+    /// The −1 bytes of group `g` (ternary codes only).
+    pub fn minus_group(&self, g: usize) -> Option<&[u8]> {
+        self.minus
+            .as_ref()
+            .map(|m| &m[g * self.len..(g + 1) * self.len])
+    }
+
+    /// s[pixel, k].
+    ///
+    /// # Panics
+    /// If `pixel` or `k` is out of range.
+    pub fn get(&self, pixel: usize, k: usize) -> i8 {
+        assert!(
+            pixel < self.pixels && k < self.len,
+            "code index ({pixel}, {k}) out of range"
+        );
+        let at = (pixel / 8) * self.len + k;
+        let bit = 1u8 << (pixel % 8);
+        if self.plus[at] & bit != 0 {
+            1
+        } else if self.minus.as_ref().is_some_and(|m| m[at] & bit != 0) {
+            -1
+        } else if self.minus.is_some() {
+            0
+        } else {
+            -1
+        }
+    }
+
+    /// I.i.d. equiprobable ±1 codes from a ChaCha8 stream seeded with `seed` (the bytes of the +1
+    /// plane are the stream's bytes in order, the unused bits of the last group cleared).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if `pixels` or `len` is zero.
+    pub fn random_binary(pixels: usize, len: usize, seed: u64) -> Result<Self> {
+        check_dims(pixels, len)?;
+        let groups = pixels.div_ceil(8);
+        let mut plus = vec![0u8; groups * len];
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.fill_bytes(&mut plus);
+        let mask = tail_mask(pixels);
+        plus[(groups - 1) * len..]
+            .iter_mut()
+            .for_each(|b| *b &= mask);
+        Ok(Codes {
+            pixels,
+            len,
+            plus,
+            minus: None,
+        })
+    }
+
+    /// I.i.d. ternary codes: 0 with probability `zero_prob`, ±1 with probability
+    /// (1 − zero_prob)/2 each, from a ChaCha8 stream seeded with `seed` (one `u32` draw per entry,
+    /// group by group, sample by sample, pixel by pixel within a group).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if `pixels` or `len` is zero or `zero_prob` is not in [0, 1).
+    pub fn random_ternary(pixels: usize, len: usize, zero_prob: f64, seed: u64) -> Result<Self> {
+        check_dims(pixels, len)?;
+        if !(0.0..1.0).contains(&zero_prob) {
+            return Err(Error::param(
+                "zero_prob",
+                format!("must be in [0, 1), got {zero_prob}"),
+            ));
+        }
+        let groups = pixels.div_ceil(8);
+        let mut plus = vec![0u8; groups * len];
+        let mut minus = vec![0u8; groups * len];
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let zero_cut = (zero_prob * 4_294_967_296.0) as u64;
+        let half = zero_cut + (4_294_967_296 - zero_cut) / 2;
+        for g in 0..groups {
+            let width = (pixels - 8 * g).min(8);
+            for k in 0..len {
+                let (mut p, mut m) = (0u8, 0u8);
+                for i in 0..width {
+                    let u = rng.next_u32() as u64;
+                    if u >= half {
+                        p |= 1 << i;
+                    } else if u >= zero_cut {
+                        m |= 1 << i;
+                    }
+                }
+                plus[g * len + k] = p;
+                minus[g * len + k] = m;
+            }
+        }
+        Ok(Codes {
+            pixels,
+            len,
+            plus,
+            minus: Some(minus),
+        })
+    }
+
+    /// Packs a dense `(pixels, len)` array of codes. The alphabet is binary when no entry is 0,
+    /// ternary otherwise.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the first entry outside {−1, 0, 1}, or for an empty
+    /// array.
+    pub fn from_dense(s: ArrayView2<'_, i8>) -> Result<Self> {
+        let (pixels, len) = s.dim();
+        check_dims(pixels, len)?;
+        if let Some(((p, k), v)) = s.indexed_iter().find(|(_, v)| !(-1..=1).contains(*v)) {
+            return Err(Error::param(
+                "codes",
+                format!("entry {v} at pixel {p}, sample {k} is not in {{-1, 0, 1}}"),
+            ));
+        }
+        let ternary = s.iter().any(|&v| v == 0);
+        let groups = pixels.div_ceil(8);
+        let mut plus = vec![0u8; groups * len];
+        let mut minus = ternary.then(|| vec![0u8; groups * len]);
+        for ((p, k), &v) in s.indexed_iter() {
+            let at = (p / 8) * len + k;
+            let bit = 1u8 << (p % 8);
+            if v == 1 {
+                plus[at] |= bit;
+            } else if v == -1 {
+                if let Some(m) = minus.as_mut() {
+                    m[at] |= bit;
+                }
+            }
+        }
+        Ok(Codes {
+            pixels,
+            len,
+            plus,
+            minus,
+        })
+    }
+
+    /// The codes as a dense `(pixels, len)` array (for small problems and file output).
+    pub fn to_dense(&self) -> Array2<i8> {
+        Array2::from_shape_fn((self.pixels, self.len), |(p, k)| self.get(p, k))
+    }
+
+    /// The codes of the pixels `idx` (in that order), e.g. a sub-array or one ADC's group.
+    ///
+    /// # Errors
+    /// [`Error::IndexOutOfBounds`] for a pixel index not below `pixels`, [`Error::InvalidParameter`]
+    /// for an empty selection.
+    pub fn select_pixels(&self, idx: &[usize]) -> Result<Self> {
+        check_dims(idx.len(), self.len)?;
+        if let Some(&bad) = idx.iter().find(|&&p| p >= self.pixels) {
+            return Err(Error::IndexOutOfBounds {
+                context: "pixel selection",
+                index: bad,
+                len: self.pixels,
+            });
+        }
+        let groups = idx.len().div_ceil(8);
+        let len = self.len;
+        let mut plus = vec![0u8; groups * len];
+        let mut minus = self.minus.as_ref().map(|_| vec![0u8; groups * len]);
+        for (q, &p) in idx.iter().enumerate() {
+            let (src, sb) = ((p / 8) * len, p % 8);
+            let (dst, db) = ((q / 8) * len, q % 8);
+            for k in 0..len {
+                plus[dst + k] |= ((self.plus[src + k] >> sb) & 1) << db;
+            }
+            if let (Some(m), Some(sm)) = (minus.as_mut(), self.minus.as_ref()) {
+                for k in 0..len {
+                    m[dst + k] |= ((sm[src + k] >> sb) & 1) << db;
+                }
+            }
+        }
+        Ok(Codes {
+            pixels: idx.len(),
+            len,
+            plus,
+            minus,
+        })
+    }
+}

@@ -1,0 +1,334 @@
+//! Inner kernels of the fused operator, compiled for several instruction sets and chosen at run
+//! time.
+//!
+//! The kernels work on a *slab* of `8·NCH` consecutive depth bins (NCH ≤ 8, so at most 64 bins
+//! at a time) and on a *block* of 8-pixel groups whose tables fit in the L2 cache. Values are held
+//! as `[T; 8]` chunks so that the compiler keeps them in vector registers.
+
+use crate::real::Real;
+
+/// A chunk of eight lanes.
+pub(crate) type Lane<T> = [T; 8];
+
+/// Instruction sets the kernels are compiled for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Isa {
+    Generic,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl Isa {
+    pub(crate) fn detect() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512vl")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                return Isa::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Generic
+    }
+
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Isa::Generic => "generic",
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => "avx2+fma",
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => "avx512",
+        }
+    }
+}
+
+#[inline(always)]
+fn add8<T: Real>(a: Lane<T>, b: Lane<T>) -> Lane<T> {
+    [
+        a[0] + b[0],
+        a[1] + b[1],
+        a[2] + b[2],
+        a[3] + b[3],
+        a[4] + b[4],
+        a[5] + b[5],
+        a[6] + b[6],
+        a[7] + b[7],
+    ]
+}
+
+#[inline(always)]
+fn sub8<T: Real>(a: Lane<T>, b: Lane<T>) -> Lane<T> {
+    [
+        a[0] - b[0],
+        a[1] - b[1],
+        a[2] - b[2],
+        a[3] - b[3],
+        a[4] - b[4],
+        a[5] - b[5],
+        a[6] - b[6],
+        a[7] - b[7],
+    ]
+}
+
+/// a·b + c, lane by lane.
+#[inline(always)]
+fn mul_add8<T: Real>(a: Lane<T>, b: Lane<T>, c: Lane<T>) -> Lane<T> {
+    [
+        a[0] * b[0] + c[0],
+        a[1] * b[1] + c[1],
+        a[2] * b[2] + c[2],
+        a[3] * b[3] + c[3],
+        a[4] * b[4] + c[4],
+        a[5] * b[5] + c[5],
+        a[6] * b[6] + c[6],
+        a[7] * b[7] + c[7],
+    ]
+}
+
+#[inline(always)]
+fn scale8<T: Real>(a: T, b: Lane<T>) -> Lane<T> {
+    [
+        a * b[0],
+        a * b[1],
+        a * b[2],
+        a * b[3],
+        a * b[4],
+        a * b[5],
+        a * b[6],
+        a * b[7],
+    ]
+}
+
+#[inline(always)]
+fn lane_at<T: Real>(v: &[T], at: usize) -> Lane<T> {
+    v[at..at + 8].try_into().expect("8 lanes")
+}
+
+/// Everything a forward block needs.
+pub(crate) struct FwdBlock<'a, T> {
+    /// `groups × 256 × NCH` lanes: the signed subset sums of each group (binary codes), or the
+    /// plain subset sums (ternary codes).
+    pub tables: &'a [Lane<T>],
+    /// The +1 code bytes of each group of the block, K each.
+    pub plus: &'a [&'a [u8]],
+    /// The −1 code bytes (ternary codes only).
+    pub minus: Option<&'a [&'a [u8]]>,
+    /// Reversed, zero-padded pulse: p[k − j] = `prev[base0 − k + (j − j0)]` for the slab's bins.
+    pub prev: &'a [T],
+    /// See `prev`.
+    pub base0: usize,
+}
+
+/// part[k] += Σ_c p[k−j]·Σ_g T_g[code_g(k)][j] lane by lane (j = 8c + lane), for every k; the
+/// eight lanes of `part[k]` are summed into y[k] by the caller.
+#[inline(always)]
+fn fwd_block<T: Real, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) {
+    let zero = [T::zero(); 8];
+    for (k, pk) in part.iter_mut().enumerate() {
+        let mut acc = [zero; NCH];
+        match a.minus {
+            None => {
+                for (g, codes) in a.plus.iter().enumerate() {
+                    let r = (g * 256 + codes[k] as usize) * NCH;
+                    let row: &[Lane<T>; NCH] = a.tables[r..r + NCH].try_into().expect("NCH lanes");
+                    for c in 0..NCH {
+                        acc[c] = add8(acc[c], row[c]);
+                    }
+                }
+            }
+            Some(minus) => {
+                for (g, (cp, cm)) in a.plus.iter().zip(minus).enumerate() {
+                    let rp = (g * 256 + cp[k] as usize) * NCH;
+                    let rm = (g * 256 + cm[k] as usize) * NCH;
+                    let pos: &[Lane<T>; NCH] =
+                        a.tables[rp..rp + NCH].try_into().expect("NCH lanes");
+                    let neg: &[Lane<T>; NCH] =
+                        a.tables[rm..rm + NCH].try_into().expect("NCH lanes");
+                    for c in 0..NCH {
+                        acc[c] = add8(acc[c], sub8(pos[c], neg[c]));
+                    }
+                }
+            }
+        }
+        let w0 = a.base0 - k;
+        let mut s = *pk;
+        for (c, ac) in acc.iter().enumerate() {
+            s = mul_add8(*ac, lane_at(a.prev, w0 + 8 * c), s);
+        }
+        *pk = s;
+    }
+}
+
+/// Everything an adjoint block needs.
+pub(crate) struct AdjBlock<'a, T> {
+    /// The +1 code bytes of each group of the block.
+    pub plus: &'a [&'a [u8]],
+    /// The −1 code bytes (ternary codes only).
+    pub minus: Option<&'a [&'a [u8]]>,
+    /// Measurements.
+    pub y: &'a [T],
+    /// As in [`FwdBlock`].
+    pub prev: &'a [T],
+    /// As in [`FwdBlock`].
+    pub base0: usize,
+}
+
+/// Samples accumulated in the working precision before the buckets are flushed to `f64`.
+pub(crate) const FLUSH: usize = 16384;
+
+/// For k in `k0..k1`: bucket[g][code_g(k)] += y[k]·p[k−j] (and the −1 buckets for ternary codes,
+/// stored after the +1 buckets of all groups).
+#[inline(always)]
+fn adj_block<T: Real, const NCH: usize>(
+    a: &AdjBlock<'_, T>,
+    k0: usize,
+    k1: usize,
+    buckets: &mut [Lane<T>],
+) {
+    let ngroups = a.plus.len();
+    for k in k0..k1 {
+        let yk = a.y[k];
+        if yk == T::zero() {
+            continue;
+        }
+        let w0 = a.base0 - k;
+        let mut w = [[T::zero(); 8]; NCH];
+        for (c, wc) in w.iter_mut().enumerate() {
+            *wc = scale8(yk, lane_at(a.prev, w0 + 8 * c));
+        }
+        for (g, codes) in a.plus.iter().enumerate() {
+            let r = (g * 256 + codes[k] as usize) * NCH;
+            let row: &mut [Lane<T>; NCH] =
+                (&mut buckets[r..r + NCH]).try_into().expect("NCH lanes");
+            for c in 0..NCH {
+                row[c] = add8(row[c], w[c]);
+            }
+        }
+        if let Some(minus) = a.minus {
+            for (g, codes) in minus.iter().enumerate() {
+                let r = ((ngroups + g) * 256 + codes[k] as usize) * NCH;
+                let row: &mut [Lane<T>; NCH] =
+                    (&mut buckets[r..r + NCH]).try_into().expect("NCH lanes");
+                for c in 0..NCH {
+                    row[c] = add8(row[c], w[c]);
+                }
+            }
+        }
+    }
+}
+
+/// y[k − k0] += a·p[k − j]·s(k) for k in the entry's range: one sparse entry of the forward.
+/// `codes` are the entry's group bytes from `k_lo`, `pw` the pulse from `k_lo − j`.
+#[inline(always)]
+fn sparse_entry<T: Real>(
+    amp: T,
+    bit: u32,
+    plus: &[u8],
+    minus: Option<&[u8]>,
+    pw: &[T],
+    out: &mut [T],
+) {
+    match minus {
+        None => {
+            for ((o, &c), &p) in out.iter_mut().zip(plus).zip(pw) {
+                let v = amp * p;
+                *o = *o + if (c >> bit) & 1 == 1 { v } else { -v };
+            }
+        }
+        Some(minus) => {
+            for (((o, &cp), &cm), &p) in out.iter_mut().zip(plus).zip(minus).zip(pw) {
+                let v = amp * p;
+                let s = ((cp >> bit) & 1) as i32 - ((cm >> bit) & 1) as i32;
+                *o = *o
+                    + if s > 0 {
+                        v
+                    } else if s < 0 {
+                        -v
+                    } else {
+                        T::zero()
+                    };
+            }
+        }
+    }
+}
+
+macro_rules! multiversion {
+    ($vis:vis fn $name:ident < $t:ident $(, const $c:ident : usize)? > ( $($arg:ident : $ty:ty),* ) => $inner:ident) => {
+        $vis fn $name<$t: Real $(, const $c: usize)?>(isa: Isa, $($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx2,fma")]
+                fn avx2<$t: Real $(, const $c: usize)?>($($arg: $ty),*) {
+                    $inner::<$t $(, $c)?>($($arg),*)
+                }
+                #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+                fn avx512<$t: Real $(, const $c: usize)?>($($arg: $ty),*) {
+                    $inner::<$t $(, $c)?>($($arg),*)
+                }
+                match isa {
+                    // SAFETY: `Isa::detect` returned these variants only after checking that the
+                    // CPU supports every feature the function is compiled with.
+                    Isa::Avx512 => return unsafe { avx512::<$t $(, $c)?>($($arg),*) },
+                    Isa::Avx2 => return unsafe { avx2::<$t $(, $c)?>($($arg),*) },
+                    Isa::Generic => {}
+                }
+            }
+            let _ = isa;
+            $inner::<$t $(, $c)?>($($arg),*)
+        }
+    };
+}
+
+multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
+multiversion!(fn adj_block_isa<T, const NCH: usize>(a: &AdjBlock<'_, T>, k0: usize, k1: usize, buckets: &mut [Lane<T>]) => adj_block);
+multiversion!(pub(crate) fn sparse_entry_isa<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
+
+/// Runs the forward block kernel for a slab of `8·nch` bins.
+pub(crate) fn forward_block<T: Real>(
+    isa: Isa,
+    nch: usize,
+    a: &FwdBlock<'_, T>,
+    part: &mut [Lane<T>],
+) {
+    match nch {
+        1 => fwd_block_isa::<T, 1>(isa, a, part),
+        2 => fwd_block_isa::<T, 2>(isa, a, part),
+        3 => fwd_block_isa::<T, 3>(isa, a, part),
+        4 => fwd_block_isa::<T, 4>(isa, a, part),
+        5 => fwd_block_isa::<T, 5>(isa, a, part),
+        6 => fwd_block_isa::<T, 6>(isa, a, part),
+        7 => fwd_block_isa::<T, 7>(isa, a, part),
+        8 => fwd_block_isa::<T, 8>(isa, a, part),
+        _ => unreachable!("slabs have 1 to 8 chunks"),
+    }
+}
+
+/// Runs the adjoint block kernel for samples `k0..k1` and a slab of `8·nch` bins.
+pub(crate) fn adjoint_block<T: Real>(
+    isa: Isa,
+    nch: usize,
+    a: &AdjBlock<'_, T>,
+    k0: usize,
+    k1: usize,
+    buckets: &mut [Lane<T>],
+) {
+    match nch {
+        1 => adj_block_isa::<T, 1>(isa, a, k0, k1, buckets),
+        2 => adj_block_isa::<T, 2>(isa, a, k0, k1, buckets),
+        3 => adj_block_isa::<T, 3>(isa, a, k0, k1, buckets),
+        4 => adj_block_isa::<T, 4>(isa, a, k0, k1, buckets),
+        5 => adj_block_isa::<T, 5>(isa, a, k0, k1, buckets),
+        6 => adj_block_isa::<T, 6>(isa, a, k0, k1, buckets),
+        7 => adj_block_isa::<T, 7>(isa, a, k0, k1, buckets),
+        8 => adj_block_isa::<T, 8>(isa, a, k0, k1, buckets),
+        _ => unreachable!("slabs have 1 to 8 chunks"),
+    }
+}

@@ -1,0 +1,299 @@
+//! Reconstruction quality: depth accuracy, detections and the relative error of the cube.
+//!
+//! A pixel is *lit* when its depth is not [`NO_RETURN`]. For scenes, each pixel's depth is its
+//! strongest return ([`Scene::depth_map`]): a zero column is no return, and thresholding of an
+//! estimate is left to the solver that produced it. All sums accumulate in `f64`.
+//!
+//! Fractions whose denominator is zero are given the value that a perfect reconstruction would
+//! have, so that every field is a finite number: the exact fraction of a scene with no lit pixel
+//! is 1, the other fractions are 0, and the RMSE over no detected pixel is 0 (the count used,
+//! [`Metrics::detected`], tells these cases apart).
+
+use ndarray::Array2;
+
+use crate::error::{Error, Result};
+use crate::real::Real;
+
+use super::scene::{DepthMap, Scene, NO_RETURN};
+
+/// Speed of light in vacuum, m/s.
+pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
+
+/// Length of one depth bin, τ·c/2 metres, for a sampling period of `tau_s` seconds
+/// (τ = 200 ps gives 2.998 cm).
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`tau_s`) unless τ is finite and > 0.
+pub fn depth_bin_m(tau_s: f64) -> Result<f64> {
+    if tau_s.is_finite() && tau_s > 0.0 {
+        Ok(tau_s * SPEED_OF_LIGHT / 2.0)
+    } else {
+        Err(Error::param(
+            "tau_s",
+            format!("the sampling period must be finite and > 0 seconds, got {tau_s}"),
+        ))
+    }
+}
+
+/// How well an estimate matches the truth.
+///
+/// A pixel is *lit* when its depth is not [`NO_RETURN`]; for scenes, a pixel's depth is its
+/// strongest return ([`Scene::depth_map`]), a zero column being no return.
+///
+/// Fractions whose denominator is zero take the value a perfect reconstruction would have, so that
+/// every field is finite: `exact_fraction` is 1 when no pixel is lit, the other fractions are 0,
+/// and the RMSE over no detected pixel is 0 ([`Metrics::detected`] tells these cases apart).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Metrics {
+    /// Number of pixels, M·N.
+    pub pixels: usize,
+    /// Pixels lit in the truth.
+    pub lit: usize,
+    /// Pixels empty in the truth (`pixels − lit`).
+    pub empty: usize,
+    /// Lit pixels whose estimated depth equals the true depth.
+    pub exact: usize,
+    /// `exact / lit` (1 when no pixel is lit).
+    pub exact_fraction: f64,
+    /// Lit pixels that are also lit in the estimate: the pixels the RMSE is computed over.
+    pub detected: usize,
+    /// Root-mean-square depth error over the detected pixels, in bins (0 when none is detected).
+    pub depth_rmse_bins: f64,
+    /// The same in metres: `depth_rmse_bins · bin_m`.
+    pub depth_rmse_m: f64,
+    /// Length of one depth bin in metres, τ·c/2.
+    pub bin_m: f64,
+    /// Missed detections: lit in the truth, no return in the estimate.
+    pub missed: usize,
+    /// `missed / lit` (0 when no pixel is lit).
+    pub missed_fraction: f64,
+    /// False detections: no return in the truth, lit in the estimate.
+    pub false_detections: usize,
+    /// `false_detections / pixels`.
+    pub false_fraction_all: f64,
+    /// `false_detections / empty` (0 when no pixel is empty).
+    pub false_fraction_empty: f64,
+    /// ‖X − X̂‖ / ‖X‖ over the whole cubes; ‖X̂‖ when the truth is all zero (so a perfect
+    /// estimate always scores 0). From depth maps, the cubes are the single-return scenes they
+    /// describe.
+    pub relative_error: f64,
+}
+
+impl std::fmt::Display for Metrics {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "exact depth {:.1}% of {} lit pixels, depth RMSE {:.3} bins ({:.4} m) over {}, \
+             missed {} ({:.1}%), false {} ({:.2}% of all, {:.2}% of empty), relative error {:.4}",
+            100.0 * self.exact_fraction,
+            self.lit,
+            self.depth_rmse_bins,
+            self.depth_rmse_m,
+            self.detected,
+            self.missed,
+            100.0 * self.missed_fraction,
+            self.false_detections,
+            100.0 * self.false_fraction_all,
+            100.0 * self.false_fraction_empty,
+            self.relative_error
+        )
+    }
+}
+
+fn ratio(num: usize, den: usize, if_empty: f64) -> f64 {
+    if den == 0 {
+        if_empty
+    } else {
+        num as f64 / den as f64
+    }
+}
+
+fn check_same_dim(context: &str, what: [&str; 3], a: [usize; 3], b: [usize; 3]) -> Result<()> {
+    for ((name, x), y) in what.iter().zip(a).zip(b) {
+        if x != y {
+            return Err(Error::shape(format!("{context}: {name}"), x, y));
+        }
+    }
+    Ok(())
+}
+
+/// Depth, detection and count fields from two depth-bin maps of equal shape; the relative error is
+/// left at 0.
+fn depth_metrics(truth: &Array2<i32>, estimate: &Array2<i32>, tau_s: f64) -> Result<Metrics> {
+    let bin_m = depth_bin_m(tau_s)?;
+    let pixels = truth.len();
+    let (mut lit, mut exact, mut detected, mut missed, mut false_detections) = (0, 0, 0, 0, 0);
+    let mut sq = 0.0f64;
+    for (&d, &e) in truth.iter().zip(estimate.iter()) {
+        match (d != NO_RETURN, e != NO_RETURN) {
+            (true, true) => {
+                lit += 1;
+                detected += 1;
+                if d == e {
+                    exact += 1;
+                }
+                let diff = f64::from(d) - f64::from(e);
+                sq += diff * diff;
+            }
+            (true, false) => {
+                lit += 1;
+                missed += 1;
+            }
+            (false, true) => false_detections += 1,
+            (false, false) => {}
+        }
+    }
+    let empty = pixels - lit;
+    let depth_rmse_bins = if detected == 0 {
+        0.0
+    } else {
+        (sq / detected as f64).sqrt()
+    };
+    Ok(Metrics {
+        pixels,
+        lit,
+        empty,
+        exact,
+        exact_fraction: ratio(exact, lit, 1.0),
+        detected,
+        depth_rmse_bins,
+        depth_rmse_m: depth_rmse_bins * bin_m,
+        bin_m,
+        missed,
+        missed_fraction: ratio(missed, lit, 0.0),
+        false_detections,
+        false_fraction_all: ratio(false_detections, pixels, 0.0),
+        false_fraction_empty: ratio(false_detections, empty, 0.0),
+        relative_error: 0.0,
+    })
+}
+
+/// `‖diff‖ / ‖truth‖`, or `‖diff‖` for a zero truth, from squared norms.
+fn relative(diff_sq: f64, truth_sq: f64, what: &str) -> Result<f64> {
+    let r = if truth_sq > 0.0 {
+        (diff_sq / truth_sq).sqrt()
+    } else {
+        diff_sq.sqrt()
+    };
+    if r.is_finite() {
+        Ok(r)
+    } else {
+        Err(Error::NonFinite {
+            what: format!("relative error of {what}"),
+        })
+    }
+}
+
+/// ‖X − X̂‖ / ‖X‖ over the whole cubes, accumulated in `f64`; ‖X̂‖ when the truth is all zero.
+///
+/// # Errors
+/// [`Error::ShapeMismatch`] if the geometries differ (the first differing dimension is named);
+/// [`Error::NonFinite`] if a value or the result is NaN or infinite.
+pub fn relative_error<T: Real>(truth: &Scene<T>, estimate: &Scene<T>) -> Result<f64> {
+    check_scenes(truth, estimate)?;
+    let (mut diff_sq, mut truth_sq) = (0.0f64, 0.0f64);
+    for (&x, &e) in truth.as_slice().iter().zip(estimate.as_slice()) {
+        let (x, e) = (x.as_f64(), e.as_f64());
+        diff_sq += (x - e) * (x - e);
+        truth_sq += x * x;
+    }
+    relative(diff_sq, truth_sq, "scenes")
+}
+
+fn check_scenes<T: Real>(truth: &Scene<T>, estimate: &Scene<T>) -> Result<()> {
+    let (a, b) = (truth.geometry(), estimate.geometry());
+    check_same_dim(
+        "compare scenes: estimate vs truth",
+        ["rows (M)", "columns (N)", "depth bins (K_s)"],
+        [a.m, a.n, a.ks],
+        [b.m, b.n, b.ks],
+    )
+}
+
+/// Compares an estimated scene with the true one.
+///
+/// Depths are the strongest return of each pixel of either scene ([`Scene::depth_map`]; for a
+/// truth with several returns per pixel, the strongest one); the relative error is over the full
+/// cubes. `tau_s` is the sampling period in seconds, for the metre figures.
+///
+/// # Errors
+/// [`Error::ShapeMismatch`] if the geometries differ (the first differing dimension is named);
+/// [`Error::InvalidParameter`] (`tau_s`) unless τ is finite and > 0; [`Error::NonFinite`] for a NaN
+/// or infinite value.
+pub fn compare<T: Real>(truth: &Scene<T>, estimate: &Scene<T>, tau_s: f64) -> Result<Metrics> {
+    check_scenes(truth, estimate)?;
+    depth_bin_m(tau_s)?;
+    let relative_error = relative_error(truth, estimate)?;
+    let mut m = depth_metrics(&truth.depth_map().depth, &estimate.depth_map().depth, tau_s)?;
+    m.relative_error = relative_error;
+    Ok(m)
+}
+
+fn check_depth_map<T: Real>(d: &DepthMap<T>, which: &str) -> Result<()> {
+    let (a, b) = (d.depth.dim(), d.amplitude.dim());
+    check_same_dim(
+        &format!("{which} depth map: amplitude vs depth"),
+        ["rows", "columns", "maps"],
+        [a.0, a.1, 1],
+        [b.0, b.1, 1],
+    )?;
+    if let Some(((i, j), v)) = d.depth.indexed_iter().find(|(_, &v)| v < NO_RETURN) {
+        return Err(Error::param(
+            "depth",
+            format!("{which} depth bin {v} at pixel ({i}, {j}) is below {NO_RETURN}"),
+        ));
+    }
+    if let Some(((i, j), v)) = d.amplitude.indexed_iter().find(|(_, v)| !v.is_finite()) {
+        return Err(Error::NonFinite {
+            what: format!("{which} amplitude {v} at pixel ({i}, {j})"),
+        });
+    }
+    Ok(())
+}
+
+/// Compares an estimated depth map with the true one.
+///
+/// A pixel is lit when its depth is not [`NO_RETURN`]. The relative error is that of the
+/// single-return scenes the maps describe (one voxel of value `amplitude` at the pixel's depth,
+/// none at [`NO_RETURN`]): per pixel, (a − â)² at equal depths, a² + â² otherwise. `tau_s` is the
+/// sampling period in seconds, for the metre figures.
+///
+/// # Errors
+/// [`Error::ShapeMismatch`] if the maps differ in shape, or a map's amplitude differs from its
+/// depth; [`Error::InvalidParameter`] (`depth`) for a depth below −1, (`tau_s`) unless τ is finite
+/// and > 0; [`Error::NonFinite`] for a NaN or infinite amplitude.
+pub fn compare_depth<T: Real>(
+    truth: &DepthMap<T>,
+    estimate: &DepthMap<T>,
+    tau_s: f64,
+) -> Result<Metrics> {
+    check_depth_map(truth, "true")?;
+    check_depth_map(estimate, "estimated")?;
+    let (a, b) = (truth.depth.dim(), estimate.depth.dim());
+    check_same_dim(
+        "compare depth maps: estimate vs truth",
+        ["rows (M)", "columns (N)", "maps"],
+        [a.0, a.1, 1],
+        [b.0, b.1, 1],
+    )?;
+    let mut m = depth_metrics(&truth.depth, &estimate.depth, tau_s)?;
+    let (mut diff_sq, mut truth_sq) = (0.0f64, 0.0f64);
+    for (((&d, &e), &x), &xe) in truth
+        .depth
+        .iter()
+        .zip(estimate.depth.iter())
+        .zip(truth.amplitude.iter())
+        .zip(estimate.amplitude.iter())
+    {
+        let x = if d == NO_RETURN { 0.0 } else { x.as_f64() };
+        let xe = if e == NO_RETURN { 0.0 } else { xe.as_f64() };
+        truth_sq += x * x;
+        diff_sq += if d == e {
+            (x - xe) * (x - xe)
+        } else {
+            x * x + xe * xe
+        };
+    }
+    m.relative_error = relative(diff_sq, truth_sq, "depth maps")?;
+    Ok(m)
+}

@@ -1,0 +1,644 @@
+//! The fused random-demodulation operator A = Σ·S·P, and the same operator composed from the
+//! generic algebra (the reference).
+
+use std::sync::{Arc, Mutex};
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::operator::{
+    BoxedOperator, ConvMethod, ConvMode, Convolve1D, Diagonal, HStack, Identity, LinearOperator,
+    OperatorExt,
+};
+use crate::real::Real;
+
+use super::codes::Codes;
+use super::geometry::Geometry;
+use super::kernels::{
+    adjoint_block, forward_block, sparse_entry_isa, AdjBlock, FwdBlock, Isa, Lane, FLUSH,
+};
+
+/// Largest slab of depth bins a kernel handles at once (8 lanes × 8 chunks).
+const SLAB: usize = 64;
+/// Cache budget (bytes) for the tables or buckets of one block of groups.
+const BLOCK_BYTES: usize = 512 * 1024;
+/// The same for the adjoint's buckets (updated in place, so a smaller working set pays).
+const ADJ_BLOCK_BYTES: usize = 256 * 1024;
+/// Blocks whose lane partial sums are accumulated in `T` before a flush to `f64`.
+const FLUSH_BLOCKS: usize = 8;
+
+/// How [`RdOperator`]'s forward product is evaluated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ForwardPath {
+    /// Sparse when the scene has few nonzeros, dense otherwise (the default).
+    Auto,
+    /// Table lookups over all pixels: O(M·N·K·K_s / 8).
+    Dense,
+    /// One pass per nonzero voxel: O(nnz(x)·K_p).
+    Sparse,
+}
+
+/// Reusable per-task buffers, so that repeated applications do not allocate.
+#[derive(Default)]
+struct Work<T> {
+    y64: Vec<f64>,
+    part: Vec<Lane<T>>,
+    lanes: Vec<Lane<T>>,
+    lanes64: Vec<Lane<f64>>,
+}
+
+struct Pool<T>(Mutex<Vec<Work<T>>>);
+
+impl<T> Pool<T> {
+    fn take(&self) -> Work<T>
+    where
+        T: Default,
+    {
+        self.0
+            .lock()
+            .map(|mut v| v.pop())
+            .ok()
+            .flatten()
+            .unwrap_or_default()
+    }
+    fn give(&self, w: Work<T>) {
+        if let Ok(mut v) = self.0.lock() {
+            v.push(w);
+        }
+    }
+}
+
+fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
+    v.clear();
+    v.resize(len, zero);
+}
+
+/// The measurement operator of the random-demodulation lidar, computed directly from bit-packed
+/// codes (DESIGN.md §5):
+///
+/// `y[k] = Σ_p s[p, k] · Σ_j x[p, j] · p[k − j]`,  k < K = K_p + K_s − 1,
+///
+/// with the scene x as the operator's input (C order, index `p·K_s + j` for pixel p = m·N + n).
+///
+/// **Forward.** Pixels are taken in groups of eight. For a block of groups and a slab of up to 64
+/// depth bins, the 256 signed subset sums of each group's depth columns are tabulated; then for
+/// every sample one table row per group (selected by the group's code byte) is added, and the
+/// sum is weighted by the pulse window p[k − j] and accumulated in `f64`. One lookup replaces
+/// eight additions of the equivalent matrix product, and the intermediate K × K_s matrix is never
+/// stored. Scenes with few nonzeros take a sparse path costing O(nnz·K_p)
+/// (see [`ForwardPath`]).
+///
+/// **Adjoint.** The transpose of the same scheme: for every sample the row `y[k]·p[k − j]` is added
+/// into one of 256 buckets per group, selected by the group's code byte; the buckets are flushed to
+/// `f64` every 4096 samples, and each pixel's backprojection is a signed sum of its group's
+/// buckets.
+///
+/// Blocks are processed in parallel with rayon; the kernels are compiled for AVX-512, AVX2+FMA and
+/// generic x86-64 and chosen at run time.
+pub struct RdOperator<T: Real> {
+    geom: Geometry,
+    codes: Arc<Codes>,
+    pulse: Vec<T>,
+    /// Reversed pulse with `pad` zeros before and `ks_pad` after.
+    prev: Vec<T>,
+    pad: usize,
+    slabs: Vec<(usize, usize)>,
+    block_groups: usize,
+    adj_block_groups: usize,
+    path: ForwardPath,
+    isa: Isa,
+    pool: Pool<T>,
+}
+
+impl<T: Real> std::fmt::Debug for RdOperator<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RdOperator")
+            .field("geometry", &self.geom)
+            .field("pulse_len", &self.pulse.len())
+            .field("alphabet", &self.codes.alphabet())
+            .field("isa", &self.isa.name())
+            .finish()
+    }
+}
+
+impl<T: Real> RdOperator<T> {
+    /// The operator for a scene grid, a pulse and codes. The pulse may be any finite real vector
+    /// (physical pulses are nonnegative, see [`Pulse`](super::Pulse); the zero-mean pulse of the
+    /// debiased adjoint is not).
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if the codes do not have `M·N` pixels and `K_p + K_s − 1`
+    /// samples; [`Error::InvalidParameter`] for an empty pulse; [`Error::NonFinite`] for a NaN or
+    /// infinite pulse value.
+    pub fn new(geom: Geometry, pulse: Vec<T>, codes: Arc<Codes>) -> Result<Self> {
+        if pulse.is_empty() {
+            return Err(Error::param("pulse", "must have at least one sample"));
+        }
+        if let Some(i) = pulse.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: format!("pulse sample {i} ({})", pulse[i]),
+            });
+        }
+        if codes.pixels() != geom.pixels() {
+            return Err(Error::shape(
+                format!("codes: pixels vs the {geom} scene's M·N"),
+                geom.pixels(),
+                codes.pixels(),
+            ));
+        }
+        let k = geom.samples(pulse.len());
+        if codes.len() != k {
+            return Err(Error::shape(
+                format!(
+                    "codes: samples vs K = K_p + K_s − 1 = {} + {} − 1",
+                    pulse.len(),
+                    geom.ks
+                ),
+                k,
+                codes.len(),
+            ));
+        }
+        let ks = geom.ks;
+        let mut slabs = Vec::new();
+        let mut j0 = 0;
+        while j0 < ks {
+            let width = (ks - j0).min(SLAB);
+            slabs.push((j0, width.div_ceil(8)));
+            j0 += width;
+        }
+        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch);
+        let pad = ks;
+        let kp = pulse.len();
+        let mut prev = vec![T::zero(); pad + kp + ks_pad];
+        for (t, &v) in pulse.iter().rev().enumerate() {
+            prev[pad + t] = v;
+        }
+        let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
+        let table_bytes = 256 * 8 * max_nch * std::mem::size_of::<T>();
+        let block_groups = (BLOCK_BYTES / table_bytes).clamp(1, 64);
+        let adj_block_groups = (ADJ_BLOCK_BYTES / table_bytes).clamp(1, 64);
+        Ok(RdOperator {
+            geom,
+            codes,
+            pulse,
+            prev,
+            pad,
+            slabs,
+            block_groups,
+            adj_block_groups,
+            path: ForwardPath::Auto,
+            isa: Isa::detect(),
+            pool: Pool(Mutex::new(Vec::new())),
+        })
+    }
+
+    /// The same operator with another pulse (sharing the codes), e.g. the zero-mean pulse.
+    ///
+    /// # Errors
+    /// As [`RdOperator::new`]; the pulse must have the same length.
+    pub fn with_pulse(&self, pulse: Vec<T>) -> Result<Self> {
+        if pulse.len() != self.pulse.len() {
+            return Err(Error::shape(
+                "with_pulse: pulse length",
+                self.pulse.len(),
+                pulse.len(),
+            ));
+        }
+        let mut op = RdOperator::new(self.geom, pulse, self.codes.clone())?;
+        op.path = self.path;
+        Ok(op)
+    }
+
+    /// The operator with the zero-mean pulse p − mean(p): its adjoint is the debiased
+    /// backprojection (DESIGN.md §4), whose per-pixel Gram block tends to (K_p/4)·I.
+    pub fn zero_mean(&self) -> Self {
+        let mean = self.pulse.iter().map(|v| v.as_f64()).sum::<f64>() / self.pulse.len() as f64;
+        let p = self
+            .pulse
+            .iter()
+            .map(|v| T::of_f64(v.as_f64() - mean))
+            .collect();
+        self.with_pulse(p).expect("same length, finite values")
+    }
+
+    /// x̃ = Ã*y with the zero-mean pulse: the debiased backprojection.
+    ///
+    /// # Panics
+    /// On wrong buffer lengths, as [`LinearOperator::apply_adjoint`].
+    pub fn apply_adjoint_debiased(&self, y: &[T], x: &mut [T]) {
+        self.zero_mean().apply_adjoint(y, x)
+    }
+
+    /// Sets how the forward product is evaluated.
+    pub fn with_forward_path(mut self, path: ForwardPath) -> Self {
+        self.path = path;
+        self
+    }
+
+    /// The scene grid.
+    pub fn geometry(&self) -> Geometry {
+        self.geom
+    }
+
+    /// The pulse.
+    pub fn pulse(&self) -> &[T] {
+        &self.pulse
+    }
+
+    /// The codes.
+    pub fn codes(&self) -> &Arc<Codes> {
+        &self.codes
+    }
+
+    /// The instruction set the kernels run with (`"avx512"`, `"avx2+fma"` or `"generic"`).
+    pub fn isa(&self) -> &'static str {
+        self.isa.name()
+    }
+
+    /// Bytes held by the operator: codes, pulse and the working buffers of one application per
+    /// thread.
+    pub fn memory_bytes(&self) -> usize {
+        let threads = rayon::current_num_threads();
+        let lane = 8 * std::mem::size_of::<T>();
+        let max_nch = self.slabs.iter().map(|s| s.1).max().unwrap_or(1);
+        let planes = if self.codes.minus_plane().is_some() {
+            2
+        } else {
+            1
+        };
+        let per_task =
+            self.codes.len() * 8 + self.block_groups * 256 * max_nch * planes * (lane + 64);
+        self.codes.memory_bytes()
+            + (self.pulse.len() + self.prev.len()) * std::mem::size_of::<T>()
+            + threads * per_task
+    }
+
+    fn block_range(&self, b: usize) -> std::ops::Range<usize> {
+        let g0 = b * self.block_groups;
+        g0..(g0 + self.block_groups).min(self.codes.groups())
+    }
+
+    fn nblocks(&self) -> usize {
+        self.codes.groups().div_ceil(self.block_groups)
+    }
+
+    /// Builds the tables of groups `groups` for slab (j0, nch) into `tables`.
+    fn build_tables(
+        &self,
+        x: &[T],
+        groups: std::ops::Range<usize>,
+        j0: usize,
+        nch: usize,
+        tables: &mut [Lane<T>],
+    ) {
+        let (ks, npix) = (self.geom.ks, self.geom.pixels());
+        let binary = self.codes.minus_plane().is_none();
+        let two = T::one() + T::one();
+        for (gi, g) in groups.enumerate() {
+            // The group's eight depth columns restricted to the slab, as lanes.
+            let mut cols = [[[T::zero(); 8]; 8]; 8];
+            for (i, col) in cols.iter_mut().enumerate() {
+                let p = 8 * g + i;
+                if p >= npix {
+                    continue;
+                }
+                for jj in 0..(8 * nch).min(ks - j0) {
+                    col[jj / 8][jj % 8] = x[p * ks + j0 + jj];
+                }
+            }
+            let t = &mut tables[gi * 256 * nch..(gi + 1) * 256 * nch];
+            for c in 0..nch {
+                let mut first = [T::zero(); 8];
+                if binary {
+                    for col in &cols {
+                        for l in 0..8 {
+                            first[l] = first[l] - col[c][l];
+                        }
+                    }
+                }
+                t[c] = first;
+            }
+            for b in 1..256usize {
+                let prev = (b & (b - 1)) * nch;
+                let i = b.trailing_zeros() as usize;
+                for c in 0..nch {
+                    let mut row = t[prev + c];
+                    for l in 0..8 {
+                        row[l] = if binary {
+                            row[l] + two * cols[i][c][l]
+                        } else {
+                            row[l] + cols[i][c][l]
+                        };
+                    }
+                    t[b * nch + c] = row;
+                }
+            }
+        }
+    }
+
+    fn group_codes(&self, groups: std::ops::Range<usize>) -> (Vec<&[u8]>, Option<Vec<&[u8]>>) {
+        let plus: Vec<&[u8]> = groups.clone().map(|g| self.codes.plus_group(g)).collect();
+        let minus = self.codes.minus_plane().map(|_| {
+            groups
+                .map(|g| self.codes.minus_group(g).expect("ternary"))
+                .collect()
+        });
+        (plus, minus)
+    }
+
+    /// The dense forward: every pixel through the tables.
+    fn forward_dense(&self, x: &[T], y: &mut [T]) {
+        let k = self.codes.len();
+        let nb = self.nblocks();
+        let tasks = rayon::current_num_threads().clamp(1, nb);
+        let max_nch = self.slabs.iter().map(|s| s.1).max().unwrap_or(1);
+        let partial: Vec<Work<T>> = (0..tasks)
+            .into_par_iter()
+            .map(|t| {
+                let mut w = self.pool.take();
+                resize(&mut w.y64, k, 0.0);
+                resize(&mut w.part, k, [T::zero(); 8]);
+                resize(
+                    &mut w.lanes,
+                    self.block_groups * 256 * max_nch,
+                    [T::zero(); 8],
+                );
+                let (b0, b1) = (t * nb / tasks, (t + 1) * nb / tasks);
+                for b in b0..b1 {
+                    let groups = self.block_range(b);
+                    let (plus, minus) = self.group_codes(groups.clone());
+                    for &(j0, nch) in &self.slabs {
+                        self.build_tables(x, groups.clone(), j0, nch, &mut w.lanes);
+                        let blk = FwdBlock {
+                            tables: &w.lanes,
+                            plus: &plus,
+                            minus: minus.as_deref(),
+                            prev: &self.prev,
+                            base0: self.pad + self.pulse.len() - 1 + j0,
+                        };
+                        forward_block(self.isa, nch, &blk, &mut w.part);
+                    }
+                    // Flush the lane partial sums to f64 every few blocks to bound their length.
+                    if (b - b0) % FLUSH_BLOCKS == FLUSH_BLOCKS - 1 || b + 1 == b1 {
+                        for (acc, p) in w.y64.iter_mut().zip(w.part.iter_mut()) {
+                            *acc += p.iter().map(|v| v.as_f64()).sum::<f64>();
+                            *p = [T::zero(); 8];
+                        }
+                    }
+                }
+                w
+            })
+            .collect();
+        for (i, yi) in y.iter_mut().enumerate() {
+            *yi = T::of_f64(partial.iter().map(|w| w.y64[i]).sum());
+        }
+        for w in partial {
+            self.pool.give(w);
+        }
+    }
+
+    /// Nonzero voxels as (pixel, depth, value).
+    fn support(&self, x: &[T]) -> Vec<(usize, usize, T)> {
+        let ks = self.geom.ks;
+        x.iter()
+            .enumerate()
+            .filter(|(_, v)| **v != T::zero())
+            .map(|(i, &v)| (i / ks, i % ks, v))
+            .collect()
+    }
+
+    /// The sparse forward over nonzero voxels, in parallel over segments of samples.
+    fn forward_sparse(&self, entries: &[(usize, usize, T)], y: &mut [T]) {
+        const BATCH: usize = 32;
+        let k = self.codes.len();
+        let kp = self.pulse.len();
+        let segs = (rayon::current_num_threads() * 4).clamp(1, k);
+        let seg = k.div_ceil(segs);
+        y.par_chunks_mut(seg).enumerate().for_each(|(si, yseg)| {
+            let k0 = si * seg;
+            let k1 = k0 + yseg.len();
+            let mut acc = vec![0.0f64; yseg.len()];
+            let mut buf = vec![T::zero(); yseg.len()];
+            for batch in entries.chunks(BATCH) {
+                for &(p, j, amp) in batch {
+                    let lo = k0.max(j);
+                    let hi = k1.min(j + kp);
+                    if lo >= hi {
+                        continue;
+                    }
+                    let g = p / 8;
+                    let plus = &self.codes.plus_group(g)[lo..hi];
+                    let minus = self.codes.minus_group(g).map(|m| &m[lo..hi]);
+                    sparse_entry_isa(
+                        self.isa,
+                        amp,
+                        (p % 8) as u32,
+                        plus,
+                        minus,
+                        &self.pulse[lo - j..hi - j],
+                        &mut buf[lo - k0..hi - k0],
+                    );
+                }
+                for (a, b) in acc.iter_mut().zip(buf.iter_mut()) {
+                    *a += b.as_f64();
+                    *b = T::zero();
+                }
+            }
+            for (o, a) in yseg.iter_mut().zip(&acc) {
+                *o = T::of_f64(*a);
+            }
+        });
+    }
+
+    /// Whether the sparse path is cheaper for `nnz` nonzero voxels.
+    fn prefers_sparse(&self, nnz: usize) -> bool {
+        // Dense: one table-row addition of `nch` lane chunks per group and sample. Sparse: about a
+        // quarter of a lane chunk's work per (voxel, pulse sample) pair.
+        let nch: usize = self.slabs.iter().map(|s| s.1).sum();
+        let dense = (self.codes.groups() * self.codes.len() * nch) as f64;
+        let sparse = 0.25 * (nnz * self.pulse.len()) as f64;
+        sparse < dense
+    }
+
+    /// y = A·x using only the nonzero entries of x (O(nnz·K_p)).
+    ///
+    /// # Panics
+    /// On wrong buffer lengths.
+    pub fn apply_sparse(&self, x: &[T], y: &mut [T]) {
+        crate::operator::check_len("apply_sparse: input x", self.ncols(), x.len());
+        crate::operator::check_len("apply_sparse: output y", self.nrows(), y.len());
+        self.forward_sparse(&self.support(x), y);
+    }
+
+    /// y = A·x through the tables over all pixels, whatever the sparsity of x.
+    ///
+    /// # Panics
+    /// On wrong buffer lengths.
+    pub fn apply_dense(&self, x: &[T], y: &mut [T]) {
+        crate::operator::check_len("apply_dense: input x", self.ncols(), x.len());
+        crate::operator::check_len("apply_dense: output y", self.nrows(), y.len());
+        self.forward_dense(x, y);
+    }
+}
+
+impl<T: Real> LinearOperator<T> for RdOperator<T> {
+    fn nrows(&self) -> usize {
+        self.codes.len()
+    }
+
+    fn ncols(&self) -> usize {
+        self.geom.voxels()
+    }
+
+    fn forward_kernel(&self, x: &[T], y: &mut [T], _: &mut [T]) {
+        match self.path {
+            ForwardPath::Dense => self.forward_dense(x, y),
+            ForwardPath::Sparse => self.forward_sparse(&self.support(x), y),
+            ForwardPath::Auto => {
+                let nnz = x.iter().filter(|v| **v != T::zero()).count();
+                if self.prefers_sparse(nnz) {
+                    self.forward_sparse(&self.support(x), y)
+                } else {
+                    self.forward_dense(x, y)
+                }
+            }
+        }
+    }
+
+    fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
+        let (ks, npix) = (self.geom.ks, self.geom.pixels());
+        let k = self.codes.len();
+        let ternary = self.codes.minus_plane().is_some();
+        let planes = if ternary { 2 } else { 1 };
+        let bg = self.adj_block_groups;
+        let block_pix = bg * 8 * ks;
+        x.par_chunks_mut(block_pix).enumerate().for_each_init(
+            || PoolGuard(&self.pool, Some(self.pool.take())),
+            |guard, (b, xb)| {
+                let w = guard.1.as_mut().expect("present until dropped");
+                let groups = b * bg..((b + 1) * bg).min(self.codes.groups());
+                let ng = groups.len();
+                let (plus, minus) = self.group_codes(groups.clone());
+                for &(j0, nch) in &self.slabs {
+                    let n_lanes = planes * ng * 256 * nch;
+                    resize(&mut w.lanes, n_lanes, [T::zero(); 8]);
+                    resize(&mut w.lanes64, n_lanes, [0.0; 8]);
+                    let blk = AdjBlock {
+                        plus: &plus,
+                        minus: minus.as_deref(),
+                        y,
+                        prev: &self.prev,
+                        base0: self.pad + self.pulse.len() - 1 + j0,
+                    };
+                    let mut k0 = 0;
+                    while k0 < k {
+                        let k1 = (k0 + FLUSH).min(k);
+                        adjoint_block(self.isa, nch, &blk, k0, k1, &mut w.lanes);
+                        for (d, s) in w.lanes64.iter_mut().zip(w.lanes.iter_mut()) {
+                            for l in 0..8 {
+                                d[l] += s[l].as_f64();
+                                s[l] = T::zero();
+                            }
+                        }
+                        k0 = k1;
+                    }
+                    // Each pixel i of group g: Σ_b ±U[b] (binary: + where bit i is set, − elsewhere;
+                    // ternary: +1 buckets minus −1 buckets, each over the bytes with bit i set).
+                    for gi in 0..ng {
+                        let mut sums = [[[0.0f64; 8]; 8]; 8]; // [pixel][chunk][lane]
+                        let mut total = [[0.0f64; 8]; 8];
+                        for plane in 0..planes {
+                            let sign = if plane == 0 { 1.0 } else { -1.0 };
+                            let u = &w.lanes64
+                                [(plane * ng + gi) * 256 * nch..(plane * ng + gi + 1) * 256 * nch];
+                            for bb in 0..256usize {
+                                let row = &u[bb * nch..(bb + 1) * nch];
+                                for c in 0..nch {
+                                    for l in 0..8 {
+                                        total[c][l] += row[c][l];
+                                    }
+                                }
+                                let mut bits = bb;
+                                while bits != 0 {
+                                    let i = bits.trailing_zeros() as usize;
+                                    bits &= bits - 1;
+                                    for c in 0..nch {
+                                        for l in 0..8 {
+                                            sums[i][c][l] += sign * row[c][l];
+                                        }
+                                    }
+                                }
+                            }
+                        }
+                        for (i, s) in sums.iter().enumerate() {
+                            let p = 8 * (groups.start + gi) + i;
+                            if p >= npix {
+                                break;
+                            }
+                            let local = (p - 8 * groups.start) * ks;
+                            for jj in 0..(8 * nch).min(ks - j0) {
+                                let v = if ternary {
+                                    s[jj / 8][jj % 8]
+                                } else {
+                                    2.0 * s[jj / 8][jj % 8] - total[jj / 8][jj % 8]
+                                };
+                                xb[local + j0 + jj] = T::of_f64(v);
+                            }
+                        }
+                    }
+                }
+            },
+        );
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "RdOperator({}, K_p {}, {:?} codes)",
+            self.geom,
+            self.pulse.len(),
+            self.codes.alphabet()
+        )
+    }
+}
+
+/// Returns its workspace to the pool when rayon drops the per-split state.
+struct PoolGuard<'a, T>(&'a Pool<T>, Option<Work<T>>);
+
+impl<T> Drop for PoolGuard<'_, T> {
+    fn drop(&mut self) {
+        if let Some(w) = self.1.take() {
+            self.0.give(w);
+        }
+    }
+}
+
+/// A = Σ·S·P built from the generic operators: P convolves every pixel's depth column with the
+/// pulse (full mode), S multiplies by the codes (a diagonal of M·N·K entries), Σ sums over
+/// pixels. Meant as the reference for small problems: it stores the codes as `T` values.
+///
+/// # Errors
+/// As [`RdOperator::new`].
+pub fn composed_operator<T: Real>(
+    geom: Geometry,
+    pulse: &[T],
+    codes: &Codes,
+) -> Result<BoxedOperator<T>> {
+    // Validate exactly as the fused operator does.
+    RdOperator::new(geom, pulse.to_vec(), Arc::new(codes.clone()))?;
+    let (npix, k) = (geom.pixels(), codes.len());
+    let p = Convolve1D::new(
+        npix,
+        geom.ks,
+        pulse.to_vec(),
+        ConvMode::Full,
+        ConvMethod::Auto,
+    )?;
+    let s_diag: Vec<T> = codes
+        .to_dense()
+        .iter()
+        .map(|&v| T::of_f64(v as f64))
+        .collect();
+    let s = Diagonal::new(s_diag)?;
+    let sum = HStack::new((0..npix).map(|_| Identity::<T>::new(k)).collect())?;
+    Ok(sum.compose(s.compose(p)?)?.boxed())
+}

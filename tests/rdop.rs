@@ -1,0 +1,182 @@
+//! The fused random-demodulation operator against the one composed from the generic algebra.
+
+use std::sync::Arc;
+
+use proptest::prelude::*;
+use rdlidar::lidar::{composed_operator, Codes, ForwardPath, Geometry, Pulse, RdOperator};
+use rdlidar::operator::{DotTest, LinearOperator};
+use rdlidar::Real;
+
+use crate::common::random_vec;
+
+/// Max |a − b| / max |b|.
+fn rel<T: Real>(a: &[T], b: &[T]) -> f64 {
+    let scale = b
+        .iter()
+        .fold(0.0f64, |m, v| m.max(v.as_f64().abs()))
+        .max(1e-300);
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x.as_f64() - y.as_f64()).abs()))
+        / scale
+}
+
+#[derive(Debug, Clone, Copy)]
+enum SceneKind {
+    Dense,
+    Sparse,
+    Empty,
+}
+
+fn scene(kind: SceneKind, len: usize, seed: u64) -> Vec<f64> {
+    let v = random_vec(len, seed);
+    match kind {
+        SceneKind::Dense => v,
+        SceneKind::Sparse => v
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| {
+                if (i * 7 + seed as usize) % 13 == 0 {
+                    a
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+        SceneKind::Empty => vec![0.0; len],
+    }
+}
+
+fn check<T: Real>(
+    g: Geometry,
+    kp: usize,
+    ternary: bool,
+    kind: SceneKind,
+    seed: u64,
+    tol: f64,
+) -> Result<(), TestCaseError> {
+    let pulse: Vec<T> = Pulse::<T>::bernoulli(kp, seed).unwrap().into_inner();
+    let k = g.samples(kp);
+    let codes = if ternary {
+        Codes::random_ternary(g.pixels(), k, 0.3, seed ^ 5).unwrap()
+    } else {
+        Codes::random_binary(g.pixels(), k, seed ^ 5).unwrap()
+    };
+    let reference = composed_operator(g, &pulse, &codes).unwrap();
+    let fused = RdOperator::new(g, pulse.clone(), Arc::new(codes)).unwrap();
+    let x: Vec<T> = scene(kind, g.voxels(), seed)
+        .into_iter()
+        .map(T::of_f64)
+        .collect();
+    let mut want = vec![T::zero(); k];
+    reference.apply(&x, &mut want);
+    for path in [ForwardPath::Auto, ForwardPath::Dense, ForwardPath::Sparse] {
+        let op = fused
+            .with_pulse(pulse.clone())
+            .unwrap()
+            .with_forward_path(path);
+        let mut got = vec![T::zero(); k];
+        op.apply(&x, &mut got);
+        let e = rel(&got, &want);
+        prop_assert!(
+            e <= tol,
+            "{} {g} K_p {kp} {:?} {:?}: forward differs by {e:e}",
+            T::NAME,
+            kind,
+            path
+        );
+    }
+    let y: Vec<T> = random_vec(k, seed ^ 11)
+        .into_iter()
+        .map(T::of_f64)
+        .collect();
+    let mut want_t = vec![T::zero(); g.voxels()];
+    reference.apply_adjoint(&y, &mut want_t);
+    let mut got_t = vec![T::zero(); g.voxels()];
+    fused.apply_adjoint(&y, &mut got_t);
+    let e = rel(&got_t, &want_t);
+    prop_assert!(
+        e <= tol,
+        "{} {g} K_p {kp}: adjoint differs by {e:e}",
+        T::NAME
+    );
+    let r = DotTest::new().seed(seed).measure(&fused);
+    prop_assert!(r.passed(), "{} dot test gap {:e}", T::NAME, r.gap);
+    Ok(())
+}
+
+fn geometry() -> impl Strategy<Value = Geometry> {
+    (1..=7usize, 1..=9usize, 1..=70usize).prop_map(|(m, n, ks)| Geometry::new(m, n, ks).unwrap())
+}
+
+proptest! {
+    #![proptest_config(crate::common::config(48))]
+
+    #[test]
+    fn fused_matches_composed(
+        g in geometry(),
+        kp in 1..=120usize,
+        ternary in any::<bool>(),
+        kind in prop::sample::select(vec![SceneKind::Dense, SceneKind::Sparse, SceneKind::Empty]),
+        seed in any::<u64>(),
+    ) {
+        check::<f64>(g, kp, ternary, kind, seed, 1e-12)?;
+        check::<f32>(g, kp, ternary, kind, seed, 1e-5)?;
+    }
+}
+
+/// Long pulses cross the adjoint's f64 flush boundary (every 16 384 samples) and many pixels cross
+/// the forward's (every 8 blocks of groups): both must still match the reference.
+#[test]
+fn flush_boundaries_match_the_reference() {
+    for (g, kp) in [
+        (Geometry::new(2, 3, 8).unwrap(), 40_000),
+        (Geometry::new(70, 70, 4).unwrap(), 20),
+    ] {
+        check::<f64>(g, kp, false, SceneKind::Dense, 3, 1e-12).unwrap();
+        check::<f32>(g, kp, false, SceneKind::Dense, 3, 1e-5).unwrap();
+        check::<f64>(g, kp, true, SceneKind::Sparse, 4, 1e-12).unwrap();
+    }
+}
+
+/// At K ≥ 10⁶ the f32 operator agrees with the f64 one to 1e-5 relative (long sums are
+/// accumulated in f64).
+#[test]
+fn f32_agrees_with_f64_at_a_million_samples() {
+    let g = Geometry::new(3, 3, 6).unwrap();
+    let kp = 1_000_000;
+    let codes = Arc::new(Codes::random_binary(g.pixels(), g.samples(kp), 9).unwrap());
+    let p64 = Pulse::<f64>::bernoulli(kp, 8).unwrap().into_inner();
+    let p32: Vec<f32> = p64.iter().map(|&v| v as f32).collect();
+    let a64 = RdOperator::new(g, p64, codes.clone()).unwrap();
+    let a32 = RdOperator::new(g, p32, codes).unwrap();
+    let x64 = random_vec(g.voxels(), 1);
+    let x32: Vec<f32> = x64.iter().map(|&v| v as f32).collect();
+    for path in [ForwardPath::Dense, ForwardPath::Sparse] {
+        let (a64, a32) = (
+            a64.with_pulse(a64.pulse().to_vec())
+                .unwrap()
+                .with_forward_path(path),
+            a32.with_pulse(a32.pulse().to_vec())
+                .unwrap()
+                .with_forward_path(path),
+        );
+        let mut y64 = vec![0.0; a64.nrows()];
+        let mut y32 = vec![0.0f32; a32.nrows()];
+        a64.apply(&x64, &mut y64);
+        a32.apply(&x32, &mut y32);
+        let y32: Vec<f64> = y32.iter().map(|&v| v as f64).collect();
+        let e = rel(&y32, &y64);
+        assert!(e <= 1e-5, "{path:?} forward: f32 vs f64 {e:e}");
+    }
+    // The adjoint sums a million terms per voxel.
+    let y64 = random_vec(a64.nrows(), 2);
+    let y32: Vec<f32> = y64.iter().map(|&v| v as f32).collect();
+    let mut b64 = vec![0.0; g.voxels()];
+    let mut b32 = vec![0.0f32; g.voxels()];
+    a64.apply_adjoint(&y64, &mut b64);
+    a32.apply_adjoint(&y32, &mut b32);
+    let b32: Vec<f64> = b32.iter().map(|&v| v as f64).collect();
+    let e = rel(&b32, &b64);
+    assert!(e <= 1e-5, "adjoint: f32 vs f64 {e:e}");
+}
