@@ -13,4 +13,6 @@ mod noise;
 mod norm;
 mod operators;
 mod rdop;
+mod tight_frame;
+mod architectures;
 mod scenes;

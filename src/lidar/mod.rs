@@ -4,6 +4,7 @@
 //! `x[m,n,:]` (K_s bins) convolved with p, multiplies it by its own code `s[m,n,k]`, and one ADC
 //! samples the sum: `y[k] = Σ_{m,n} s[m,n,k]·(x[m,n,:] ⊛ p)[k]`, k < K = K_p + K_s − 1.
 
+mod architectures;
 mod codes;
 mod geometry;
 mod kernels;
@@ -14,6 +15,7 @@ mod rdop;
 mod scene;
 mod scenes;
 
+pub use architectures::{coded_aperture, multi_adc, pixel_groups, tiles};
 pub use codes::{CodeAlphabet, Codes};
 pub use geometry::{Geometry, Regime};
 pub use metrics::{compare, compare_depth, depth_bin_m, relative_error, Metrics, SPEED_OF_LIGHT};
