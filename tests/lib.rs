@@ -3,6 +3,7 @@
 mod common;
 
 mod algebra;
+mod architectures;
 mod cli;
 mod convolution;
 mod errors;
@@ -13,6 +14,5 @@ mod noise;
 mod norm;
 mod operators;
 mod rdop;
-mod tight_frame;
-mod architectures;
 mod scenes;
+mod tight_frame;
