@@ -50,6 +50,15 @@ pub enum Error {
         /// What the routine reported.
         reason: String,
     },
+    /// A file cannot be read or written, or its contents are not what was expected (wrong dtype
+    /// or shape, invalid values, truncated or not a `.npy` file).
+    #[error("{path}: {reason}")]
+    File {
+        /// The file, as given.
+        path: String,
+        /// What is wrong, e.g. `"dtype int32 is not accepted for a scene: expected float32 or float64"`.
+        reason: String,
+    },
     /// The adjoint identity ⟨Ax, y⟩ = ⟨x, A*y⟩ does not hold within tolerance.
     #[error("dot test failed: relative gap {gap:.3e} above tolerance {tolerance:.3e}")]
     DotTestFailed {

@@ -39,6 +39,7 @@
 #![warn(missing_docs)]
 
 pub mod error;
+pub mod io;
 #[cfg(feature = "lapack")]
 pub mod lapack;
 pub mod lidar;

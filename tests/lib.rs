@@ -5,6 +5,7 @@ mod common;
 mod algebra;
 mod architectures;
 mod cli;
+mod cli_lidar;
 mod convolution;
 mod errors;
 #[cfg(feature = "lapack")]

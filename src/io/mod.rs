@@ -1,0 +1,249 @@
+//! Files: the `.npy` arrays other tools exchange with the crate (DESIGN.md §8) and atomic writes.
+//!
+//! Every problem with a file is reported as [`Error::File`], whose message
+//! starts with the file's path.
+//!
+//! Writes are atomic: the data goes to a temporary file in the destination's directory
+//! (`.NAME.tmp-<pid>-<n>`), which is flushed, synced to disk and then renamed over the destination.
+//! On any error the temporary file is removed, so a destination is either left as it was or
+//! replaced by a complete file, never by a partial one.
+//!
+//! ```no_run
+//! use rdlidar::io::{read_pulse, write_measurements};
+//!
+//! # fn main() -> rdlidar::Result<()> {
+//! let pulse = read_pulse::<f64>("pulse.npy")?;      // float32 or float64 on disk
+//! write_measurements("copy.npy", pulse.as_slice())?; // written atomically, as float64
+//! # Ok(())
+//! # }
+//! ```
+
+pub mod npy;
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use crate::error::{Error, Result};
+
+pub use npy::{
+    read_codes, read_depth, read_header, read_measurements, read_pulse, read_scene, stage_array,
+    stage_codes, write_array, write_codes, write_depth, write_measurements, write_pulse,
+    write_scene, NpyDtype, NpyHeader, ShapeExpectation,
+};
+
+/// An [`Error::File`] for `path`.
+pub(crate) fn file_error(path: &Path, reason: impl Into<String>) -> Error {
+    Error::File {
+        path: path.display().to_string(),
+        reason: reason.into(),
+    }
+}
+
+/// Distinguishes the temporary files of one process.
+static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
+
+/// A file written under a temporary name next to its destination and renamed into place by
+/// [`StagedFile::commit`].
+///
+/// Dropping a staged file that was not committed removes the temporary file, so an error at any
+/// point (including a panic that unwinds) leaves nothing behind.
+///
+/// ```no_run
+/// use std::io::Write;
+/// use rdlidar::io::StagedFile;
+///
+/// # fn main() -> rdlidar::Result<()> {
+/// let mut f = StagedFile::create("out/notes.txt")?;
+/// writeln!(f.writer(), "complete or absent").map_err(|e| f.io_error("cannot write", e))?;
+/// f.commit()?; // flush, fsync, rename
+/// # Ok(())
+/// # }
+/// ```
+#[derive(Debug)]
+pub struct StagedFile {
+    dest: PathBuf,
+    tmp: PathBuf,
+    /// `None` once the file has been synced and closed.
+    writer: Option<BufWriter<File>>,
+    committed: bool,
+}
+
+impl StagedFile {
+    /// Creates the temporary file for `dest` in `dest`'s directory.
+    ///
+    /// # Errors
+    /// [`Error::File`] naming `dest` if it has no file name or the temporary file cannot be created
+    /// (e.g. the directory does not exist or is not writable).
+    pub fn create(dest: impl AsRef<Path>) -> Result<Self> {
+        let dest = dest.as_ref().to_path_buf();
+        let name = dest
+            .file_name()
+            .ok_or_else(|| file_error(&dest, "not a file name"))?
+            .to_string_lossy()
+            .into_owned();
+        if dest.is_dir() {
+            return Err(file_error(&dest, "is a directory, expected a file name"));
+        }
+        let dir = match dest.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let pid = std::process::id();
+        let mut attempts = 0;
+        loop {
+            let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+            let tmp = dir.join(format!(".{name}.tmp-{pid}-{n}"));
+            match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+                Ok(file) => {
+                    return Ok(StagedFile {
+                        dest,
+                        tmp,
+                        writer: Some(BufWriter::with_capacity(1 << 20, file)),
+                        committed: false,
+                    })
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && attempts < 64 => {
+                    attempts += 1;
+                }
+                Err(e) => {
+                    let what = if dir.is_dir() {
+                        format!("cannot create a file in {}", dir.display())
+                    } else {
+                        format!("directory {} does not exist", dir.display())
+                    };
+                    return Err(file_error(&dest, format!("{what}: {e}")));
+                }
+            }
+        }
+    }
+
+    /// The destination path.
+    pub fn path(&self) -> &Path {
+        &self.dest
+    }
+
+    /// The buffered writer of the temporary file.
+    ///
+    /// # Panics
+    /// After [`StagedFile::sync`], which closes it.
+    pub fn writer(&mut self) -> &mut BufWriter<File> {
+        self.writer
+            .as_mut()
+            .expect("the staged file is still open for writing")
+    }
+
+    /// An [`Error::File`] naming the destination, for an I/O error met while writing.
+    pub fn io_error(&self, what: &str, e: std::io::Error) -> Error {
+        file_error(&self.dest, format!("{what}: {e}"))
+    }
+
+    /// Flushes the data and syncs the temporary file to disk, then closes it. Idempotent.
+    ///
+    /// # Errors
+    /// [`Error::File`] naming the destination if flushing or syncing fails (e.g. a full disk).
+    pub fn sync(&mut self) -> Result<()> {
+        if let Some(w) = self.writer.take() {
+            let file = w
+                .into_inner()
+                .map_err(|e| file_error(&self.dest, format!("cannot write: {}", e.error())))?;
+            file.sync_all()
+                .map_err(|e| file_error(&self.dest, format!("cannot sync to disk: {e}")))?;
+        }
+        Ok(())
+    }
+
+    /// Syncs the data (if not done yet) and renames the temporary file over the destination.
+    ///
+    /// # Errors
+    /// [`Error::File`] naming the destination if syncing or renaming fails; the temporary file is
+    /// removed and the destination left as it was.
+    pub fn commit(mut self) -> Result<()> {
+        self.sync()?;
+        std::fs::rename(&self.tmp, &self.dest)
+            .map_err(|e| file_error(&self.dest, format!("cannot rename into place: {e}")))?;
+        self.committed = true;
+        // Make the rename itself durable where directories can be synced (best effort).
+        if let Some(dir) = self.dest.parent() {
+            let dir = if dir.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                dir
+            };
+            if let Ok(d) = File::open(dir) {
+                let _ = d.sync_all();
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Drop for StagedFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            self.writer.take();
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// Writes `dest` atomically: `write` fills a [`StagedFile`]'s writer, then the file is synced and
+/// renamed into place.
+///
+/// # Errors
+/// [`Error::File`] naming `dest` when the file cannot be created, written, synced or renamed;
+/// any error returned by `write`. In every error case `dest` is left as it was.
+pub fn write_atomic<F>(dest: impl AsRef<Path>, write: F) -> Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> Result<()>,
+{
+    let mut staged = StagedFile::create(dest)?;
+    write(staged.writer())?;
+    staged.commit()
+}
+
+/// Writes `contents` under a temporary name next to `dest` and syncs it, without renaming it into
+/// place (see [`StagedFile`]).
+///
+/// # Errors
+/// [`Error::File`] naming `dest` when the file cannot be created, written or synced.
+pub fn stage_bytes(dest: impl AsRef<Path>, contents: &[u8]) -> Result<StagedFile> {
+    let mut staged = StagedFile::create(dest)?;
+    staged
+        .writer()
+        .write_all(contents)
+        .map_err(|e| staged.io_error("cannot write", e))?;
+    staged.sync()?;
+    Ok(staged)
+}
+
+/// Renames staged files into place, in order.
+///
+/// If a rename fails, the files not yet renamed are removed and the error returned; the files
+/// renamed before it stay in place (the caller decides whether to remove them). The returned
+/// paths on success are the destinations, in order.
+///
+/// # Errors
+/// [`Error::File`] naming the file whose rename failed.
+pub fn commit_all(files: Vec<StagedFile>) -> Result<Vec<PathBuf>> {
+    let mut done = Vec::with_capacity(files.len());
+    for f in files {
+        let dest = f.path().to_path_buf();
+        f.commit()?;
+        done.push(dest);
+    }
+    Ok(done)
+}
+
+/// Writes `contents` to `dest` atomically (see [`write_atomic`]).
+///
+/// # Errors
+/// As [`write_atomic`].
+pub fn write_bytes_atomic(dest: impl AsRef<Path>, contents: &[u8]) -> Result<()> {
+    let dest = dest.as_ref();
+    write_atomic(dest, |w| {
+        w.write_all(contents)
+            .map_err(|e| file_error(dest, format!("cannot write: {e}")))
+    })
+}
