@@ -216,14 +216,16 @@ impl Codes {
         let groups = pixels.div_ceil(8);
         let mut plus = vec![0u8; groups * len];
         let mut minus = ternary.then(|| vec![0u8; groups * len]);
-        for ((p, k), &v) in s.indexed_iter() {
-            let at = (p / 8) * len + k;
+        for (p, row) in s.rows().into_iter().enumerate() {
+            let at = (p / 8) * len;
             let bit = 1u8 << (p % 8);
-            if v == 1 {
-                plus[at] |= bit;
-            } else if v == -1 {
-                if let Some(m) = minus.as_mut() {
-                    m[at] |= bit;
+            let dst = &mut plus[at..at + len];
+            for (d, &v) in dst.iter_mut().zip(row.iter()) {
+                *d |= if v == 1 { bit } else { 0 };
+            }
+            if let Some(m) = minus.as_mut() {
+                for (d, &v) in m[at..at + len].iter_mut().zip(row.iter()) {
+                    *d |= if v == -1 { bit } else { 0 };
                 }
             }
         }
