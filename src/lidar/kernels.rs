@@ -274,6 +274,8 @@ fn flush<T: Real>(src: &mut [Lane<T>], dst: &mut [Lane<f64>]) {
 /// For one group: `sums[i] = Σ_{b ∋ i} sign·U[b]` over the `planes` bucket sets (sign +1 for the
 /// first, −1 for the second) and `total = Σ_b U[b]` over the first. `u` holds `planes` sets of
 /// 256 × `nch` lanes; `sums` has 8 × `nch` lanes (pixel-major), `total` `nch` lanes.
+// `T` is unused: the dispatch macro instantiates every kernel per scalar type.
+#[allow(clippy::extra_unused_type_parameters)]
 #[inline(always)]
 fn reduce_group<T: Real>(
     u: &[Lane<f64>],
