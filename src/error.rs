@@ -59,6 +59,14 @@ pub enum Error {
         /// What is wrong, e.g. `"dtype int32 is not accepted for a scene: expected float32 or float64"`.
         reason: String,
     },
+    /// An iterative solver cannot continue (zero curvature, non-finite values, …).
+    #[error("{solver}: numerical breakdown: {reason}")]
+    Breakdown {
+        /// The solver.
+        solver: &'static str,
+        /// What happened.
+        reason: String,
+    },
     /// The adjoint identity ⟨Ax, y⟩ = ⟨x, A*y⟩ does not hold within tolerance.
     #[error("dot test failed: relative gap {gap:.3e} above tolerance {tolerance:.3e}")]
     DotTestFailed {

@@ -46,6 +46,7 @@ pub mod lidar;
 pub mod linalg;
 pub mod operator;
 pub mod real;
+pub mod solver;
 
 pub use error::{Error, Result};
 pub use operator::{LinearOperator, OperatorExt};

@@ -16,4 +16,5 @@ mod norm;
 mod operators;
 mod rdop;
 mod scenes;
+mod solvers;
 mod tight_frame;
