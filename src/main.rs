@@ -7,10 +7,13 @@ use std::time::Instant;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use ndarray_npy::WritableElement;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use rdlidar::io::{self, NpyDtype, ShapeExpectation, StagedFile};
 use rdlidar::lidar::{
-    paper_scene, random_opaque_scene, semi_transparent_scene, CodeAlphabet, Codes, Geometry,
-    NoiseModel, NoiseStage, Pulse, RdOperator, Scene, StageReport,
+    coded_aperture, multi_adc, paper_scene, pixel_groups, random_opaque_scene,
+    semi_transparent_scene, tiles, CodeAlphabet, Codes, Geometry, NoiseModel, NoiseStage, Pulse,
+    RdOperator, Scene, StageReport,
 };
 use rdlidar::operator::{
     BoxedOperator, ConvMethod, ConvMode, Convolve1D, DenseMatrix, Diagonal, DotTest, Gradient2D,
@@ -90,6 +93,22 @@ enum Command {
     /// SEED+2 and the random and transparent scenes from SEED+3. The same arguments give the same
     /// files on every machine.
     ///
+    /// Architectures (the paper's §3; at most one of the three flags, meta.json records it under
+    /// "architecture"):
+    ///
+    /// * --adcs G (G > 1): G ADCs, every pixel modulated by G independent code sets, code set g
+    ///   (g = 0 … G−1) drawn from SEED+1+1000·g. codes.npy is (G, M, N, K) int8, meas.npy (G, K),
+    ///   row g measured through set g.
+    ///
+    /// * --tiles AxB: the array split into tiles of AxB pixels (row-major, the last ones clipped
+    ///   at the edges), one ADC per tile summing only its pixels. codes.npy is the usual
+    ///   (M, N, K), meas.npy (T, K) for T tiles, in row-major tile order. Read them back with
+    ///   `forward`/`adjoint`/`dottest --tiles AxB`.
+    ///
+    /// * --aperture F: a coded aperture, only ⌈F·M·N⌉ pixels drawn at random from SEED+4 reach
+    ///   the single ADC. The other pixels' codes are written as 0 in codes.npy, which is thus an
+    ///   ordinary (M, N, K) file whose single-ADC operator is the coded aperture; meas.npy is (K,).
+    ///
     /// DIR is created if needed (its parent must exist). An existing non-empty DIR is refused
     /// unless --force is given, which replaces the five files and leaves other files alone.
     /// Files are written under temporary names and renamed into place once all are complete; on
@@ -103,24 +122,31 @@ enum Command {
     /// Reads the pulse (K_p,), the codes (M, N, K_p + K_s − 1) and the scene (M, N, K_s), and
     /// writes the measurements (K,) to OUT.
     ///
+    /// Codes of shape (G, M, N, K), as `simulate --adcs G` writes them, are G code sets with one
+    /// ADC each, and OUT is (G, K). With --tiles AxB the array is split into T tiles with one
+    /// ADC each, and OUT is (T, K).
+    ///
     /// Example: `rdlidar forward --pulse run0/pulse.npy --codes run0/codes.npy --scene run0/scene.npy --out y.npy`
     Forward {
         /// Pulse file (K_p,), float32 or float64, ≥ 0.
         #[arg(long, value_name = "P")]
         pulse: PathBuf,
-        /// Codes file (M, N, K), int8 (or float) in {-1, 0, 1}.
+        /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
         #[arg(long, value_name = "S")]
         codes: PathBuf,
         /// Scene file (M, N, K_s), float32 or float64.
         #[arg(long, value_name = "X")]
         scene: PathBuf,
-        /// Output measurements file (K,).
+        /// Output measurements file (K,), or (ADCs, K) for several ADCs.
         #[arg(long, value_name = "Y")]
         out: PathBuf,
         /// Precision of the computation and of OUT (default: f64 if the scene or the pulse is
         /// float64, f32 otherwise).
         #[arg(long, value_enum)]
         precision: Option<Precision>,
+        /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
+        #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+        tiles: Option<Tile>,
     },
 
     /// Apply the adjoint (backprojection): x̃ = A* y.
@@ -130,15 +156,18 @@ enum Command {
     /// p − mean(p) is used, which removes the constant floor plain backprojection adds to every
     /// depth bin of a pixel with a 0/1 pulse.
     ///
+    /// Codes of shape (G, M, N, K) (`simulate --adcs G`) need measurements (G, K); with
+    /// --tiles AxB the measurements are (T, K), one row per tile.
+    ///
     /// Example: `rdlidar adjoint --pulse run0/pulse.npy --codes run0/codes.npy --meas run0/meas.npy --depth-bins 40 --out xt.npy --debiased`
     Adjoint {
         /// Pulse file (K_p,), float32 or float64, ≥ 0.
         #[arg(long, value_name = "P")]
         pulse: PathBuf,
-        /// Codes file (M, N, K), int8 (or float) in {-1, 0, 1}.
+        /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
         #[arg(long, value_name = "S")]
         codes: PathBuf,
-        /// Measurements file (K,), float32 or float64.
+        /// Measurements file (K,), or (ADCs, K) for several ADCs; float32 or float64.
         #[arg(long, value_name = "Y")]
         meas: PathBuf,
         /// Depth bins K_s of the scene.
@@ -154,6 +183,9 @@ enum Command {
         /// pulse are float64, f32 otherwise).
         #[arg(long, value_enum)]
         precision: Option<Precision>,
+        /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
+        #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+        tiles: Option<Tile>,
     },
 
     /// Check the adjoint identity <Ax, y> = <x, A*y> of the operator built from files.
@@ -163,12 +195,15 @@ enum Command {
     /// |<Ax,y> - <x,A*y>| / max(|Ax||y|, |x||A*y|) on seeded Gaussian vectors and exits with
     /// status 1 if one is above its tolerance (1e-4 in f32, 1e-10 in f64).
     ///
+    /// Codes of shape (G, M, N, K) give the stacked operator of G ADCs; --tiles AxB the stacked
+    /// operator of one ADC per tile.
+    ///
     /// Example: `rdlidar dottest --pulse run0/pulse.npy --codes run0/codes.npy --depth-bins 40`
     Dottest {
         /// Pulse file (K_p,), float32 or float64, ≥ 0.
         #[arg(long, value_name = "P")]
         pulse: PathBuf,
-        /// Codes file (M, N, K), int8 (or float) in {-1, 0, 1}.
+        /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
         #[arg(long, value_name = "S")]
         codes: PathBuf,
         /// Depth bins K_s of the scene.
@@ -177,6 +212,9 @@ enum Command {
         /// Seed of the test vectors.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
+        #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+        tiles: Option<Tile>,
     },
 
     /// Time the forward, adjoint and sparse forward operators on a generated problem.
@@ -247,6 +285,46 @@ struct SimulateArgs {
     /// Replace scene.npy, pulse.npy, codes.npy, meas.npy and meta.json in a non-empty DIR.
     #[arg(long)]
     force: bool,
+    /// Number of ADCs G ≥ 1, each with its own code set for every pixel (G > 1 writes codes.npy
+    /// (G, M, N, K) and meas.npy (G, K)).
+    #[arg(long, value_name = "G", value_parser = parse_positive, default_value_t = 1)]
+    adcs: usize,
+    /// Split the array into tiles of AxB pixels with one ADC each (meas.npy (T, K) for T tiles).
+    #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+    tiles: Option<Tile>,
+    /// Coded aperture: only a random fraction F in (0, 1] of the pixels (⌈F·M·N⌉ of them)
+    /// reaches the ADC; the others' codes are written as 0.
+    #[arg(long, value_name = "F")]
+    aperture: Option<f64>,
+}
+
+/// A tile size, `AxB` on the command line: A rows and B columns of pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Tile {
+    m: usize,
+    n: usize,
+}
+
+impl std::fmt::Display for Tile {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}x{}", self.m, self.n)
+    }
+}
+
+fn parse_tile(text: &str) -> Result<Tile, String> {
+    let parts: Vec<&str> = text.trim().split(['x', 'X']).collect();
+    let dims: Vec<usize> = parts
+        .iter()
+        .map(|p| p.trim().parse::<usize>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("expected AxB (tile rows x tile columns), got {text:?}"))?;
+    match dims[..] {
+        [m, n] if m > 0 && n > 0 => Ok(Tile { m, n }),
+        [m, n] => Err(format!("tile dimensions must be positive, got {m}x{n}")),
+        _ => Err(format!(
+            "expected AxB (tile rows x tile columns), got {text:?}"
+        )),
+    }
 }
 
 fn parse_positive(text: &str) -> Result<usize, String> {
@@ -476,11 +554,147 @@ fn npy_dtype<T: Real>() -> &'static str {
     }
 }
 
+/// How the measurements were taken, from the codes header and `--tiles`, before the codes are
+/// read.
+#[derive(Debug, Clone, Copy)]
+enum LayoutKind {
+    /// A single code set (M, N, K) and one ADC (a coded aperture has zero codes).
+    Single,
+    /// G code sets (G, M, N, K), one ADC each.
+    MultiAdc(usize),
+    /// A single code set, one ADC per tile.
+    Tiles(Tile),
+}
+
+/// The codes of a problem, read according to its [`LayoutKind`].
+enum Layout {
+    /// One code set, one ADC.
+    Single(Arc<Codes>),
+    /// One ADC per code set.
+    MultiAdc(Vec<Arc<Codes>>),
+    /// One code set, one ADC per group of pixels (the tiles of `tile`).
+    Tiles {
+        codes: Arc<Codes>,
+        tile: Tile,
+        groups: Vec<Vec<usize>>,
+    },
+}
+
+impl Layout {
+    /// Rows of the measurements: `None` for the (K,) vector of one ADC, `Some(R)` for (R, K).
+    fn rows(&self) -> Option<usize> {
+        match self {
+            Layout::Single(_) => None,
+            Layout::MultiAdc(sets) => Some(sets.len()),
+            Layout::Tiles { groups, .. } => Some(groups.len()),
+        }
+    }
+
+    /// The measurement operator with the pulse `pulse`.
+    fn operator<T: Real>(&self, g: Geometry, pulse: Vec<T>) -> rdlidar::Result<BoxedOperator<T>> {
+        Ok(match self {
+            Layout::Single(codes) => RdOperator::new(g, pulse, codes.clone())?.boxed(),
+            Layout::MultiAdc(sets) => multi_adc(g, &pulse, sets.clone())?.boxed(),
+            Layout::Tiles { codes, groups, .. } => pixel_groups(g, &pulse, codes, groups)?.boxed(),
+        })
+    }
+
+    /// "binary" if every code set is ±1, "ternary" otherwise.
+    fn alphabet(&self) -> &'static str {
+        let binary = |c: &Arc<Codes>| c.alphabet() == CodeAlphabet::Binary;
+        let all_binary = match self {
+            Layout::Single(codes) | Layout::Tiles { codes, .. } => binary(codes),
+            Layout::MultiAdc(sets) => sets.iter().all(binary),
+        };
+        if all_binary {
+            "binary"
+        } else {
+            "ternary"
+        }
+    }
+
+    /// A note for the messages of the multi-ADC layouts (empty for a single ADC).
+    fn note(&self) -> String {
+        match self {
+            Layout::Single(_) => String::new(),
+            Layout::MultiAdc(sets) => format!(", {} ADCs (one code set each)", sets.len()),
+            Layout::Tiles { tile, groups, .. } => {
+                format!(", tiles of {tile} pixels ({} ADCs)", groups.len())
+            }
+        }
+    }
+}
+
+/// Decides the layout from the header of the codes file and `--tiles`; returns it with the
+/// codes' shape.
+fn layout_kind(codes: &Path, tile: Option<Tile>) -> CliResult<(LayoutKind, Vec<usize>)> {
+    let h = io::read_header(codes)?;
+    let kind = match (h.shape.len(), tile) {
+        (4, Some(t)) => {
+            return Err(format!(
+                "{}: codes of shape {} are {} code sets, one ADC each; --tiles {t} and several \
+                 code sets are not supported together",
+                codes.display(),
+                shape_text(&h.shape),
+                h.shape[0]
+            )
+            .into())
+        }
+        (4, None) => LayoutKind::MultiAdc(h.shape[0]),
+        (_, Some(t)) => LayoutKind::Tiles(t),
+        (_, None) => LayoutKind::Single,
+    };
+    Ok((kind, h.shape))
+}
+
+/// Reads the codes as `kind` says: (M, N, K) or (G, M, N, K). Returns the geometry (with `ks`
+/// depth bins) and the layout.
+fn read_layout(
+    codes: &Path,
+    kind: LayoutKind,
+    expect: &ShapeExpectation,
+    ks: usize,
+) -> CliResult<(Geometry, Layout)> {
+    let geometry =
+        |(m, n): (usize, usize)| Geometry::new(m, n, ks).map_err(|e| format!("--depth-bins: {e}"));
+    Ok(match kind {
+        LayoutKind::Single => {
+            let (grid, s) = io::read_codes(codes, expect)?;
+            (geometry(grid)?, Layout::Single(Arc::new(s)))
+        }
+        LayoutKind::MultiAdc(_) => {
+            let (grid, sets) = io::read_code_sets(codes, expect)?;
+            let sets = sets.into_iter().map(Arc::new).collect();
+            (geometry(grid)?, Layout::MultiAdc(sets))
+        }
+        LayoutKind::Tiles(tile) => {
+            let (grid, s) = io::read_codes(codes, expect)?;
+            let g = geometry(grid)?;
+            let groups = tiles(g, tile.m, tile.n).map_err(|e| format!("--tiles: {e}"))?;
+            (
+                g,
+                Layout::Tiles {
+                    codes: Arc::new(s),
+                    tile,
+                    groups,
+                },
+            )
+        }
+    })
+}
+
+/// p − mean(p), the pulse of the debiased adjoint (the mean taken in f64).
+fn zero_mean_pulse<T: Real>(p: &[T]) -> Vec<T> {
+    let mean = p.iter().map(|v| v.as_f64()).sum::<f64>() / p.len() as f64;
+    p.iter().map(|v| T::of_f64(v.as_f64() - mean)).collect()
+}
+
 fn forward<T: Real + WritableElement>(
     pulse: &Path,
     codes: &Path,
     scene: &Path,
     out: &Path,
+    tile: Option<Tile>,
 ) -> CliResult {
     let p = io::read_pulse::<T>(pulse)?;
     let x = io::read_scene::<T>(scene)?;
@@ -490,29 +704,119 @@ fn forward<T: Real + WritableElement>(
         depth_bins: g.ks,
         grid: Some((g.m, g.n)),
     };
-    let (_, s) = io::read_codes(codes, &expect)?;
-    let op = RdOperator::new(g, p.into_inner(), Arc::new(s))?;
-    let mut y = vec![T::zero(); op.nrows()];
-    op.apply(x.as_slice(), &mut y);
-    io::write_measurements(out, &y)?;
-    println!(
-        "wrote {}: measurements ({},) {}",
-        out.display(),
-        y.len(),
-        npy_dtype::<T>()
-    );
+    let (kind, _) = layout_kind(codes, tile)?;
+    let (_, layout) = read_layout(codes, kind, &expect, g.ks)?;
+    let op = layout.operator(g, p.into_inner())?;
+    let y = apply_to(&op, x.as_slice());
+    match layout.rows() {
+        None => {
+            io::write_measurements(out, &y)?;
+            println!(
+                "wrote {}: measurements ({},) {}",
+                out.display(),
+                y.len(),
+                npy_dtype::<T>()
+            );
+        }
+        Some(rows) => {
+            let k = expect.samples();
+            let y2 = ndarray::ArrayView2::from_shape((rows, k), &y[..])
+                .map_err(|e| format!("cannot shape the measurements: {e}"))?;
+            io::write_array(out, &y2)?;
+            println!(
+                "wrote {}: measurements ({rows}, {k}) {}, one row per ADC{}",
+                out.display(),
+                npy_dtype::<T>(),
+                layout.note()
+            );
+        }
+    }
     Ok(())
 }
 
+/// The files of `adjoint`.
+struct AdjointFiles<'a> {
+    pulse: &'a Path,
+    codes: &'a Path,
+    meas: &'a Path,
+    out: &'a Path,
+}
+
+/// Reads the measurements in the shape `kind` needs: (K,) for one ADC, (R, K) for R ADCs, with a
+/// message that names the flag or the file that decides the shape when the shapes disagree.
+fn read_layout_measurements<T: Real>(
+    files: &AdjointFiles<'_>,
+    kind: LayoutKind,
+    codes_shape: &[usize],
+    expect: &ShapeExpectation,
+) -> CliResult<Vec<T>> {
+    let meas = files.meas;
+    let h = io::read_header(meas)?;
+    let k = expect.samples();
+    let float = matches!(h.dtype, NpyDtype::Float32 | NpyDtype::Float64);
+    let (rows, why) = match kind {
+        LayoutKind::Single => {
+            if float && h.shape.len() == 2 && codes_shape.len() == 3 {
+                return Err(format!(
+                    "{}: measurements of shape {} have one row per ADC, but the codes {} are \
+                     one code set read as a single ADC: for a tiled array pass --tiles AxB \
+                     with its tile size (meta.json \"architecture\" \"tile\")",
+                    meas.display(),
+                    shape_text(&h.shape),
+                    files.codes.display()
+                )
+                .into());
+            }
+            return Ok(io::read_measurements::<T>(meas, Some(expect))?);
+        }
+        LayoutKind::MultiAdc(sets) => (
+            (sets > 0).then_some(sets),
+            format!(
+                "the codes {} of shape {} are {sets} code sets, one ADC each",
+                files.codes.display(),
+                shape_text(codes_shape)
+            ),
+        ),
+        LayoutKind::Tiles(t) => match codes_shape {
+            [m, n, _] if *m > 0 && *n > 0 => {
+                let count = m.div_ceil(t.m) * n.div_ceil(t.n);
+                (
+                    Some(count),
+                    format!(
+                        "--tiles {t} splits the {m}x{n} array into {count} tiles, one ADC each"
+                    ),
+                )
+            }
+            _ => (None, String::new()),
+        },
+    };
+    if let (Some(r), true) = (rows, float) {
+        let found = match h.shape[..] {
+            [_] => Some("are those of one ADC".to_string()),
+            [n, _] if n != r => Some(format!("have {n} rows")),
+            _ => None,
+        };
+        if let Some(found) = found {
+            return Err(format!(
+                "{}: measurements of shape {} {found}, but {why}: expected shape ({r}, {k})",
+                meas.display(),
+                shape_text(&h.shape)
+            )
+            .into());
+        }
+    }
+    let y = io::read_measurement_rows::<T>(meas, Some(expect), rows)?;
+    Ok(y.into_raw_vec_and_offset().0)
+}
+
 fn adjoint<T: Real + WritableElement>(
-    pulse: &Path,
-    codes: &Path,
-    meas: &Path,
+    files: &AdjointFiles<'_>,
     depth_bins: usize,
-    out: &Path,
     debiased: bool,
+    tile: Option<Tile>,
 ) -> CliResult {
-    let p = io::read_pulse::<T>(pulse)?;
+    let out = files.out;
+    let p = io::read_pulse::<T>(files.pulse)?;
     if p.len().checked_add(depth_bins).is_none() {
         return Err(format!("--depth-bins {depth_bins} is too large").into());
     }
@@ -521,13 +825,15 @@ fn adjoint<T: Real + WritableElement>(
         depth_bins,
         grid: None,
     };
-    let y = io::read_measurements::<T>(meas, Some(&expect))?;
-    let ((m, n), s) = io::read_codes(codes, &expect)?;
-    let g = Geometry::new(m, n, depth_bins).map_err(|e| format!("--depth-bins: {e}"))?;
-    let mut op = RdOperator::new(g, p.into_inner(), Arc::new(s))?;
-    if debiased {
-        op = op.zero_mean();
-    }
+    let (kind, codes_shape) = layout_kind(files.codes, tile)?;
+    let y = read_layout_measurements::<T>(files, kind, &codes_shape, &expect)?;
+    let (g, layout) = read_layout(files.codes, kind, &expect, depth_bins)?;
+    let pulse = if debiased {
+        zero_mean_pulse(p.as_slice())
+    } else {
+        p.into_inner()
+    };
+    let op = layout.operator(g, pulse)?;
     let mut x = vec![T::zero(); g.voxels()];
     op.apply_adjoint(&y, &mut x);
     let xt = Scene::from_vec(g, x).map_err(|e| {
@@ -539,15 +845,24 @@ fn adjoint<T: Real + WritableElement>(
     })?;
     io::write_scene(out, &xt)?;
     println!(
-        "wrote {}: {}backprojection ({m}, {n}, {depth_bins}) {}",
+        "wrote {}: {}backprojection ({}, {}, {depth_bins}) {}{}",
         out.display(),
         if debiased { "debiased " } else { "" },
-        npy_dtype::<T>()
+        g.m,
+        g.n,
+        npy_dtype::<T>(),
+        layout.note()
     );
     Ok(())
 }
 
-fn dottest(pulse: &Path, codes: &Path, depth_bins: usize, seed: u64) -> CliResult<bool> {
+fn dottest(
+    pulse: &Path,
+    codes: &Path,
+    depth_bins: usize,
+    seed: u64,
+    tile: Option<Tile>,
+) -> CliResult<bool> {
     let p = io::read_pulse::<f64>(pulse)?;
     if p.len().checked_add(depth_bins).is_none() {
         return Err(format!("--depth-bins {depth_bins} is too large").into());
@@ -557,29 +872,30 @@ fn dottest(pulse: &Path, codes: &Path, depth_bins: usize, seed: u64) -> CliResul
         depth_bins,
         grid: None,
     };
-    let ((m, n), s) = io::read_codes(codes, &expect)?;
-    let g = Geometry::new(m, n, depth_bins).map_err(|e| format!("--depth-bins: {e}"))?;
-    let alphabet = match s.alphabet() {
-        CodeAlphabet::Binary => "binary",
-        CodeAlphabet::Ternary => "ternary",
-    };
-    let s = Arc::new(s);
-    let op64 = RdOperator::new(g, p.as_slice().to_vec(), s.clone())?;
-    let op32 = RdOperator::new(g, p.as_slice().iter().map(|&v| v as f32).collect(), s)?;
+    let (kind, _) = layout_kind(codes, tile)?;
+    let (g, layout) = read_layout(codes, kind, &expect, depth_bins)?;
+    let p64 = p.as_slice().to_vec();
+    let p32: Vec<f32> = p.as_slice().iter().map(|&v| v as f32).collect();
     let test = DotTest::new().seed(seed);
     let rows = [
-        ("pulse as given", test.measure(&op32), test.measure(&op64)),
+        (
+            "pulse as given",
+            test.measure(&layout.operator(g, p32.clone())?),
+            test.measure(&layout.operator(g, p64.clone())?),
+        ),
         (
             "zero-mean pulse",
-            test.measure(&op32.zero_mean()),
-            test.measure(&op64.zero_mean()),
+            test.measure(&layout.operator(g, zero_mean_pulse(&p32))?),
+            test.measure(&layout.operator(g, zero_mean_pulse(&p64))?),
         ),
     ];
     println!(
-        "dot test |<Ax,y> - <x,A*y>| / max(|Ax||y|, |x||A*y|): {g}, K_p {}, K {}, {alphabet} \
-         codes, seed {seed}",
+        "dot test |<Ax,y> - <x,A*y>| / max(|Ax||y|, |x||A*y|): {g}, K_p {}, K {}, {} \
+         codes{}, seed {seed}",
         p.len(),
-        expect.samples()
+        expect.samples(),
+        layout.alphabet(),
+        layout.note()
     );
     println!(
         "{:<16} {:<9} {:>10} {:>10}",
@@ -761,9 +1077,29 @@ struct GeometryMeta {
 #[derive(Debug, Serialize)]
 struct SeedsMeta {
     pulse: u64,
+    /// The seed of the first (or only) code set.
     codes: u64,
+    /// The seed of every code set, in order (one per ADC with --adcs).
+    code_sets: Vec<u64>,
     noise: u64,
     scene: Option<u64>,
+    /// The seed of the coded aperture's pixel selection.
+    aperture: Option<u64>,
+}
+
+/// The "architecture" entry of `meta.json`.
+#[derive(Debug, Serialize)]
+struct ArchitectureMeta {
+    /// "single", "multi_adc", "tiles" or "aperture".
+    kind: &'static str,
+    /// Number of ADCs: the rows of meas.npy when it is two-dimensional.
+    adcs: usize,
+    /// Tile size [A, B] of `--tiles AxB`.
+    tile: Option<[usize; 2]>,
+    /// Pixels that reach an ADC.
+    active_pixels: usize,
+    /// The fraction given to `--aperture`.
+    aperture_fraction: Option<f64>,
 }
 
 #[derive(Debug, Serialize)]
@@ -809,14 +1145,29 @@ struct Meta {
     scene: SceneMeta,
     code_alphabet: &'static str,
     ternary_zero_prob: Option<f64>,
+    architecture: ArchitectureMeta,
     regime: String,
     critical_pulse_len: usize,
     noise: NoiseMeta,
     files: FilesMeta,
 }
 
-/// Checks the flags of `simulate` that the generators would otherwise reject later, by name.
-fn check_simulate_flags(a: &SimulateArgs) -> CliResult {
+/// The measurement architecture `simulate` produces (the paper's §3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Architecture {
+    /// One ADC summing every pixel.
+    Single,
+    /// G > 1 ADCs, each with its own code set.
+    MultiAdc(usize),
+    /// One ADC per tile.
+    Tiles(Tile),
+    /// One ADC summing a random fraction of the pixels.
+    Aperture(f64),
+}
+
+/// Checks the flags of `simulate` that the generators would otherwise reject later, by name, and
+/// returns the architecture they select.
+fn check_simulate_flags(a: &SimulateArgs) -> CliResult<Architecture> {
     if let Some(f) = a.lit_fraction {
         if a.scene != SceneKind::Random {
             return Err(format!(
@@ -839,6 +1190,36 @@ fn check_simulate_flags(a: &SimulateArgs) -> CliResult {
             return Err(format!("--snr-db: must be finite, got {s}").into());
         }
     }
+    if let Some(f) = a.aperture {
+        if !(f > 0.0 && f <= 1.0) {
+            return Err(format!("--aperture: must be in (0, 1], got {f}").into());
+        }
+    }
+    let mut chosen = Vec::new();
+    if a.adcs > 1 {
+        chosen.push(format!("--adcs {}", a.adcs));
+    }
+    if let Some(t) = a.tiles {
+        chosen.push(format!("--tiles {t}"));
+    }
+    if let Some(f) = a.aperture {
+        chosen.push(format!("--aperture {f}"));
+    }
+    if let [first @ .., last] = &chosen[..] {
+        if !first.is_empty() {
+            return Err(format!(
+                "{} and {last} are not supported together: choose one architecture",
+                first.join(", ")
+            )
+            .into());
+        }
+    }
+    let arch = match (a.adcs, a.tiles, a.aperture) {
+        (_, Some(t), _) => Architecture::Tiles(t),
+        (_, _, Some(f)) => Architecture::Aperture(f),
+        (1, _, _) => Architecture::Single,
+        (n, _, _) => Architecture::MultiAdc(n),
+    };
     let out = &a.out;
     if out.exists() {
         if !out.is_dir() {
@@ -865,23 +1246,114 @@ fn check_simulate_flags(a: &SimulateArgs) -> CliResult {
             .into());
         }
     }
-    Ok(())
+    Ok(arch)
 }
 
-fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
+/// Code set `set` of `--adcs` is drawn from this seed (set 0 from SEED+1).
+fn code_seed(seed: u64, set: usize) -> u64 {
+    seed.wrapping_add(1)
+        .wrapping_add(1000u64.wrapping_mul(set as u64))
+}
+
+/// An integer in [0, n), n ≥ 1, uniformly (rejection of the incomplete last block).
+fn below(rng: &mut ChaCha8Rng, n: u64) -> u64 {
+    // 2^64 mod n: the values at or above 2^64 − r would favour the first r results.
+    let r = (u64::MAX % n + 1) % n;
+    loop {
+        let v = rng.next_u64();
+        if r == 0 || v <= u64::MAX - r {
+            return v % n;
+        }
+    }
+}
+
+/// The active pixels of a coded aperture: ⌈fraction·pixels⌉ distinct pixels (at least one; a
+/// product within 1e-9 of an integer counts as that integer), drawn by a partial Fisher–Yates
+/// shuffle of 0 … pixels−1 on a ChaCha8 stream seeded with `seed`, in increasing order.
+fn aperture_pixels(pixels: usize, fraction: f64, seed: u64) -> Vec<usize> {
+    let x = fraction * pixels as f64;
+    let count = if (x - x.round()).abs() <= 1e-9 * x.max(1.0) {
+        x.round()
+    } else {
+        x.ceil()
+    };
+    let count = (count as usize).clamp(1, pixels);
+    let mut order: Vec<usize> = (0..pixels).collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for i in 0..count {
+        let j = i + below(&mut rng, (pixels - i) as u64) as usize;
+        order.swap(i, j);
+    }
+    order.truncate(count);
+    order.sort_unstable();
+    order
+}
+
+/// y = A x for a freshly allocated y.
+fn apply_to<T: Real>(op: &impl LinearOperator<T>, x: &[T]) -> Vec<T> {
+    let mut y = vec![T::zero(); op.nrows()];
+    op.apply(x, &mut y);
+    y
+}
+
+/// A shape as NumPy prints it: `(4, 5, 6)`, `(7,)`.
+fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(|d| d.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+fn simulate<T: Real + WritableElement>(a: &SimulateArgs, arch: Architecture) -> CliResult {
     let g = a.size;
     let kp = a.pulse_len;
     let k = kp
         .checked_add(g.ks - 1)
         .ok_or_else(|| format!("--pulse-len {kp} is too large"))?;
+    let sets = match arch {
+        Architecture::MultiAdc(n) => n,
+        _ => 1,
+    };
+    let groups = match arch {
+        Architecture::Tiles(t) => Some(tiles(g, t.m, t.n).map_err(|e| format!("--tiles: {e}"))?),
+        _ => None,
+    };
+    // Rows of meas.npy when it is two-dimensional (one per ADC).
+    let rows = match arch {
+        Architecture::MultiAdc(n) => Some(n),
+        Architecture::Tiles(_) => groups.as_ref().map(Vec::len),
+        _ => None,
+    };
+    if let Some(r) = rows {
+        let too_large = r
+            .checked_mul(k)
+            .and_then(|v| v.checked_mul(g.pixels()))
+            .is_none();
+        if too_large {
+            let flag = match arch {
+                Architecture::Tiles(t) => format!("--tiles {t}"),
+                _ => format!("--adcs {r}"),
+            };
+            return Err(format!("{flag}: {r} ADCs of {k} samples are too many").into());
+        }
+    }
     let seeds = SeedsMeta {
         pulse: a.seed,
-        codes: a.seed.wrapping_add(1),
+        codes: code_seed(a.seed, 0),
+        code_sets: (0..sets).map(|i| code_seed(a.seed, i)).collect(),
         noise: a.seed.wrapping_add(2),
         scene: match a.scene {
             SceneKind::Paper => None,
             _ => Some(a.seed.wrapping_add(3)),
         },
+        aperture: matches!(arch, Architecture::Aperture(_)).then(|| a.seed.wrapping_add(4)),
     };
     let scene_seed = a.seed.wrapping_add(3);
     let lit_fraction = (a.scene == SceneKind::Random).then(|| a.lit_fraction.unwrap_or(0.5));
@@ -893,14 +1365,44 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
     }
     .map_err(|e| format!("--scene {}: {e}", a.scene.name()))?;
     let pulse = Pulse::<T>::bernoulli(kp, seeds.pulse).map_err(|e| format!("--pulse-len: {e}"))?;
-    let codes = match a.ternary_zero_prob {
-        None => Codes::random_binary(g.pixels(), k, seeds.codes),
-        Some(p) => Codes::random_ternary(g.pixels(), k, p, seeds.codes),
-    }?;
-    let codes = Arc::new(codes);
-    let op = RdOperator::new(g, pulse.as_slice().to_vec(), codes.clone())?;
-    let mut y = vec![T::zero(); k];
-    op.apply(scene.as_slice(), &mut y);
+    let code_sets = seeds
+        .code_sets
+        .iter()
+        .map(|&seed| {
+            match a.ternary_zero_prob {
+                None => Codes::random_binary(g.pixels(), k, seed),
+                Some(p) => Codes::random_ternary(g.pixels(), k, p, seed),
+            }
+            .map(Arc::new)
+        })
+        .collect::<rdlidar::Result<Vec<_>>>()?;
+    let codes = code_sets[0].clone();
+    let active = match arch {
+        Architecture::Aperture(f) => Some(aperture_pixels(
+            g.pixels(),
+            f,
+            seeds.aperture.unwrap_or_default(),
+        )),
+        _ => None,
+    };
+    let x = scene.as_slice();
+    let mut y = match (arch, &groups, &active) {
+        (Architecture::MultiAdc(_), _, _) => {
+            apply_to(&multi_adc(g, pulse.as_slice(), code_sets.clone())?, x)
+        }
+        (Architecture::Tiles(_), Some(groups), _) => {
+            apply_to(&pixel_groups(g, pulse.as_slice(), &codes, groups)?, x)
+        }
+        (Architecture::Aperture(_), _, Some(active)) => {
+            apply_to(&coded_aperture(g, pulse.as_slice(), &codes, active)?, x)
+        }
+        _ => {
+            let op = RdOperator::new(g, pulse.as_slice().to_vec(), codes.clone())?;
+            let mut y = vec![T::zero(); k];
+            op.apply(x, &mut y);
+            y
+        }
+    };
     let noise = match a.snr_db {
         None => NoiseMeta {
             model: "none",
@@ -937,6 +1439,46 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
         CodeAlphabet::Binary => "binary",
         CodeAlphabet::Ternary => "ternary",
     };
+    let architecture = ArchitectureMeta {
+        kind: match arch {
+            Architecture::Single => "single",
+            Architecture::MultiAdc(_) => "multi_adc",
+            Architecture::Tiles(_) => "tiles",
+            Architecture::Aperture(_) => "aperture",
+        },
+        adcs: rows.unwrap_or(1),
+        tile: match arch {
+            Architecture::Tiles(t) => Some([t.m, t.n]),
+            _ => None,
+        },
+        active_pixels: active.as_ref().map_or(g.pixels(), Vec::len),
+        aperture_fraction: match arch {
+            Architecture::Aperture(f) => Some(f),
+            _ => None,
+        },
+    };
+    let arch_note = match arch {
+        Architecture::Single => None,
+        Architecture::MultiAdc(n) => Some(format!(
+            "{n} ADCs, one code set each (code seeds {})",
+            seeds
+                .code_sets
+                .iter()
+                .map(u64::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+        Architecture::Tiles(t) => Some(format!(
+            "tiles of {t} pixels, {} ADCs (one per tile)",
+            architecture.adcs
+        )),
+        Architecture::Aperture(f) => Some(format!(
+            "coded aperture, {} of {} pixels active (fraction {f}, seed {})",
+            architecture.active_pixels,
+            g.pixels(),
+            a.seed.wrapping_add(4)
+        )),
+    };
     let meta = Meta {
         crate_name: env!("CARGO_PKG_NAME"),
         crate_version: env!("CARGO_PKG_VERSION"),
@@ -961,6 +1503,7 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
         },
         code_alphabet: alphabet,
         ternary_zero_prob: a.ternary_zero_prob,
+        architecture,
         regime: g.regime(kp).to_string(),
         critical_pulse_len: g.critical_pulse_len(),
         noise,
@@ -974,6 +1517,16 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
     let mut json =
         serde_json::to_string_pretty(&meta).map_err(|e| format!("cannot format meta.json: {e}"))?;
     json.push('\n');
+    let meas_shape = match rows {
+        None => vec![k],
+        Some(r) => vec![r, k],
+    };
+    let meas = ndarray::ArrayView::from_shape(ndarray::IxDyn(&meas_shape), &y[..])
+        .map_err(|e| format!("cannot shape the measurements: {e}"))?;
+    let codes_shape = match arch {
+        Architecture::MultiAdc(n) => vec![n, g.m, g.n, k],
+        _ => vec![g.m, g.n, k],
+    };
 
     let dir = &a.out;
     let created = !dir.exists();
@@ -983,13 +1536,18 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
     }
     let written = (|| -> rdlidar::Result<Vec<PathBuf>> {
         let [f_scene, f_pulse, f_codes, f_meas, f_meta] = SIMULATE_FILES.map(|f| dir.join(f));
+        let grid = (g.m, g.n);
         // Each file is complete and synced before the first one is renamed into place; on an
         // error the staged files are dropped, which removes them.
         let staged: Vec<StagedFile> = vec![
             io::stage_array(f_scene, scene.data())?,
             io::stage_array(f_pulse, &ndarray::ArrayView1::from(pulse.as_slice()))?,
-            io::stage_codes(f_codes, (g.m, g.n), &codes)?,
-            io::stage_array(f_meas, &ndarray::ArrayView1::from(&y[..]))?,
+            match (arch, &active) {
+                (Architecture::MultiAdc(_), _) => io::stage_code_sets(f_codes, grid, &code_sets)?,
+                (_, Some(active)) => io::stage_masked_codes(f_codes, grid, &codes, active)?,
+                _ => io::stage_codes(f_codes, grid, &codes)?,
+            },
+            io::stage_array(f_meas, &meas)?,
             io::stage_bytes(f_meta, json.as_bytes())?,
         ];
         io::commit_all(staged)
@@ -1005,14 +1563,14 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
     }
     let dt = npy_dtype::<T>();
     println!(
-        "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, codes.npy ({}, {}, {k}) \
-         int8, meas.npy ({k},) {dt}, meta.json",
+        "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, codes.npy {} int8, \
+         meas.npy {} {dt}, meta.json",
         dir.display(),
         g.m,
         g.n,
         g.ks,
-        g.m,
-        g.n
+        shape_text(&codes_shape),
+        shape_text(&meas_shape),
     );
     println!(
         "{} scene, {lit_pixels} lit pixels; {alphabet} codes; {} regime (critical K_p = {}); {}",
@@ -1024,6 +1582,9 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs) -> CliResult {
             None => "noise-free".to_string(),
         }
     );
+    if let Some(note) = arch_note {
+        println!("architecture: {note}");
+    }
     Ok(())
 }
 
@@ -1058,10 +1619,10 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             Ok(ok(passed))
         }
         Command::Simulate(a) => {
-            check_simulate_flags(&a)?;
+            let arch = check_simulate_flags(&a)?;
             match a.precision {
-                Precision::F32 => simulate::<f32>(&a)?,
-                Precision::F64 => simulate::<f64>(&a)?,
+                Precision::F32 => simulate::<f32>(&a, arch)?,
+                Precision::F64 => simulate::<f64>(&a, arch)?,
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -1071,6 +1632,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             scene,
             out,
             precision,
+            tiles,
         } => {
             check_out_file(&out)?;
             let precision = match precision {
@@ -1078,8 +1640,8 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
                 None => auto_precision(&[&scene, &pulse])?,
             };
             match precision {
-                Precision::F32 => forward::<f32>(&pulse, &codes, &scene, &out)?,
-                Precision::F64 => forward::<f64>(&pulse, &codes, &scene, &out)?,
+                Precision::F32 => forward::<f32>(&pulse, &codes, &scene, &out, tiles)?,
+                Precision::F64 => forward::<f64>(&pulse, &codes, &scene, &out, tiles)?,
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -1091,19 +1653,22 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             out,
             debiased,
             precision,
+            tiles,
         } => {
             check_out_file(&out)?;
             let precision = match precision {
                 Some(p) => p,
                 None => auto_precision(&[&meas, &pulse])?,
             };
+            let files = AdjointFiles {
+                pulse: &pulse,
+                codes: &codes,
+                meas: &meas,
+                out: &out,
+            };
             match precision {
-                Precision::F32 => {
-                    adjoint::<f32>(&pulse, &codes, &meas, depth_bins, &out, debiased)?
-                }
-                Precision::F64 => {
-                    adjoint::<f64>(&pulse, &codes, &meas, depth_bins, &out, debiased)?
-                }
+                Precision::F32 => adjoint::<f32>(&files, depth_bins, debiased, tiles)?,
+                Precision::F64 => adjoint::<f64>(&files, depth_bins, debiased, tiles)?,
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -1112,7 +1677,8 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             codes,
             depth_bins,
             seed,
-        } => Ok(ok(dottest(&pulse, &codes, depth_bins, seed)?)),
+            tiles,
+        } => Ok(ok(dottest(&pulse, &codes, depth_bins, seed, tiles)?)),
         Command::Bench {
             size,
             pulse_len,

@@ -28,9 +28,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use crate::error::{Error, Result};
 
 pub use npy::{
-    read_codes, read_depth, read_header, read_measurements, read_pulse, read_scene, stage_array,
-    stage_codes, write_array, write_codes, write_depth, write_measurements, write_pulse,
-    write_scene, NpyDtype, NpyHeader, ShapeExpectation,
+    read_code_sets, read_codes, read_depth, read_header, read_measurement_rows, read_measurements,
+    read_pulse, read_scene, stage_array, stage_code_sets, stage_codes, stage_masked_codes,
+    write_array, write_code_sets, write_codes, write_depth, write_masked_codes, write_measurements,
+    write_pulse, write_scene, NpyDtype, NpyHeader, ShapeExpectation,
 };
 
 /// An [`Error::File`] for `path`.

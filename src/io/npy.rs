@@ -8,6 +8,13 @@
 //! | measurements | (K,)        | float32, float64                 | as `T`             |
 //! | depth        | (M, N)      | int32, −1 = no return            | int32              |
 //!
+//! The architecture variants of [`crate::lidar`] have files of their own, read and written only
+//! by the functions made for them: G code sets of a multi-ADC array, (G, M, N, K) int8
+//! ([`read_code_sets`], [`write_code_sets`]), and the measurements of several ADCs, (R, K) with
+//! one row per ADC ([`read_measurement_rows`], written by [`write_array`]). The codes of a coded
+//! aperture are ordinary (M, N, K) codes that are 0 outside the aperture
+//! ([`write_masked_codes`]). The readers of the table above never accept these shapes.
+//!
 //! Readers check, in this order and before reading the data: that the file opens and is a `.npy`
 //! file, the dtype, the number of dimensions, that no axis is empty, that the shape fits the other
 //! inputs (K = K_p + K_s − 1 for codes and measurements), and that the file holds exactly the
@@ -18,6 +25,7 @@
 //! correctly; files are always written in C order. Every failure is an
 //! [`Error::File`] whose message starts with the path.
 
+use std::borrow::Borrow;
 use std::fs::File;
 use std::io::{BufReader, Seek, Write};
 use std::path::Path;
@@ -464,6 +472,67 @@ pub fn read_measurements<T: Real>(
     Ok(a.into_raw_vec_and_offset().0)
 }
 
+/// Reads the measurements of several ADCs (one per code set, or one per tile of the array): a
+/// float32 or float64 array of shape (R, K), row r holding the K samples of ADC r, converted to
+/// `T`.
+///
+/// Only two-dimensional files are accepted; the (K,) measurements of one ADC are read by
+/// [`read_measurements`]. With `expect`, the row length must be K = K_p + K_s − 1; with `rows`,
+/// there must be that many rows.
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype or number of dimensions, an empty axis, a row length other than K, a number of rows other
+/// than `rows`, or a NaN or infinite value (named by its index).
+pub fn read_measurement_rows<T: Real>(
+    path: impl AsRef<Path>,
+    expect: Option<&ShapeExpectation>,
+    rows: Option<usize>,
+) -> Result<Array2<T>> {
+    let path = path.as_ref();
+    let role = "measurements";
+    // The shape is checked from the header, before reading the data.
+    let h = open_npy(path)?.header;
+    if !matches!(h.dtype, NpyDtype::Float32 | NpyDtype::Float64) {
+        return Err(wrong_dtype(path, role, &h.dtype, "float32 or float64"));
+    }
+    check_ndim(path, role, &h, 2, "(ADCs, K), one row per ADC")?;
+    if let Some(e) = expect {
+        let k = e.samples();
+        if h.shape[1] != k {
+            return Err(file_error(
+                path,
+                format!(
+                    "measurements shape {} has rows of {} samples, expected K = K_p + K_s − 1 = \
+                     {} + {} − 1 = {k} (pulse length {}, {} depth bins)",
+                    shape_text(&h.shape),
+                    h.shape[1],
+                    e.pulse_len,
+                    e.depth_bins,
+                    e.pulse_len,
+                    e.depth_bins
+                ),
+            ));
+        }
+    }
+    if let Some(r) = rows {
+        if h.shape[0] != r {
+            return Err(file_error(
+                path,
+                format!(
+                    "measurements shape {} has {} rows, expected {r} (one per ADC)",
+                    shape_text(&h.shape),
+                    h.shape[0]
+                ),
+            ));
+        }
+    }
+    into_dim::<T, Ix2>(
+        path,
+        read_real(path, role, 2, "(ADCs, K), one row per ADC")?,
+    )
+}
+
 /// What codes and measurements must fit: the pulse length, the depth bins and, when a scene is
 /// given, its grid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -499,6 +568,52 @@ pub fn read_codes(
     expect: &ShapeExpectation,
 ) -> Result<((usize, usize), Codes)> {
     let path = path.as_ref();
+    let (shape, codes) = read_dense_codes(path, expect, 3, "(M, N, K)")?;
+    let (m, n, k) = (shape[0], shape[1], shape[2]);
+    let flat = codes
+        .into_shape_with_order((m * n, k))
+        .map_err(|e| file_error(path, format!("cannot reshape the codes: {e}")))?;
+    let packed = Codes::from_dense(flat.view()).map_err(|e| file_error(path, e.to_string()))?;
+    Ok(((m, n), packed))
+}
+
+/// Reads G code sets, one per ADC of a multi-ADC array: an int8 (or float32/float64) array of
+/// shape (G, M, N, K) with values in {−1, 0, 1}, K = K_p + K_s − 1, whose slice g is the
+/// (M, N, K) codes of set g. Returns (M, N) and the G packed code sets, in order (each binary
+/// when it has no 0 entry, ternary otherwise).
+///
+/// Only four-dimensional files are accepted; a single code set (M, N, K) is read by
+/// [`read_codes`].
+///
+/// # Errors
+/// As [`read_codes`], with four dimensions (G, M, N, K) expected: the grid is axes 1 and 2, K the
+/// last axis, and a bad value is named by its four-dimensional index.
+pub fn read_code_sets(
+    path: impl AsRef<Path>,
+    expect: &ShapeExpectation,
+) -> Result<((usize, usize), Vec<Codes>)> {
+    let path = path.as_ref();
+    let (shape, codes) = read_dense_codes(path, expect, 4, "(G, M, N, K)")?;
+    let (sets, m, n, k) = (shape[0], shape[1], shape[2], shape[3]);
+    let flat = codes
+        .into_shape_with_order((sets, m * n, k))
+        .map_err(|e| file_error(path, format!("cannot reshape the codes: {e}")))?;
+    let packed = flat
+        .outer_iter()
+        .map(|set| Codes::from_dense(set).map_err(|e| file_error(path, e.to_string())))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(((m, n), packed))
+}
+
+/// Reads and checks a codes file of `ndim` dimensions whose last three axes are (M, N, K): the
+/// dtype, the number of dimensions, empty axes, the grid, K and the values. Returns the shape and
+/// the values as int8, in C order.
+fn read_dense_codes(
+    path: &Path,
+    expect: &ShapeExpectation,
+    ndim: usize,
+    axes: &str,
+) -> Result<(Vec<usize>, ArrayD<i8>)> {
     if expect.pulse_len == 0 || expect.depth_bins == 0 {
         return Err(Error::param(
             "expect",
@@ -522,8 +637,8 @@ pub fn read_codes(
             "int8 (or float32/float64 holding −1, 0, 1)",
         ));
     }
-    check_ndim(path, role, &h, 3, "(M, N, K)")?;
-    let (m, n, k) = (h.shape[0], h.shape[1], h.shape[2]);
+    check_ndim(path, role, &h, ndim, axes)?;
+    let (m, n, k) = (h.shape[ndim - 3], h.shape[ndim - 2], h.shape[ndim - 1]);
     if let Some((gm, gn)) = expect.grid {
         if (m, n) != (gm, gn) {
             return Err(file_error(
@@ -578,11 +693,7 @@ pub fn read_codes(
             ))
         }
     };
-    let flat = codes
-        .into_shape_with_order((m * n, k))
-        .map_err(|e| file_error(path, format!("cannot reshape the codes: {e}")))?;
-    let packed = Codes::from_dense(flat.view()).map_err(|e| file_error(path, e.to_string()))?;
-    Ok(((m, n), packed))
+    Ok((h.shape, codes))
 }
 
 fn float_codes<S: Copy + Into<f64> + std::fmt::Display>(
@@ -726,50 +837,174 @@ pub fn stage_codes(
     codes: &Codes,
 ) -> Result<StagedFile> {
     let path = path.as_ref();
+    check_grid("write_codes", grid, codes)?;
+    let (m, n) = grid;
+    let mut staged = start_codes_file(path, vec![m, n, codes.len()])?;
+    write_code_rows(path, staged.writer(), codes, None)?;
+    staged.sync()?;
+    Ok(staged)
+}
+
+/// Writes G code sets (one per ADC of a multi-ADC array) as an int8 array of shape
+/// (G, M, N, K), atomically: slice g holds the codes of `sets[g]`, as [`write_codes`] writes them.
+///
+/// # Errors
+/// As [`stage_code_sets`], or [`Error::File`] if the file cannot be renamed into place.
+pub fn write_code_sets<C: Borrow<Codes>>(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    sets: &[C],
+) -> Result<()> {
+    stage_code_sets(path, grid, sets)?.commit()
+}
+
+/// Writes G code sets as an int8 array of shape (G, M, N, K) under a temporary name, one pixel
+/// row at a time, and syncs it; see [`stage_array`].
+///
+/// # Errors
+/// [`Error::InvalidParameter`] for an empty list of sets; [`Error::ShapeMismatch`] if `grid`
+/// does not have a set's number of pixels or the sets differ in their number of samples;
+/// [`Error::File`] naming `path` if the file cannot be created, written or synced.
+pub fn stage_code_sets<C: Borrow<Codes>>(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    sets: &[C],
+) -> Result<StagedFile> {
+    let path = path.as_ref();
+    let first = sets
+        .first()
+        .ok_or_else(|| Error::param("sets", "need at least one code set"))?
+        .borrow();
+    for (i, set) in sets.iter().enumerate() {
+        let set = set.borrow();
+        check_grid("write_code_sets", grid, set)?;
+        if set.len() != first.len() {
+            return Err(Error::shape(
+                format!("write_code_sets: samples of set {i} vs set 0"),
+                first.len(),
+                set.len(),
+            ));
+        }
+    }
+    let (m, n) = grid;
+    let mut staged = start_codes_file(path, vec![sets.len(), m, n, first.len()])?;
+    for set in sets {
+        write_code_rows(path, staged.writer(), set.borrow(), None)?;
+    }
+    staged.sync()?;
+    Ok(staged)
+}
+
+/// Writes the codes of a coded aperture as an int8 array of shape (M, N, K), atomically: the
+/// pixels listed in `active` keep their codes, every other pixel's codes are written as 0 (so the
+/// single-ADC operator of the file is the coded-aperture operator).
+///
+/// # Errors
+/// As [`stage_masked_codes`], or [`Error::File`] if the file cannot be renamed into place.
+pub fn write_masked_codes(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    codes: &Codes,
+    active: &[usize],
+) -> Result<()> {
+    stage_masked_codes(path, grid, codes, active)?.commit()
+}
+
+/// Writes the codes of a coded aperture (0 outside the pixels `active`) as an int8 array of
+/// shape (M, N, K) under a temporary name, one pixel row at a time, and syncs it; see
+/// [`stage_array`].
+///
+/// # Errors
+/// [`Error::ShapeMismatch`] if `grid` does not have the codes' number of pixels;
+/// [`Error::IndexOutOfBounds`] for an active pixel not below M·N; [`Error::File`] naming `path` if
+/// the file cannot be created, written or synced.
+pub fn stage_masked_codes(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    codes: &Codes,
+    active: &[usize],
+) -> Result<StagedFile> {
+    let path = path.as_ref();
+    check_grid("write_masked_codes", grid, codes)?;
+    let mut mask = vec![false; codes.pixels()];
+    for &p in active {
+        *mask.get_mut(p).ok_or(Error::IndexOutOfBounds {
+            context: "write_masked_codes: active pixels",
+            index: p,
+            len: codes.pixels(),
+        })? = true;
+    }
+    let (m, n) = grid;
+    let mut staged = start_codes_file(path, vec![m, n, codes.len()])?;
+    write_code_rows(path, staged.writer(), codes, Some(&mask))?;
+    staged.sync()?;
+    Ok(staged)
+}
+
+/// Checks that an M × N grid has the codes' number of pixels.
+fn check_grid(context: &str, grid: (usize, usize), codes: &Codes) -> Result<()> {
     let (m, n) = grid;
     if m.checked_mul(n) != Some(codes.pixels()) {
         return Err(Error::shape(
-            format!("write_codes: pixels of the {m}x{n} grid vs the codes"),
+            format!("{context}: pixels of the {m}x{n} grid vs the codes"),
             codes.pixels(),
             m.saturating_mul(n),
         ));
     }
-    let k = codes.len();
+    Ok(())
+}
+
+/// Creates the temporary file of an int8 array of shape `shape` and writes its header.
+fn start_codes_file(path: &Path, shape: Vec<usize>) -> Result<StagedFile> {
     let header = Header {
         type_descriptor: <i8 as WritableElement>::type_descriptor(),
         layout: Layout::Standard,
-        shape: vec![m, n, k],
+        shape,
     };
     let mut staged = StagedFile::create(path)?;
-    let w = staged.writer();
     header
-        .write(&mut *w)
+        .write(&mut *staged.writer())
         .map_err(|e| file_error(path, format!("cannot write the header: {e}")))?;
+    Ok(staged)
+}
+
+/// Writes the codes as int8, pixel after pixel, K bytes per pixel; the pixels whose entry in
+/// `mask` is `false` are written as 0.
+fn write_code_rows(
+    path: &Path,
+    w: &mut impl Write,
+    codes: &Codes,
+    mask: Option<&[bool]>,
+) -> Result<()> {
+    let k = codes.len();
     let mut row = vec![0u8; k];
     for p in 0..codes.pixels() {
         let bit = 1u8 << (p % 8);
         let plus = codes.plus_group(p / 8);
-        match codes.minus_group(p / 8) {
-            Some(minus) => {
-                for ((r, &pl), &mi) in row.iter_mut().zip(plus).zip(minus) {
-                    *r = if pl & bit != 0 {
-                        1
-                    } else if mi & bit != 0 {
-                        (-1i8) as u8
-                    } else {
-                        0
-                    };
+        if mask.is_some_and(|m| !m[p]) {
+            row.fill(0);
+        } else {
+            match codes.minus_group(p / 8) {
+                Some(minus) => {
+                    for ((r, &pl), &mi) in row.iter_mut().zip(plus).zip(minus) {
+                        *r = if pl & bit != 0 {
+                            1
+                        } else if mi & bit != 0 {
+                            (-1i8) as u8
+                        } else {
+                            0
+                        };
+                    }
                 }
-            }
-            None => {
-                for (r, &pl) in row.iter_mut().zip(plus) {
-                    *r = if pl & bit != 0 { 1 } else { (-1i8) as u8 };
+                None => {
+                    for (r, &pl) in row.iter_mut().zip(plus) {
+                        *r = if pl & bit != 0 { 1 } else { (-1i8) as u8 };
+                    }
                 }
             }
         }
         w.write_all(&row)
             .map_err(|e| file_error(path, format!("cannot write: {e}")))?;
     }
-    staged.sync()?;
-    Ok(staged)
+    Ok(())
 }

@@ -13,11 +13,13 @@
 //! Reaching the iteration limit is a termination reason, not an error; invalid parameters,
 //! mismatched shapes, non-finite data and numerical breakdowns are [`Error`]s.
 
+mod argmin_cgls;
 mod backprojection;
 mod cgls;
 
 use std::time::{Duration, Instant};
 
+pub use argmin_cgls::{ArgminCgls, CglsState, LinearLeastSquares};
 pub use backprojection::{backprojection, Backprojection, BackprojectionResult, Threshold};
 pub use cgls::{cgls, CglsParams};
 
