@@ -17,4 +17,5 @@ mod operators;
 mod rdop;
 mod scenes;
 mod solvers;
+mod sparse_solvers;
 mod tight_frame;

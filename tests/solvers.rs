@@ -346,26 +346,58 @@ fn argmin_executor_drives_cgls_to_the_same_solution() {
     let op = DenseMatrix::new(a).unwrap();
     for lambda in [0.0, 0.7] {
         let want = reference(&an, &y, lambda);
-        let problem = LinearLeastSquares { op: &op, y: &y, damp: lambda };
+        let problem = LinearLeastSquares {
+            op: &op,
+            y: &y,
+            damp: lambda,
+        };
         let res = Executor::new(problem, ArgminCgls::new(1e-12).unwrap())
             .configure(|s| s.param(vec![0.0; 15]).max_iters(200))
             .run()
             .unwrap();
         let x = res.state().get_best_param().unwrap();
-        assert!(rel_err(x, &want) < 1e-8, "λ = {lambda}: {:e}", rel_err(x, &want));
-        assert_eq!(res.state().get_termination_status(), &TerminationStatus::Terminated(TerminationReason::SolverConverged));
+        assert!(
+            rel_err(x, &want) < 1e-8,
+            "λ = {lambda}: {:e}",
+            rel_err(x, &want)
+        );
+        assert_eq!(
+            res.state().get_termination_status(),
+            &TerminationStatus::Terminated(TerminationReason::SolverConverged)
+        );
         // The same iterations as the native solver.
         let mut xn = vec![0.0; 15];
-        let params = CglsParams { damp: lambda, stopping: Stopping { max_iter: 200, rel_residual: Some(1e-12), ..Stopping::default() } };
+        let params = CglsParams {
+            damp: lambda,
+            stopping: Stopping {
+                max_iter: 200,
+                rel_residual: Some(1e-12),
+                ..Stopping::default()
+            },
+        };
         let report = cgls(&op, &y, &mut xn, &params, &mut ()).unwrap();
         assert_eq!(res.state().get_iter() as usize, report.iterations);
     }
     // Argmin's iteration limit applies.
-    let problem = LinearLeastSquares { op: &op, y: &y, damp: 0.0 };
-    let res = Executor::new(problem, ArgminCgls::new(0.0).unwrap()).configure(|s| s.param(vec![0.0; 15]).max_iters(3)).run().unwrap();
+    let problem = LinearLeastSquares {
+        op: &op,
+        y: &y,
+        damp: 0.0,
+    };
+    let res = Executor::new(problem, ArgminCgls::new(0.0).unwrap())
+        .configure(|s| s.param(vec![0.0; 15]).max_iters(3))
+        .run()
+        .unwrap();
     assert_eq!(res.state().get_iter(), 3);
     // Errors are reported, not panics.
-    let problem = LinearLeastSquares { op: &op, y: &y[..39], damp: 0.0 };
-    assert!(Executor::new(problem, ArgminCgls::new(1e-6).unwrap()).configure(|s| s.param(vec![0.0; 15])).run().is_err());
+    let problem = LinearLeastSquares {
+        op: &op,
+        y: &y[..39],
+        damp: 0.0,
+    };
+    assert!(Executor::new(problem, ArgminCgls::new(1e-6).unwrap())
+        .configure(|s| s.param(vec![0.0; 15]))
+        .run()
+        .is_err());
     assert!(ArgminCgls::<f64>::new(f64::NAN).is_err());
 }

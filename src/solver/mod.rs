@@ -16,14 +16,22 @@
 mod argmin_cgls;
 mod backprojection;
 mod cgls;
+mod cosamp;
+mod fista;
+mod iht;
 
 use std::time::{Duration, Instant};
 
 pub use argmin_cgls::{ArgminCgls, CglsState, LinearLeastSquares};
 pub use backprojection::{backprojection, Backprojection, BackprojectionResult, Threshold};
 pub use cgls::{cgls, CglsParams};
+pub use cosamp::{cosamp, CosampParams};
+pub use fista::{fista, FistaParams, Lambda, Restart, StepRule};
+pub use iht::{iht, IhtParams, IhtStep};
 
 use crate::error::{Error, Result};
+use crate::linalg::dot;
+use crate::operator::{operator_norm, PowerIteration};
 use crate::real::Real;
 
 /// When an iterative solver stops. Criteria set to `None` are off.
@@ -320,6 +328,128 @@ pub(crate) fn check_problem<T: Real>(
         return Err(Error::NonFinite {
             what: format!("{solver}: initial x entry {i}"),
         });
+    }
+    Ok(())
+}
+
+/// ‖x − prev‖ / ‖x‖ accumulated in `f64`: 0 when the two are equal, +∞ when only `x` is zero.
+pub(crate) fn relative_change<T: Real>(x: &[T], prev: &[T]) -> f64 {
+    let d: f64 = x
+        .iter()
+        .zip(prev)
+        .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
+        .sum();
+    let xx = dot(x, x);
+    if d == 0.0 {
+        0.0
+    } else if xx == 0.0 {
+        f64::INFINITY
+    } else {
+        (d / xx).sqrt()
+    }
+}
+
+/// Indices of the `k` entries of largest magnitude, in increasing order (all indices when
+/// `k ≥ v.len()`); among equal magnitudes the lower index wins.
+pub(crate) fn largest_indices<T: Real>(v: &[T], k: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..v.len()).collect();
+    if k < v.len() {
+        let by_magnitude = |&a: &usize, &b: &usize| {
+            let (ma, mb) = (v[a].as_f64().abs(), v[b].as_f64().abs());
+            mb.total_cmp(&ma).then(a.cmp(&b))
+        };
+        if k > 0 {
+            idx.select_nth_unstable_by(k - 1, by_magnitude);
+        }
+        idx.truncate(k);
+    }
+    idx.sort_unstable();
+    idx
+}
+
+/// Indices of the nonzero entries, in increasing order.
+pub(crate) fn support<T: Real>(v: &[T]) -> Vec<usize> {
+    v.iter()
+        .enumerate()
+        .filter(|(_, x)| **x != T::zero())
+        .map(|(i, _)| i)
+        .collect()
+}
+
+/// H_k: keeps the `k` entries of largest magnitude (see [`largest_indices`]) and zeroes the rest.
+pub(crate) fn hard_threshold<T: Real>(x: &mut [T], k: usize) {
+    if k >= x.len() {
+        return;
+    }
+    let keep = largest_indices(x, k);
+    let mut next = keep.iter().copied().peekable();
+    for (i, v) in x.iter_mut().enumerate() {
+        if next.peek() == Some(&i) {
+            next.next();
+        } else {
+            *v = T::zero();
+        }
+    }
+}
+
+/// Checks the settings of a step derived from a power-iteration estimate of ‖A‖.
+pub(crate) fn validate_power_step(settings: &PowerIteration, margin: f64) -> Result<()> {
+    if settings.max_iter == 0 {
+        return Err(Error::param(
+            "power_iteration.max_iter",
+            "must be at least 1",
+        ));
+    }
+    if !(settings.tol.is_finite() && settings.tol > 0.0) {
+        return Err(Error::param(
+            "power_iteration.tol",
+            format!("must be a positive finite number, got {}", settings.tol),
+        ));
+    }
+    if !(margin.is_finite() && margin >= 1.0) {
+        return Err(Error::param(
+            "margin",
+            format!("must be a finite number ≥ 1, got {margin}"),
+        ));
+    }
+    Ok(())
+}
+
+/// L = margin · σ², with σ the power-iteration estimate of ‖A‖₂ (a lower bound, hence the
+/// margin); 0 when the operator maps the start vector to zero.
+pub(crate) fn lipschitz_estimate<T: Real, A: crate::operator::LinearOperator<T> + ?Sized>(
+    op: &A,
+    settings: &PowerIteration,
+    margin: f64,
+) -> Result<f64> {
+    let sigma = operator_norm(op, settings)?.value;
+    let l = margin * sigma * sigma;
+    if !l.is_finite() {
+        return Err(Error::NonFinite {
+            what: format!("Lipschitz constant from the operator norm estimate {sigma}"),
+        });
+    }
+    Ok(l)
+}
+
+/// Checks a sparsity level against the number of unknowns.
+pub(crate) fn check_sparsity(sparsity: usize, n: usize) -> Result<()> {
+    if sparsity == 0 || sparsity > n {
+        return Err(Error::param(
+            "sparsity",
+            format!("must be between 1 and the {n} unknowns, got {sparsity}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks that a tolerance is a finite number ≥ 0.
+pub(crate) fn check_tolerance(name: &'static str, value: f64) -> Result<()> {
+    if !(value.is_finite() && value >= 0.0) {
+        return Err(Error::param(
+            name,
+            format!("must be a finite number ≥ 0, got {value}"),
+        ));
     }
     Ok(())
 }
