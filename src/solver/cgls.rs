@@ -64,7 +64,7 @@ where
     let lambda = params.damp;
     let lam_t = T::of_f64(lambda);
     let mut scratch = vec![T::zero(); op.scratch_len()];
-    let mut monitor = Monitor::new(params.stopping, observer);
+    let mut monitor = Monitor::new(NAME, params.stopping, observer);
 
     // r = y − Ax, s = Aᵀr − λx, p = s.
     let mut r = vec![T::zero(); m];
@@ -77,11 +77,8 @@ where
     let mut q = vec![T::zero(); m];
     let mut gamma = dot(&s, &s);
     let gamma0 = gamma;
-    let finish = |monitor: Monitor<'_, T, O>, it: usize, t: Termination, op: &Counted<&A>| {
-        monitor.finish(NAME, it, t, op.forward_count(), op.adjoint_count())
-    };
     if gamma0 == 0.0 {
-        return Ok(finish(monitor, 0, Termination::ZeroResidual, &op));
+        return Ok(monitor.finish(0, Termination::ZeroResidual, &op));
     }
     let mut it = 0;
     loop {
@@ -116,10 +113,10 @@ where
         let objective = 0.5 * (dot(&r, &r) + lambda * xx);
         let residual = (gamma_new / gamma0).sqrt();
         if let Some(t) = monitor.step(it, residual, objective, change, x) {
-            return Ok(finish(monitor, it, t, &op));
+            return Ok(monitor.finish(it, t, &op));
         }
         if gamma_new == 0.0 {
-            return Ok(finish(monitor, it, Termination::Converged, &op));
+            return Ok(monitor.finish(it, Termination::Converged, &op));
         }
         let beta = T::of_f64(gamma_new / gamma);
         p.iter_mut()

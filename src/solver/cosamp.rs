@@ -113,14 +113,11 @@ where
     check_problem(NAME, m, n, y, x)?;
     let s = params.sparsity;
     let op = Counted::new(op);
-    let mut monitor = Monitor::new(params.stopping, observer);
-    let finish = |monitor: Monitor<'_, T, O>, it: usize, t: Termination, op: &Counted<&A>| {
-        monitor.finish(NAME, it, t, op.forward_count(), op.adjoint_count())
-    };
+    let mut monitor = Monitor::new(NAME, params.stopping, observer);
     let ynorm = norm2(y);
     if ynorm == 0.0 {
         x.fill(T::zero());
-        return Ok(finish(monitor, 0, Termination::ZeroResidual, &op));
+        return Ok(monitor.finish(0, Termination::ZeroResidual, &op));
     }
     hard_threshold(x, s);
     let mut scratch = vec![T::zero(); op.scratch_len()];
@@ -134,7 +131,7 @@ where
     loop {
         op.apply_adjoint_with_scratch(&r, &mut u, &mut scratch);
         if u.iter().all(|&v| v == T::zero()) {
-            return Ok(finish(monitor, it, Termination::Converged, &op));
+            return Ok(monitor.finish(it, Termination::Converged, &op));
         }
         it += 1;
         let merged = union(&largest_indices(&u, 2 * s), &supp);
@@ -171,9 +168,9 @@ where
         let converged = same_support && change <= params.fixed_point_tol;
         match monitor.step(it, rr.sqrt() / ynorm, 0.5 * rr, change, x) {
             Some(Termination::MaxIterations) | None if converged => {
-                return Ok(finish(monitor, it, Termination::Converged, &op));
+                return Ok(monitor.finish(it, Termination::Converged, &op));
             }
-            Some(t) => return Ok(finish(monitor, it, t, &op)),
+            Some(t) => return Ok(monitor.finish(it, t, &op)),
             None => {}
         }
     }

@@ -303,14 +303,11 @@ where
     let (m, n) = (op.nrows(), op.ncols());
     check_problem(NAME, m, n, y, x)?;
     let op = Counted::new(op);
-    let mut monitor = Monitor::new(params.stopping, observer);
-    let finish = |monitor: Monitor<'_, T, O>, it: usize, t: Termination, op: &Counted<&A>| {
-        monitor.finish(NAME, it, t, op.forward_count(), op.adjoint_count())
-    };
+    let mut monitor = Monitor::new(NAME, params.stopping, observer);
     let ynorm = norm2(y);
     if ynorm == 0.0 {
         x.fill(T::zero());
-        return Ok(finish(monitor, 0, Termination::ZeroResidual, &op));
+        return Ok(monitor.finish(0, Termination::ZeroResidual, &op));
     }
     if params.nonnegative {
         x.iter_mut()
@@ -338,7 +335,7 @@ where
                 if lambda > 0.0 {
                     x.fill(T::zero());
                 }
-                return Ok(finish(monitor, 0, Termination::Converged, &op));
+                return Ok(monitor.finish(0, Termination::Converged, &op));
             }
             (l, None)
         }
@@ -421,7 +418,7 @@ where
             .sqrt()
             / ynorm;
         if let Some(t) = monitor.step(it, residual, f_x, change, x) {
-            return Ok(finish(monitor, it, t, &op));
+            return Ok(monitor.finish(it, t, &op));
         }
     }
 }

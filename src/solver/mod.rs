@@ -31,6 +31,7 @@ pub use iht::{iht, IhtParams, IhtStep};
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
+use crate::operator::Counted;
 use crate::operator::{operator_norm, PowerIteration};
 use crate::real::Real;
 
@@ -199,6 +200,7 @@ pub struct Report {
 
 /// The shared bookkeeping of an iterative run: histories, stopping rules, the observer.
 pub(crate) struct Monitor<'o, T, O: Observer<T> + ?Sized> {
+    solver: &'static str,
     stop: Stopping,
     observer: &'o mut O,
     start: Instant,
@@ -208,8 +210,9 @@ pub(crate) struct Monitor<'o, T, O: Observer<T> + ?Sized> {
 }
 
 impl<'o, T: Real, O: Observer<T> + ?Sized> Monitor<'o, T, O> {
-    pub(crate) fn new(stop: Stopping, observer: &'o mut O) -> Self {
+    pub(crate) fn new(solver: &'static str, stop: Stopping, observer: &'o mut O) -> Self {
         Monitor {
+            solver,
             stop,
             observer,
             start: Instant::now(),
@@ -266,22 +269,22 @@ impl<'o, T: Real, O: Observer<T> + ?Sized> Monitor<'o, T, O> {
         None
     }
 
-    pub(crate) fn finish(
+    /// The report of a run that ended after `iterations` for `termination`, with the apply
+    /// counts of the solver's counting wrapper.
+    pub(crate) fn finish<A: ?Sized>(
         self,
-        solver: &'static str,
         iterations: usize,
         termination: Termination,
-        forward_applies: usize,
-        adjoint_applies: usize,
+        op: &Counted<&A>,
     ) -> Report {
         Report {
-            solver,
+            solver: self.solver,
             iterations,
             termination,
             residual_history: self.residuals,
             objective_history: self.objectives,
-            forward_applies,
-            adjoint_applies,
+            forward_applies: op.forward_count(),
+            adjoint_applies: op.adjoint_count(),
             elapsed: self.start.elapsed(),
         }
     }
