@@ -271,47 +271,6 @@ fn flush<T: Real>(src: &mut [Lane<T>], dst: &mut [Lane<f64>]) {
     }
 }
 
-/// For one group: `sums[i] = Σ_{b ∋ i} sign·U[b]` over the `planes` bucket sets (sign +1 for the
-/// first, −1 for the second) and `total = Σ_b U[b]` over the first. `u` holds `planes` sets of
-/// 256 × `nch` lanes; `sums` has 8 × `nch` lanes (pixel-major), `total` `nch` lanes.
-// `T` is unused: the dispatch macro instantiates every kernel per scalar type.
-#[allow(clippy::extra_unused_type_parameters)]
-#[inline(always)]
-fn reduce_group<T: Real>(
-    u: &[Lane<f64>],
-    planes: usize,
-    nch: usize,
-    sums: &mut [Lane<f64>],
-    total: &mut [Lane<f64>],
-) {
-    sums.iter_mut().for_each(|v| *v = [0.0; 8]);
-    total.iter_mut().for_each(|v| *v = [0.0; 8]);
-    for plane in 0..planes {
-        let set = &u[plane * 256 * nch..(plane + 1) * 256 * nch];
-        let neg = plane == 1;
-        for b in 0..256usize {
-            let row = &set[b * nch..(b + 1) * nch];
-            if !neg {
-                for (t, r) in total.iter_mut().zip(row) {
-                    for l in 0..8 {
-                        t[l] += r[l];
-                    }
-                }
-            }
-            let mut bits = b;
-            while bits != 0 {
-                let i = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                for (sv, r) in sums[i * nch..(i + 1) * nch].iter_mut().zip(row) {
-                    for l in 0..8 {
-                        sv[l] = if neg { sv[l] - r[l] } else { sv[l] + r[l] };
-                    }
-                }
-            }
-        }
-    }
-}
-
 macro_rules! multiversion {
     ($vis:vis fn $name:ident < $t:ident $(, const $c:ident : usize)? > ( $($arg:ident : $ty:ty),* ) => $inner:ident) => {
         $vis fn $name<$t: Real $(, const $c: usize)?>(isa: Isa, $($arg: $ty),*) {
@@ -342,7 +301,6 @@ macro_rules! multiversion {
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
 multiversion!(fn adj_block_isa<T, const NCH: usize>(a: &AdjBlock<'_, T>, k0: usize, k1: usize, buckets: &mut [Lane<T>]) => adj_block);
 multiversion!(pub(crate) fn flush_isa<T>(src: &mut [Lane<T>], dst: &mut [Lane<f64>]) => flush);
-multiversion!(pub(crate) fn reduce_group_isa<T>(u: &[Lane<f64>], planes: usize, nch: usize, sums: &mut [Lane<f64>], total: &mut [Lane<f64>]) => reduce_group);
 multiversion!(pub(crate) fn sparse_entry_isa<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
 
 /// Runs the forward block kernel for a slab of `8·nch` bins.

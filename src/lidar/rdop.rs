@@ -15,8 +15,7 @@ use crate::real::Real;
 use super::codes::Codes;
 use super::geometry::Geometry;
 use super::kernels::{
-    adjoint_block, flush_isa, forward_block, reduce_group_isa, sparse_entry_isa, AdjBlock,
-    FwdBlock, Isa, Lane, FLUSH,
+    adjoint_block, flush_isa, forward_block, sparse_entry_isa, AdjBlock, FwdBlock, Isa, Lane, FLUSH,
 };
 
 /// Largest slab of depth bins a kernel handles at once (8 lanes × 8 chunks).
@@ -540,44 +539,43 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                     }
                     // Each pixel i of group g: Σ_b ±U[b] (binary: + where bit i is set, − elsewhere;
                     // ternary: +1 buckets minus −1 buckets, each over the bytes with bit i set).
-                    let mut sums = [[0.0f64; 8]; 64];
-                    let mut total = [[0.0f64; 8]; 8];
                     for gi in 0..ng {
-                        // Gather the group's bucket sets (one per plane) contiguously.
-                        let u: Vec<Lane<f64>>;
-                        let set: &[Lane<f64>] = if planes == 1 {
-                            &w.lanes64[gi * 256 * nch..(gi + 1) * 256 * nch]
-                        } else {
-                            u = [gi, ng + gi]
-                                .iter()
-                                .flat_map(|&s| {
-                                    w.lanes64[s * 256 * nch..(s + 1) * 256 * nch]
-                                        .iter()
-                                        .copied()
-                                })
-                                .collect();
-                            &u
-                        };
-                        reduce_group_isa::<T>(
-                            self.isa,
-                            set,
-                            planes,
-                            nch,
-                            &mut sums[..8 * nch],
-                            &mut total[..nch],
-                        );
-                        for i in 0..8 {
+                        let mut sums = [[[0.0f64; 8]; 8]; 8]; // [pixel][chunk][lane]
+                        let mut total = [[0.0f64; 8]; 8];
+                        for plane in 0..planes {
+                            let sign = if plane == 0 { 1.0 } else { -1.0 };
+                            let u = &w.lanes64
+                                [(plane * ng + gi) * 256 * nch..(plane * ng + gi + 1) * 256 * nch];
+                            for bb in 0..256usize {
+                                let row = &u[bb * nch..(bb + 1) * nch];
+                                for c in 0..nch {
+                                    for l in 0..8 {
+                                        total[c][l] += row[c][l];
+                                    }
+                                }
+                                let mut bits = bb;
+                                while bits != 0 {
+                                    let i = bits.trailing_zeros() as usize;
+                                    bits &= bits - 1;
+                                    for c in 0..nch {
+                                        for l in 0..8 {
+                                            sums[i][c][l] += sign * row[c][l];
+                                        }
+                                    }
+                                }
+                            }
+                        }
+                        for (i, s) in sums.iter().enumerate() {
                             let p = 8 * (groups.start + gi) + i;
                             if p >= npix {
                                 break;
                             }
                             let local = (p - 8 * groups.start) * ks;
                             for jj in 0..(8 * nch).min(ks - j0) {
-                                let sv = sums[i * nch + jj / 8][jj % 8];
                                 let v = if ternary {
-                                    sv
+                                    s[jj / 8][jj % 8]
                                 } else {
-                                    2.0 * sv - total[jj / 8][jj % 8]
+                                    2.0 * s[jj / 8][jj % 8] - total[jj / 8][jj % 8]
                                 };
                                 xb[local + j0 + jj] = T::of_f64(v);
                             }
