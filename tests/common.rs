@@ -431,11 +431,15 @@ pub fn rel_max_diff(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
 }
 
 /// Proptest settings with a fixed generator seed, so that every run tests the same cases
-/// (failures are reproducible; `PROPTEST_CASES` still scales the count).
+/// (failures are reproducible; `PROPTEST_CASES` still scales the count). Failing cases are kept
+/// beside each test file (`tests/NAME.proptest-regressions`) and replayed first.
 pub fn config(cases: u32) -> ProptestConfig {
     ProptestConfig {
         cases,
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x0072_646c_6964_6172),
+        failure_persistence: Some(Box::new(
+            proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"),
+        )),
         ..ProptestConfig::default()
     }
 }
