@@ -180,3 +180,43 @@ fn f32_agrees_with_f64_at_a_million_samples() {
     let e = rel(&b32, &b64);
     assert!(e <= 1e-5, "adjoint: f32 vs f64 {e:e}");
 }
+
+proptest! {
+    #![proptest_config(crate::common::config(32))]
+
+    /// The support-restricted operator equals A·Rᵀ built with the algebra, in both directions.
+    #[test]
+    fn support_operator_matches_the_restricted_composition(
+        g in geometry(),
+        kp in 1..=300usize,
+        ternary in any::<bool>(),
+        picks in prop::collection::vec(any::<prop::sample::Index>(), 0..=40),
+        seed in any::<u64>(),
+    ) {
+        use rdlidar::lidar::SupportOperator;
+        use rdlidar::operator::{OperatorExt, Restriction};
+        let pulse = Pulse::<f64>::bernoulli(kp, seed).unwrap().into_inner();
+        let k = g.samples(kp);
+        let codes = if ternary {
+            Codes::random_ternary(g.pixels(), k, 0.3, seed ^ 3).unwrap()
+        } else {
+            Codes::random_binary(g.pixels(), k, seed ^ 3).unwrap()
+        };
+        let op = RdOperator::new(g, pulse, Arc::new(codes)).unwrap();
+        let voxels: Vec<usize> = picks.iter().map(|i| i.index(g.voxels())).collect();
+        let sup = SupportOperator::new(&op, voxels.clone()).unwrap();
+        let reference = (&op).compose(Restriction::<f64>::new(g.voxels(), voxels.clone()).unwrap().adjoint()).unwrap();
+        let a = random_vec(voxels.len(), seed ^ 5);
+        let (mut y1, mut y2) = (vec![0.0; k], vec![0.0; k]);
+        sup.apply(&a, &mut y1);
+        reference.apply(&a, &mut y2);
+        prop_assert!(rel(&y1, &y2) <= 1e-12 || y2.iter().all(|v| *v == 0.0));
+        let y = random_vec(k, seed ^ 6);
+        let (mut x1, mut x2) = (vec![0.0; voxels.len()], vec![0.0; voxels.len()]);
+        sup.apply_adjoint(&y, &mut x1);
+        reference.apply_adjoint(&y, &mut x2);
+        prop_assert!(rel(&x1, &x2) <= 1e-12 || x2.is_empty());
+        prop_assert!(DotTest::new().seed(seed).measure(&sup).passed());
+        prop_assert!(SupportOperator::new(&op, vec![g.voxels()]).is_err());
+    }
+}

@@ -14,6 +14,7 @@ mod pulse;
 mod rdop;
 mod scene;
 mod scenes;
+mod support;
 
 pub use architectures::{coded_aperture, multi_adc, pixel_groups, tiles};
 pub use codes::{CodeAlphabet, Codes};
@@ -31,3 +32,4 @@ pub use scenes::{
     attenuate, composite_nearest, paper_scene, paper_surfaces, random_opaque_scene,
     scene_from_pngs, semi_transparent_scene,
 };
+pub use support::SupportOperator;

@@ -450,6 +450,12 @@ impl<T: Real> RdOperator<T> {
         });
     }
 
+    /// y = Σ over `entries` (pixel, depth, value) of the voxel's contribution: the sparse forward
+    /// on an explicit list of nonzeros.
+    pub(crate) fn forward_entries(&self, entries: &[(usize, usize, T)], y: &mut [T]) {
+        self.forward_sparse(entries, y);
+    }
+
     /// Whether the sparse path is cheaper for `nnz` nonzero voxels.
     fn prefers_sparse(&self, nnz: usize) -> bool {
         // Dense: one table-row addition of `nch` lane chunks per group and sample. Sparse: about a
