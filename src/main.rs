@@ -635,7 +635,7 @@ fn layout_kind(codes: &Path, tile: Option<Tile>) -> CliResult<(LayoutKind, Vec<u
                 "{}: codes of shape {} are {} code sets, one ADC each; --tiles {t} and several \
                  code sets are not supported together",
                 codes.display(),
-                shape_text(&h.shape),
+                io::shape_text(&h.shape),
                 h.shape[0]
             )
             .into())
@@ -762,7 +762,7 @@ fn read_layout_measurements<T: Real>(
                      one code set read as a single ADC: for a tiled array pass --tiles AxB \
                      with its tile size (meta.json \"architecture\" \"tile\")",
                     meas.display(),
-                    shape_text(&h.shape),
+                    io::shape_text(&h.shape),
                     files.codes.display()
                 )
                 .into());
@@ -774,7 +774,7 @@ fn read_layout_measurements<T: Real>(
             format!(
                 "the codes {} of shape {} are {sets} code sets, one ADC each",
                 files.codes.display(),
-                shape_text(codes_shape)
+                io::shape_text(codes_shape)
             ),
         ),
         LayoutKind::Tiles(t) => match codes_shape {
@@ -800,7 +800,7 @@ fn read_layout_measurements<T: Real>(
             return Err(format!(
                 "{}: measurements of shape {} {found}, but {why}: expected shape ({r}, {k})",
                 meas.display(),
-                shape_text(&h.shape)
+                io::shape_text(&h.shape)
             )
             .into());
         }
@@ -1296,21 +1296,6 @@ fn apply_to<T: Real>(op: &impl LinearOperator<T>, x: &[T]) -> Vec<T> {
     y
 }
 
-/// A shape as NumPy prints it: `(4, 5, 6)`, `(7,)`.
-fn shape_text(shape: &[usize]) -> String {
-    match shape {
-        [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            shape
-                .iter()
-                .map(|d| d.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
-}
-
 fn simulate<T: Real + WritableElement>(a: &SimulateArgs, arch: Architecture) -> CliResult {
     let g = a.size;
     let kp = a.pulse_len;
@@ -1569,8 +1554,8 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs, arch: Architecture) -> 
         g.m,
         g.n,
         g.ks,
-        shape_text(&codes_shape),
-        shape_text(&meas_shape),
+        io::shape_text(&codes_shape),
+        io::shape_text(&meas_shape),
     );
     println!(
         "{} scene, {lit_pixels} lit pixels; {alphabet} codes; {} regime (critical K_p = {}); {}",

@@ -128,7 +128,7 @@ pub struct NpyHeader {
 }
 
 /// Formats a shape as NumPy prints it: `(4, 5, 6)`, `(7,)`.
-fn shape_text(shape: &[usize]) -> String {
+pub fn shape_text(shape: &[usize]) -> String {
     match shape {
         [n] => format!("({n},)"),
         _ => format!(

@@ -55,6 +55,13 @@ pub struct ArgminCgls<T> {
     gamma0: f64,
 }
 
+/// Records one forward and one adjoint application in argmin's per-problem counters.
+fn count_applies<O>(problem: &mut Problem<O>) {
+    for name in ["operator_forward", "operator_adjoint"] {
+        *problem.counts.entry(name).or_insert(0) += 1;
+    }
+}
+
 impl<T: Real> ArgminCgls<T> {
     /// A solver stopping at relative normal-equation residual `tol`.
     ///
@@ -127,16 +134,7 @@ where
         self.gamma = dot(&self.s, &self.s);
         self.gamma0 = self.gamma;
         let cost = self.objective(&x, lls.damp);
-        problem
-            .counts
-            .entry("operator_forward")
-            .and_modify(|c| *c += 1)
-            .or_insert(1);
-        problem
-            .counts
-            .entry("operator_adjoint")
-            .and_modify(|c| *c += 1)
-            .or_insert(1);
+        count_applies(problem);
         Ok((state.param(x).cost(cost), None))
     }
 
@@ -182,16 +180,7 @@ where
             .for_each(|(pi, &si)| *pi = si + beta * *pi);
         self.gamma = gamma_new;
         let cost = self.objective(&x, lls.damp);
-        problem
-            .counts
-            .entry("operator_forward")
-            .and_modify(|c| *c += 1)
-            .or_insert(1);
-        problem
-            .counts
-            .entry("operator_adjoint")
-            .and_modify(|c| *c += 1)
-            .or_insert(1);
+        count_applies(problem);
         let residual = if self.gamma0 > 0.0 {
             (gamma_new / self.gamma0).sqrt()
         } else {
