@@ -4,6 +4,7 @@ mod common;
 
 mod algebra;
 mod architectures;
+mod argmin_solvers;
 mod cli;
 mod cli_lidar;
 mod convolution;

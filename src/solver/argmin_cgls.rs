@@ -9,6 +9,10 @@ use crate::operator::LinearOperator;
 use crate::real::Real;
 
 /// The damped linear least-squares problem min ‖Ax − y‖² + λ‖x‖², as an argmin problem.
+///
+/// With `damp` 0 it is also the problem of [`ArgminFista`](super::ArgminFista),
+/// [`ArgminIht`](super::ArgminIht) and [`ArgminCosamp`](super::ArgminCosamp), which add their
+/// own ℓ1 term or sparsity constraint.
 #[derive(Debug, Clone, Copy)]
 pub struct LinearLeastSquares<'a, T, A: ?Sized> {
     /// The operator A.
@@ -55,10 +59,11 @@ pub struct ArgminCgls<T> {
     gamma0: f64,
 }
 
-/// Records one forward and one adjoint application in argmin's per-problem counters.
-fn count_applies<O>(problem: &mut Problem<O>) {
-    for name in ["operator_forward", "operator_adjoint"] {
-        *problem.counts.entry(name).or_insert(0) += 1;
+/// Adds `forward` and `adjoint` applications of the operator to argmin's per-problem counters
+/// (`operator_forward`, `operator_adjoint`).
+pub(super) fn count_applies<O>(problem: &mut Problem<O>, forward: usize, adjoint: usize) {
+    for (name, applies) in [("operator_forward", forward), ("operator_adjoint", adjoint)] {
+        *problem.counts.entry(name).or_insert(0) += applies as u64;
     }
 }
 
@@ -134,7 +139,7 @@ where
         self.gamma = dot(&self.s, &self.s);
         self.gamma0 = self.gamma;
         let cost = self.objective(&x, lls.damp);
-        count_applies(problem);
+        count_applies(problem, 1, 1);
         Ok((state.param(x).cost(cost), None))
     }
 
@@ -180,7 +185,7 @@ where
             .for_each(|(pi, &si)| *pi = si + beta * *pi);
         self.gamma = gamma_new;
         let cost = self.objective(&x, lls.damp);
-        count_applies(problem);
+        count_applies(problem, 1, 1);
         let residual = if self.gamma0 > 0.0 {
             (gamma_new / self.gamma0).sqrt()
         } else {

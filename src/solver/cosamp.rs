@@ -1,13 +1,18 @@
 //! CoSaMP: compressive sampling matching pursuit, with matrix-free least squares on the support.
 
+use std::ops::ControlFlow;
+
+use serde::{Deserialize, Serialize};
+
 use crate::error::{Error, Result};
 use crate::linalg::{dot, norm2};
-use crate::operator::{Counted, LinearOperator, OperatorExt, Restriction};
+use crate::operator::{LinearOperator, OperatorExt, Restriction};
 use crate::real::Real;
 
+use super::iteration::{fit_scratch, solve, Iteration, Progress, StoppingRecord};
 use super::{
     cgls, check_problem, check_sparsity, check_tolerance, hard_threshold, largest_indices,
-    relative_change, support, CglsParams, Monitor, Observer, Report, Stopping, Termination,
+    relative_change, support, CglsParams, Observer, Report, Stopping, Termination,
 };
 
 /// Parameters of [`cosamp`].
@@ -45,7 +50,8 @@ impl CosampParams {
         }
     }
 
-    fn validate(&self, n: usize) -> Result<()> {
+    /// Checks everything but the upper bound of the sparsity, which needs the operator.
+    pub(super) fn validate_settings(&self) -> Result<()> {
         self.stopping.validate()?;
         self.inner.stopping.validate()?;
         if !(self.inner.damp.is_finite() && self.inner.damp >= 0.0) {
@@ -54,7 +60,11 @@ impl CosampParams {
                 format!("must be finite and ≥ 0, got {}", self.inner.damp),
             ));
         }
-        check_tolerance("fixed_point_tol", self.fixed_point_tol)?;
+        check_tolerance("fixed_point_tol", self.fixed_point_tol)
+    }
+
+    fn validate(&self, n: usize) -> Result<()> {
+        self.validate_settings()?;
         check_sparsity(self.sparsity, n)
     }
 }
@@ -65,6 +75,134 @@ fn union(a: &[usize], b: &[usize]) -> Vec<usize> {
     out.sort_unstable();
     out.dedup();
     out
+}
+
+/// The state of [`cosamp`] between iterations: the forward product and residual of x, its
+/// support and the proxy.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(super) struct CosampIteration<T> {
+    sparsity: usize,
+    fixed_point_tol: f64,
+    /// The damping and the stopping rules of the inner [`CglsParams`].
+    inner_damp: f64,
+    inner_stopping: StoppingRecord,
+    /// ‖y‖.
+    ynorm: f64,
+    ax: Vec<T>,
+    /// y − Ax.
+    r: Vec<T>,
+    /// Aᵀr, computed by `prepare`.
+    u: Vec<T>,
+    xn: Vec<T>,
+    supp: Vec<usize>,
+    #[serde(skip, default = "Vec::new")]
+    scratch: Vec<T>,
+}
+
+impl<T: Real> Iteration<T> for CosampIteration<T> {
+    const NAME: &'static str = "cosamp";
+    type Params = CosampParams;
+
+    fn stopping(params: &CosampParams) -> Stopping {
+        params.stopping
+    }
+
+    fn start<A: LinearOperator<T> + ?Sized>(
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        params: &CosampParams,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        let (m, n) = (op.nrows(), op.ncols());
+        params.validate(n)?;
+        check_problem(Self::NAME, m, n, y, x)?;
+        let ynorm = norm2(y);
+        if ynorm == 0.0 {
+            x.fill(T::zero());
+            return Ok(ControlFlow::Break(Termination::ZeroResidual));
+        }
+        hard_threshold(x, params.sparsity);
+        let mut scratch = vec![T::zero(); op.scratch_len()];
+        let mut ax = vec![T::zero(); m];
+        op.apply_with_scratch(x, &mut ax, &mut scratch);
+        let r: Vec<T> = y.iter().zip(&ax).map(|(&a, &b)| a - b).collect();
+        Ok(ControlFlow::Continue(CosampIteration {
+            sparsity: params.sparsity,
+            fixed_point_tol: params.fixed_point_tol,
+            inner_damp: params.inner.damp,
+            inner_stopping: params.inner.stopping.into(),
+            ynorm,
+            ax,
+            r,
+            u: vec![T::zero(); n],
+            xn: vec![T::zero(); n],
+            supp: support(x),
+            scratch,
+        }))
+    }
+
+    /// The proxy u = Aᵀ(y − Ax); x solves the problem when it is exactly zero.
+    fn prepare<A: LinearOperator<T> + ?Sized>(&mut self, op: &A) -> bool {
+        fit_scratch(&mut self.scratch, op);
+        op.apply_adjoint_with_scratch(&self.r, &mut self.u, &mut self.scratch);
+        self.u.iter().all(|&v| v == T::zero())
+    }
+
+    fn step<A: LinearOperator<T> + ?Sized>(
+        &mut self,
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        it: usize,
+    ) -> Result<Progress> {
+        fit_scratch(&mut self.scratch, op);
+        let (s, n) = (self.sparsity, x.len());
+        let merged = union(&largest_indices(&self.u, 2 * s), &self.supp);
+        let mut b: Vec<T> = merged.iter().map(|&i| x[i]).collect();
+        let restricted = op.compose(Restriction::new(n, merged.clone())?.adjoint())?;
+        let inner = CglsParams {
+            damp: self.inner_damp,
+            stopping: self.inner_stopping.into(),
+        };
+        cgls(&restricted, y, &mut b, &inner, &mut ()).map_err(|e| match e {
+            Error::Breakdown { reason, .. } => Error::Breakdown {
+                solver: Self::NAME,
+                reason: format!("inner least squares at iteration {it}: {reason}"),
+            },
+            other => other,
+        })?;
+        hard_threshold(&mut b, s);
+        self.xn.fill(T::zero());
+        for (&i, &v) in merged.iter().zip(&b) {
+            self.xn[i] = v;
+        }
+        op.apply_with_scratch(&self.xn, &mut self.ax, &mut self.scratch);
+        let change = relative_change(&self.xn, x);
+        let new_supp = support(&self.xn);
+        let same_support = new_supp == self.supp;
+        x.copy_from_slice(&self.xn);
+        self.supp = new_supp;
+        for ((ri, &yi), &ai) in self.r.iter_mut().zip(y).zip(&self.ax) {
+            *ri = yi - ai;
+        }
+        let rr = dot(&self.r, &self.r);
+        if !rr.is_finite() {
+            return Err(Error::Breakdown {
+                solver: Self::NAME,
+                reason: format!("non-finite residual at iteration {it}"),
+            });
+        }
+        Ok(Progress {
+            residual: rr.sqrt() / self.ynorm,
+            objective: 0.5 * rr,
+            change,
+            converged: same_support && change <= self.fixed_point_tol,
+        })
+    }
+
+    fn objective(&self) -> f64 {
+        0.5 * dot(&self.r, &self.r)
+    }
 }
 
 /// Finds an s-sparse x approximately minimizing ½‖Ax − y‖² by CoSaMP (Needell & Tropp 2009),
@@ -107,71 +245,5 @@ where
     A: LinearOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    const NAME: &str = "cosamp";
-    let (m, n) = (op.nrows(), op.ncols());
-    params.validate(n)?;
-    check_problem(NAME, m, n, y, x)?;
-    let s = params.sparsity;
-    let op = Counted::new(op);
-    let mut monitor = Monitor::new(NAME, params.stopping, observer);
-    let ynorm = norm2(y);
-    if ynorm == 0.0 {
-        x.fill(T::zero());
-        return Ok(monitor.finish(0, Termination::ZeroResidual, &op));
-    }
-    hard_threshold(x, s);
-    let mut scratch = vec![T::zero(); op.scratch_len()];
-    let mut ax = vec![T::zero(); m];
-    op.apply_with_scratch(x, &mut ax, &mut scratch);
-    let mut r: Vec<T> = y.iter().zip(&ax).map(|(&a, &b)| a - b).collect();
-    let mut u = vec![T::zero(); n];
-    let mut xn = vec![T::zero(); n];
-    let mut supp = support(x);
-    let mut it = 0;
-    loop {
-        op.apply_adjoint_with_scratch(&r, &mut u, &mut scratch);
-        if u.iter().all(|&v| v == T::zero()) {
-            return Ok(monitor.finish(it, Termination::Converged, &op));
-        }
-        it += 1;
-        let merged = union(&largest_indices(&u, 2 * s), &supp);
-        let mut b: Vec<T> = merged.iter().map(|&i| x[i]).collect();
-        let restricted = (&op).compose(Restriction::new(n, merged.clone())?.adjoint())?;
-        cgls(&restricted, y, &mut b, &params.inner, &mut ()).map_err(|e| match e {
-            Error::Breakdown { reason, .. } => Error::Breakdown {
-                solver: NAME,
-                reason: format!("inner least squares at iteration {it}: {reason}"),
-            },
-            other => other,
-        })?;
-        hard_threshold(&mut b, s);
-        xn.fill(T::zero());
-        for (&i, &v) in merged.iter().zip(&b) {
-            xn[i] = v;
-        }
-        op.apply_with_scratch(&xn, &mut ax, &mut scratch);
-        let change = relative_change(&xn, x);
-        let new_supp = support(&xn);
-        let same_support = new_supp == supp;
-        x.copy_from_slice(&xn);
-        supp = new_supp;
-        for ((ri, &yi), &ai) in r.iter_mut().zip(y).zip(&ax) {
-            *ri = yi - ai;
-        }
-        let rr = dot(&r, &r);
-        if !rr.is_finite() {
-            return Err(Error::Breakdown {
-                solver: NAME,
-                reason: format!("non-finite residual at iteration {it}"),
-            });
-        }
-        let converged = same_support && change <= params.fixed_point_tol;
-        match monitor.step(it, rr.sqrt() / ynorm, 0.5 * rr, change, x) {
-            Some(Termination::MaxIterations) | None if converged => {
-                return Ok(monitor.finish(it, Termination::Converged, &op));
-            }
-            Some(t) => return Ok(monitor.finish(it, t, &op)),
-            None => {}
-        }
-    }
+    solve::<T, A, O, CosampIteration<T>>(op, y, x, params, observer)
 }

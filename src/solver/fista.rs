@@ -1,14 +1,19 @@
 //! FISTA for the lasso, optionally nonnegative, with a power-iteration or backtracking step and
 //! adaptive restart.
 
+use std::ops::ControlFlow;
+
+use serde::{Deserialize, Serialize};
+
 use crate::error::{Error, Result};
 use crate::linalg::{norm2, norm_inf};
-use crate::operator::{Counted, LinearOperator, PowerIteration};
+use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 
+use super::iteration::{fit_scratch, solve, Iteration, Progress};
 use super::{
-    check_problem, lipschitz_estimate, relative_change, validate_power_step, Monitor, Observer,
-    Report, Stopping, Termination,
+    check_problem, lipschitz_estimate, relative_change, validate_power_step, Observer, Report,
+    Stopping, Termination,
 };
 
 /// Largest number of backtracking trials in one step before [`fista`] gives up.
@@ -109,7 +114,7 @@ impl Default for FistaParams {
 }
 
 impl FistaParams {
-    fn validate(&self) -> Result<()> {
+    pub(super) fn validate(&self) -> Result<()> {
         self.stopping.validate()?;
         let (value, what) = match self.lambda {
             Lambda::Absolute(v) => (v, "λ"),
@@ -153,16 +158,16 @@ fn extrapolate<T: Real>(out: &mut [T], a: &[T], b: &[T], beta: f64) {
     }
 }
 
-/// The lasso problem and the buffers of its proximal-gradient step.
-struct Lasso<'a, T: Real, A: ?Sized> {
-    op: &'a Counted<&'a A>,
-    y: &'a [T],
+/// The lasso's weights and the buffers of its proximal-gradient step.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Lasso<T> {
     lambda: f64,
     nonnegative: bool,
     /// `Some(eta)` for backtracking.
     eta: Option<f64>,
     /// The current Lipschitz estimate (0 until backtracking has set it).
     l: f64,
+    #[serde(skip, default = "Vec::new")]
     scratch: Vec<T>,
     /// A z − y.
     res: Vec<T>,
@@ -170,14 +175,14 @@ struct Lasso<'a, T: Real, A: ?Sized> {
     grad: Vec<T>,
 }
 
-impl<T: Real, A: LinearOperator<T> + ?Sized> Lasso<'_, T, A> {
+impl<T: Real> Lasso<T> {
     const NAME: &'static str = "fista";
 
     /// ½‖Ax − y‖² + λ‖x‖₁, from x and Ax.
-    fn objective(&self, x: &[T], ax: &[T]) -> f64 {
+    fn objective(&self, y: &[T], x: &[T], ax: &[T]) -> f64 {
         let fit: f64 = ax
             .iter()
-            .zip(self.y)
+            .zip(y)
             .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
             .sum();
         let l1: f64 = x.iter().map(|v| v.as_f64().abs()).sum();
@@ -185,18 +190,25 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Lasso<'_, T, A> {
     }
 
     /// p = prox_{λ/L}(z − Aᵀ(Az − y)/L) and Ap, backtracking on L if configured.
-    fn step(&mut self, z: &[T], az: &[T], p: &mut [T], ap: &mut [T]) -> Result<()> {
-        for ((r, &a), &b) in self.res.iter_mut().zip(az).zip(self.y) {
+    fn step<A: LinearOperator<T> + ?Sized>(
+        &mut self,
+        op: &A,
+        y: &[T],
+        z: &[T],
+        az: &[T],
+        p: &mut [T],
+        ap: &mut [T],
+    ) -> Result<()> {
+        fit_scratch(&mut self.scratch, op);
+        for ((r, &a), &b) in self.res.iter_mut().zip(az).zip(y) {
             *r = a - b;
         }
-        self.op
-            .apply_adjoint_with_scratch(&self.res, &mut self.grad, &mut self.scratch);
+        op.apply_adjoint_with_scratch(&self.res, &mut self.grad, &mut self.scratch);
         if self.l == 0.0 {
             // First backtracking step: start from the Rayleigh quotient of the gradient.
             let gg = norm2(&self.grad);
             if gg > 0.0 {
-                self.op
-                    .apply_with_scratch(&self.grad, ap, &mut self.scratch);
+                op.apply_with_scratch(&self.grad, ap, &mut self.scratch);
                 let ratio = norm2(ap) / gg;
                 self.l = ratio * ratio;
             }
@@ -210,7 +222,7 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Lasso<'_, T, A> {
             for ((pi, &zi), &gi) in p.iter_mut().zip(z).zip(&self.grad) {
                 *pi = T::of_f64(shrink(zi.as_f64() - inv * gi.as_f64(), t, self.nonnegative));
             }
-            self.op.apply_with_scratch(p, ap, &mut self.scratch);
+            op.apply_with_scratch(p, ap, &mut self.scratch);
             let Some(eta) = self.eta else {
                 return Ok(());
             };
@@ -243,6 +255,193 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Lasso<'_, T, A> {
                 });
             }
         }
+    }
+}
+
+/// [`Restart`] for serde.
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Restart")]
+enum RestartDef {
+    Off,
+    Gradient,
+    Function,
+}
+
+/// The state of [`fista`] between iterations: the lasso, the previous iterate, the extrapolated
+/// point z, the forward products of all three, and the momentum.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(super) struct FistaIteration<T> {
+    lasso: Lasso<T>,
+    #[serde(with = "RestartDef")]
+    restart: Restart,
+    /// ‖y‖.
+    ynorm: f64,
+    /// The objective at x.
+    f_x: f64,
+    ax: Vec<T>,
+    x_prev: Vec<T>,
+    ax_prev: Vec<T>,
+    z: Vec<T>,
+    az: Vec<T>,
+    p: Vec<T>,
+    ap: Vec<T>,
+    t: f64,
+    momentum: bool,
+}
+
+impl<T: Real> Iteration<T> for FistaIteration<T> {
+    const NAME: &'static str = "fista";
+    type Params = FistaParams;
+
+    fn stopping(params: &FistaParams) -> Stopping {
+        params.stopping
+    }
+
+    fn start<A: LinearOperator<T> + ?Sized>(
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        params: &FistaParams,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        params.validate()?;
+        let (m, n) = (op.nrows(), op.ncols());
+        check_problem(Self::NAME, m, n, y, x)?;
+        let ynorm = norm2(y);
+        if ynorm == 0.0 {
+            x.fill(T::zero());
+            return Ok(ControlFlow::Break(Termination::ZeroResidual));
+        }
+        if params.nonnegative {
+            x.iter_mut()
+                .for_each(|v| *v = if *v > T::zero() { *v } else { T::zero() });
+        }
+        let mut scratch = vec![T::zero(); op.scratch_len()];
+        let lambda = match params.lambda {
+            Lambda::Absolute(v) => v,
+            Lambda::Fraction(f) => {
+                let mut aty = vec![T::zero(); n];
+                op.apply_adjoint_with_scratch(y, &mut aty, &mut scratch);
+                let top = norm_inf(&aty);
+                if !top.is_finite() {
+                    return Err(Error::NonFinite {
+                        what: format!("{}: ‖Aᵀy‖∞ = {top}", Self::NAME),
+                    });
+                }
+                f * top
+            }
+        };
+        let (l, eta) = match params.step {
+            StepRule::PowerIteration { settings, margin } => {
+                let l = lipschitz_estimate(op, &settings, margin)?;
+                if l == 0.0 {
+                    if lambda > 0.0 {
+                        x.fill(T::zero());
+                    }
+                    return Ok(ControlFlow::Break(Termination::Converged));
+                }
+                (l, None)
+            }
+            StepRule::Backtracking { eta } => (0.0, Some(eta)),
+        };
+        let mut lasso = Lasso {
+            lambda,
+            nonnegative: params.nonnegative,
+            eta,
+            l,
+            scratch,
+            res: vec![T::zero(); m],
+            grad: vec![T::zero(); n],
+        };
+        let mut ax = vec![T::zero(); m];
+        op.apply_with_scratch(x, &mut ax, &mut lasso.scratch);
+        let f_x = lasso.objective(y, x, &ax);
+        Ok(ControlFlow::Continue(FistaIteration {
+            lasso,
+            restart: params.restart,
+            ynorm,
+            f_x,
+            x_prev: x.to_vec(),
+            ax_prev: ax.clone(),
+            z: x.to_vec(),
+            az: ax.clone(),
+            ax,
+            p: vec![T::zero(); n],
+            ap: vec![T::zero(); m],
+            t: 1.0,
+            momentum: false,
+        }))
+    }
+
+    fn step<A: LinearOperator<T> + ?Sized>(
+        &mut self,
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        it: usize,
+    ) -> Result<Progress> {
+        let lasso = &mut self.lasso;
+        lasso.step(op, y, &self.z, &self.az, &mut self.p, &mut self.ap)?;
+        let mut f_p = lasso.objective(y, &self.p, &self.ap);
+        let mut restarted = false;
+        match self.restart {
+            Restart::Function if self.momentum && f_p > self.f_x => {
+                lasso.step(op, y, x, &self.ax, &mut self.p, &mut self.ap)?;
+                f_p = lasso.objective(y, &self.p, &self.ap);
+                restarted = true;
+            }
+            Restart::Gradient => {
+                let along: f64 = self
+                    .z
+                    .iter()
+                    .zip(self.p.iter())
+                    .zip(x.iter())
+                    .map(|((&zi, &pi), &xi)| {
+                        (zi.as_f64() - pi.as_f64()) * (pi.as_f64() - xi.as_f64())
+                    })
+                    .sum();
+                restarted = along > 0.0;
+            }
+            _ => {}
+        }
+        if !f_p.is_finite() {
+            return Err(Error::Breakdown {
+                solver: Self::NAME,
+                reason: format!("non-finite objective at iteration {it}"),
+            });
+        }
+        let change = relative_change(&self.p, x);
+        self.x_prev.copy_from_slice(x);
+        x.copy_from_slice(&self.p);
+        std::mem::swap(&mut self.ax_prev, &mut self.ax);
+        std::mem::swap(&mut self.ax, &mut self.ap);
+        self.f_x = f_p;
+        if restarted {
+            self.t = 1.0;
+        }
+        let t_next = 0.5 * (1.0 + (1.0 + 4.0 * self.t * self.t).sqrt());
+        let beta = (self.t - 1.0) / t_next;
+        self.t = t_next;
+        self.momentum = beta > 0.0;
+        extrapolate(&mut self.z, x, &self.x_prev, beta);
+        extrapolate(&mut self.az, &self.ax, &self.ax_prev, beta);
+        let residual = self
+            .ax
+            .iter()
+            .zip(y)
+            .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            / self.ynorm;
+        Ok(Progress {
+            residual,
+            objective: self.f_x,
+            change,
+            converged: false,
+        })
+    }
+
+    fn objective(&self) -> f64 {
+        self.f_x
     }
 }
 
@@ -298,127 +497,5 @@ where
     A: LinearOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    const NAME: &str = "fista";
-    params.validate()?;
-    let (m, n) = (op.nrows(), op.ncols());
-    check_problem(NAME, m, n, y, x)?;
-    let op = Counted::new(op);
-    let mut monitor = Monitor::new(NAME, params.stopping, observer);
-    let ynorm = norm2(y);
-    if ynorm == 0.0 {
-        x.fill(T::zero());
-        return Ok(monitor.finish(0, Termination::ZeroResidual, &op));
-    }
-    if params.nonnegative {
-        x.iter_mut()
-            .for_each(|v| *v = if *v > T::zero() { *v } else { T::zero() });
-    }
-    let mut scratch = vec![T::zero(); op.scratch_len()];
-    let lambda = match params.lambda {
-        Lambda::Absolute(v) => v,
-        Lambda::Fraction(f) => {
-            let mut aty = vec![T::zero(); n];
-            op.apply_adjoint_with_scratch(y, &mut aty, &mut scratch);
-            let top = norm_inf(&aty);
-            if !top.is_finite() {
-                return Err(Error::NonFinite {
-                    what: format!("{NAME}: ‖Aᵀy‖∞ = {top}"),
-                });
-            }
-            f * top
-        }
-    };
-    let (l, eta) = match params.step {
-        StepRule::PowerIteration { settings, margin } => {
-            let l = lipschitz_estimate(&op, &settings, margin)?;
-            if l == 0.0 {
-                if lambda > 0.0 {
-                    x.fill(T::zero());
-                }
-                return Ok(monitor.finish(0, Termination::Converged, &op));
-            }
-            (l, None)
-        }
-        StepRule::Backtracking { eta } => (0.0, Some(eta)),
-    };
-    let mut lasso = Lasso {
-        op: &op,
-        y,
-        lambda,
-        nonnegative: params.nonnegative,
-        eta,
-        l,
-        scratch,
-        res: vec![T::zero(); m],
-        grad: vec![T::zero(); n],
-    };
-
-    let mut ax = vec![T::zero(); m];
-    op.apply_with_scratch(x, &mut ax, &mut lasso.scratch);
-    let mut f_x = lasso.objective(x, &ax);
-    let mut x_prev = x.to_vec();
-    let mut ax_prev = ax.clone();
-    let mut z = x.to_vec();
-    let mut az = ax.clone();
-    let mut p = vec![T::zero(); n];
-    let mut ap = vec![T::zero(); m];
-    let mut t = 1.0f64;
-    let mut momentum = false;
-    let mut it = 0;
-    loop {
-        it += 1;
-        lasso.step(&z, &az, &mut p, &mut ap)?;
-        let mut f_p = lasso.objective(&p, &ap);
-        let mut restarted = false;
-        match params.restart {
-            Restart::Function if momentum && f_p > f_x => {
-                lasso.step(x, &ax, &mut p, &mut ap)?;
-                f_p = lasso.objective(&p, &ap);
-                restarted = true;
-            }
-            Restart::Gradient => {
-                let along: f64 = z
-                    .iter()
-                    .zip(p.iter())
-                    .zip(x.iter())
-                    .map(|((&zi, &pi), &xi)| {
-                        (zi.as_f64() - pi.as_f64()) * (pi.as_f64() - xi.as_f64())
-                    })
-                    .sum();
-                restarted = along > 0.0;
-            }
-            _ => {}
-        }
-        if !f_p.is_finite() {
-            return Err(Error::Breakdown {
-                solver: NAME,
-                reason: format!("non-finite objective at iteration {it}"),
-            });
-        }
-        let change = relative_change(&p, x);
-        x_prev.copy_from_slice(x);
-        x.copy_from_slice(&p);
-        std::mem::swap(&mut ax_prev, &mut ax);
-        std::mem::swap(&mut ax, &mut ap);
-        f_x = f_p;
-        if restarted {
-            t = 1.0;
-        }
-        let t_next = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
-        let beta = (t - 1.0) / t_next;
-        t = t_next;
-        momentum = beta > 0.0;
-        extrapolate(&mut z, x, &x_prev, beta);
-        extrapolate(&mut az, &ax, &ax_prev, beta);
-        let residual = ax
-            .iter()
-            .zip(y)
-            .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-            .sum::<f64>()
-            .sqrt()
-            / ynorm;
-        if let Some(t) = monitor.step(it, residual, f_x, change, x) {
-            return Ok(monitor.finish(it, t, &op));
-        }
-    }
+    solve::<T, A, O, FistaIteration<T>>(op, y, x, params, observer)
 }

@@ -1,14 +1,19 @@
 //! Iterative hard thresholding with the normalized step, for sparsity-constrained least squares.
 
+use std::ops::ControlFlow;
+
+use serde::{Deserialize, Serialize};
+
 use crate::error::{Error, Result};
 use crate::linalg::{dot, norm2};
-use crate::operator::{Counted, LinearOperator, PowerIteration};
+use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 
+use super::iteration::{fit_scratch, solve, Iteration, Progress};
 use super::{
     check_problem, check_sparsity, check_tolerance, hard_threshold, largest_indices,
-    lipschitz_estimate, relative_change, support, validate_power_step, Monitor, Observer, Report,
-    Stopping, Termination,
+    lipschitz_estimate, relative_change, support, validate_power_step, Observer, Report, Stopping,
+    Termination,
 };
 
 /// The constant c of the normalized step's acceptance test (ω = (1 − c)‖Δx‖² / ‖AΔx‖²).
@@ -67,19 +72,25 @@ impl IhtParams {
         }
     }
 
-    fn validate(&self, n: usize) -> Result<()> {
+    /// Checks everything but the upper bound of the sparsity, which needs the operator.
+    pub(super) fn validate_settings(&self) -> Result<()> {
         self.stopping.validate()?;
         check_tolerance("fixed_point_tol", self.fixed_point_tol)?;
         if let IhtStep::PowerIteration { settings, margin } = self.step {
             validate_power_step(&settings, margin)?;
         }
+        Ok(())
+    }
+
+    fn validate(&self, n: usize) -> Result<()> {
+        self.validate_settings()?;
         check_sparsity(self.sparsity, n)
     }
 }
 
 /// μ = ‖g_Γ‖² / ‖A g_Γ‖²; the whole gradient is used when g_Γ or A g_Γ vanishes.
 fn normalized_step<T: Real, A: LinearOperator<T> + ?Sized>(
-    op: &Counted<&A>,
+    op: &A,
     g: &[T],
     gamma: &[usize],
     gs: &mut [T],
@@ -107,6 +118,192 @@ fn normalized_step<T: Real, A: LinearOperator<T> + ?Sized>(
             solver: "iht",
             reason: format!("step length {mu} along the gradient"),
         })
+    }
+}
+
+/// The state of [`iht`] between iterations: the forward product and residual of x, its support,
+/// the gradient, and the buffers of the step.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(super) struct IhtIteration<T> {
+    sparsity: usize,
+    /// μ = 1/L of [`IhtStep::PowerIteration`]; `None` for the normalized step.
+    fixed_mu: Option<f64>,
+    fixed_point_tol: f64,
+    /// ‖y‖.
+    ynorm: f64,
+    ax: Vec<T>,
+    /// y − Ax.
+    r: Vec<T>,
+    /// Aᵀr, computed by `prepare`.
+    g: Vec<T>,
+    gs: Vec<T>,
+    ag: Vec<T>,
+    xn: Vec<T>,
+    axn: Vec<T>,
+    supp: Vec<usize>,
+    #[serde(skip, default = "Vec::new")]
+    scratch: Vec<T>,
+}
+
+impl<T: Real> Iteration<T> for IhtIteration<T> {
+    const NAME: &'static str = "iht";
+    type Params = IhtParams;
+
+    fn stopping(params: &IhtParams) -> Stopping {
+        params.stopping
+    }
+
+    fn start<A: LinearOperator<T> + ?Sized>(
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        params: &IhtParams,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        let (m, n) = (op.nrows(), op.ncols());
+        params.validate(n)?;
+        check_problem(Self::NAME, m, n, y, x)?;
+        let s = params.sparsity;
+        let ynorm = norm2(y);
+        if ynorm == 0.0 {
+            x.fill(T::zero());
+            return Ok(ControlFlow::Break(Termination::ZeroResidual));
+        }
+        hard_threshold(x, s);
+        let fixed_mu = match params.step {
+            IhtStep::Normalized => None,
+            IhtStep::PowerIteration { settings, margin } => {
+                let l = lipschitz_estimate(op, &settings, margin)?;
+                if l == 0.0 {
+                    return Ok(ControlFlow::Break(Termination::Converged));
+                }
+                Some(1.0 / l)
+            }
+        };
+        let mut scratch = vec![T::zero(); op.scratch_len()];
+        let mut ax = vec![T::zero(); m];
+        op.apply_with_scratch(x, &mut ax, &mut scratch);
+        let r: Vec<T> = y.iter().zip(&ax).map(|(&a, &b)| a - b).collect();
+        Ok(ControlFlow::Continue(IhtIteration {
+            sparsity: s,
+            fixed_mu,
+            fixed_point_tol: params.fixed_point_tol,
+            ynorm,
+            ax,
+            r,
+            g: vec![T::zero(); n],
+            gs: vec![T::zero(); n],
+            ag: vec![T::zero(); m],
+            xn: vec![T::zero(); n],
+            axn: vec![T::zero(); m],
+            supp: support(x),
+            scratch,
+        }))
+    }
+
+    /// The gradient g = Aᵀ(y − Ax); x solves the problem when it is exactly zero.
+    fn prepare<A: LinearOperator<T> + ?Sized>(&mut self, op: &A) -> bool {
+        fit_scratch(&mut self.scratch, op);
+        op.apply_adjoint_with_scratch(&self.r, &mut self.g, &mut self.scratch);
+        self.g.iter().all(|&v| v == T::zero())
+    }
+
+    fn step<A: LinearOperator<T> + ?Sized>(
+        &mut self,
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        it: usize,
+    ) -> Result<Progress> {
+        fit_scratch(&mut self.scratch, op);
+        let s = self.sparsity;
+        // Γ: the current support, or the s largest gradient entries when x = 0.
+        let (mut mu, gamma) = match self.fixed_mu {
+            Some(mu) => (mu, None),
+            None => {
+                let gamma = if self.supp.is_empty() {
+                    largest_indices(&self.g, s)
+                } else {
+                    self.supp.clone()
+                };
+                let mu = normalized_step(
+                    op,
+                    &self.g,
+                    &gamma,
+                    &mut self.gs,
+                    &mut self.ag,
+                    &mut self.scratch,
+                )?;
+                (mu, Some(gamma))
+            }
+        };
+        let mut shrinks = 0;
+        let new_supp = loop {
+            for ((v, &xi), &gi) in self.xn.iter_mut().zip(x.iter()).zip(&self.g) {
+                *v = T::of_f64(xi.as_f64() + mu * gi.as_f64());
+            }
+            hard_threshold(&mut self.xn, s);
+            op.apply_with_scratch(&self.xn, &mut self.axn, &mut self.scratch);
+            let new_supp = support(&self.xn);
+            let Some(gamma) = &gamma else {
+                break new_supp;
+            };
+            if new_supp == *gamma {
+                break new_supp;
+            }
+            let dx: f64 = self
+                .xn
+                .iter()
+                .zip(x.iter())
+                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
+                .sum();
+            let adx: f64 = self
+                .axn
+                .iter()
+                .zip(&self.ax)
+                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
+                .sum();
+            let omega = if adx > 0.0 {
+                (1.0 - C) * dx / adx
+            } else {
+                f64::INFINITY
+            };
+            if mu <= omega {
+                break new_supp;
+            }
+            mu /= KAPPA * (1.0 - C);
+            shrinks += 1;
+            if shrinks >= MAX_SHRINKS || mu == 0.0 {
+                return Err(Error::Breakdown {
+                    solver: Self::NAME,
+                    reason: format!("no admissible step after {shrinks} reductions (μ = {mu})"),
+                });
+            }
+        };
+        let change = relative_change(&self.xn, x);
+        let same_support = new_supp == self.supp;
+        x.copy_from_slice(&self.xn);
+        std::mem::swap(&mut self.ax, &mut self.axn);
+        self.supp = new_supp;
+        for ((ri, &yi), &ai) in self.r.iter_mut().zip(y).zip(&self.ax) {
+            *ri = yi - ai;
+        }
+        let rr = dot(&self.r, &self.r);
+        if !rr.is_finite() {
+            return Err(Error::Breakdown {
+                solver: Self::NAME,
+                reason: format!("non-finite residual at iteration {it}"),
+            });
+        }
+        Ok(Progress {
+            residual: rr.sqrt() / self.ynorm,
+            objective: 0.5 * rr,
+            change,
+            converged: same_support && change <= self.fixed_point_tol,
+        })
+    }
+
+    fn objective(&self) -> f64 {
+        0.5 * dot(&self.r, &self.r)
     }
 }
 
@@ -152,122 +349,5 @@ where
     A: LinearOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    const NAME: &str = "iht";
-    let (m, n) = (op.nrows(), op.ncols());
-    params.validate(n)?;
-    check_problem(NAME, m, n, y, x)?;
-    let s = params.sparsity;
-    let op = Counted::new(op);
-    let mut monitor = Monitor::new(NAME, params.stopping, observer);
-    let ynorm = norm2(y);
-    if ynorm == 0.0 {
-        x.fill(T::zero());
-        return Ok(monitor.finish(0, Termination::ZeroResidual, &op));
-    }
-    hard_threshold(x, s);
-    let fixed_mu = match params.step {
-        IhtStep::Normalized => None,
-        IhtStep::PowerIteration { settings, margin } => {
-            let l = lipschitz_estimate(&op, &settings, margin)?;
-            if l == 0.0 {
-                return Ok(monitor.finish(0, Termination::Converged, &op));
-            }
-            Some(1.0 / l)
-        }
-    };
-    let mut scratch = vec![T::zero(); op.scratch_len()];
-    let mut ax = vec![T::zero(); m];
-    op.apply_with_scratch(x, &mut ax, &mut scratch);
-    let mut r: Vec<T> = y.iter().zip(&ax).map(|(&a, &b)| a - b).collect();
-    let mut g = vec![T::zero(); n];
-    let mut gs = vec![T::zero(); n];
-    let mut ag = vec![T::zero(); m];
-    let mut xn = vec![T::zero(); n];
-    let mut axn = vec![T::zero(); m];
-    let mut supp = support(x);
-    let mut it = 0;
-    loop {
-        op.apply_adjoint_with_scratch(&r, &mut g, &mut scratch);
-        if g.iter().all(|&v| v == T::zero()) {
-            return Ok(monitor.finish(it, Termination::Converged, &op));
-        }
-        it += 1;
-        // Γ: the current support, or the s largest gradient entries when x = 0.
-        let (mut mu, gamma) = match fixed_mu {
-            Some(mu) => (mu, None),
-            None => {
-                let gamma = if supp.is_empty() {
-                    largest_indices(&g, s)
-                } else {
-                    supp.clone()
-                };
-                let mu = normalized_step(&op, &g, &gamma, &mut gs, &mut ag, &mut scratch)?;
-                (mu, Some(gamma))
-            }
-        };
-        let mut shrinks = 0;
-        let new_supp = loop {
-            for ((v, &xi), &gi) in xn.iter_mut().zip(x.iter()).zip(&g) {
-                *v = T::of_f64(xi.as_f64() + mu * gi.as_f64());
-            }
-            hard_threshold(&mut xn, s);
-            op.apply_with_scratch(&xn, &mut axn, &mut scratch);
-            let new_supp = support(&xn);
-            let Some(gamma) = &gamma else {
-                break new_supp;
-            };
-            if new_supp == *gamma {
-                break new_supp;
-            }
-            let dx: f64 = xn
-                .iter()
-                .zip(x.iter())
-                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-                .sum();
-            let adx: f64 = axn
-                .iter()
-                .zip(&ax)
-                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-                .sum();
-            let omega = if adx > 0.0 {
-                (1.0 - C) * dx / adx
-            } else {
-                f64::INFINITY
-            };
-            if mu <= omega {
-                break new_supp;
-            }
-            mu /= KAPPA * (1.0 - C);
-            shrinks += 1;
-            if shrinks >= MAX_SHRINKS || mu == 0.0 {
-                return Err(Error::Breakdown {
-                    solver: NAME,
-                    reason: format!("no admissible step after {shrinks} reductions (μ = {mu})"),
-                });
-            }
-        };
-        let change = relative_change(&xn, x);
-        let same_support = new_supp == supp;
-        x.copy_from_slice(&xn);
-        std::mem::swap(&mut ax, &mut axn);
-        supp = new_supp;
-        for ((ri, &yi), &ai) in r.iter_mut().zip(y).zip(&ax) {
-            *ri = yi - ai;
-        }
-        let rr = dot(&r, &r);
-        if !rr.is_finite() {
-            return Err(Error::Breakdown {
-                solver: NAME,
-                reason: format!("non-finite residual at iteration {it}"),
-            });
-        }
-        let converged = same_support && change <= params.fixed_point_tol;
-        match monitor.step(it, rr.sqrt() / ynorm, 0.5 * rr, change, x) {
-            Some(Termination::MaxIterations) | None if converged => {
-                return Ok(monitor.finish(it, Termination::Converged, &op));
-            }
-            Some(t) => return Ok(monitor.finish(it, t, &op)),
-            None => {}
-        }
-    }
+    solve::<T, A, O, IhtIteration<T>>(op, y, x, params, observer)
 }

@@ -14,20 +14,25 @@
 //! mismatched shapes, non-finite data and numerical breakdowns are [`Error`]s.
 
 mod argmin_cgls;
+mod argmin_sparse;
 mod backprojection;
 mod cgls;
 mod cosamp;
 mod fista;
 mod iht;
+mod iteration;
+mod progress;
 
 use std::time::{Duration, Instant};
 
 pub use argmin_cgls::{ArgminCgls, CglsState, LinearLeastSquares};
+pub use argmin_sparse::{ArgminCosamp, ArgminFista, ArgminIht, SparseState};
 pub use backprojection::{backprojection, Backprojection, BackprojectionResult, Threshold};
 pub use cgls::{cgls, CglsParams};
 pub use cosamp::{cosamp, CosampParams};
 pub use fista::{fista, FistaParams, Lambda, Restart, StepRule};
 pub use iht::{iht, IhtParams, IhtStep};
+pub use progress::ProgressObserver;
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
