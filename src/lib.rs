@@ -45,6 +45,7 @@ pub mod lapack;
 pub mod lidar;
 pub mod linalg;
 pub mod operator;
+pub mod plot;
 pub mod real;
 pub mod solver;
 

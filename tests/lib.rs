@@ -15,6 +15,7 @@ mod metrics;
 mod noise;
 mod norm;
 mod operators;
+mod plot;
 mod rdop;
 mod scenes;
 mod solvers;
