@@ -12,6 +12,7 @@ mod errors;
 #[cfg(feature = "lapack")]
 mod lapack;
 mod metrics;
+mod model_based;
 mod noise;
 mod norm;
 mod operators;

@@ -260,6 +260,49 @@ fn sparse_entry<T: Real>(
     }
 }
 
+/// z[k] = s[k]·y[k] for the pixel at bit `bit` of the code bytes: its codes applied to the
+/// measurements, decoded branch-free so that the loop vectorizes.
+#[inline(always)]
+fn signed_copy<T: Real>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) {
+    match minus {
+        None => {
+            for ((o, &c), &v) in z.iter_mut().zip(plus).zip(y) {
+                *o = if (c >> bit) & 1 == 1 { v } else { -v };
+            }
+        }
+        Some(minus) => {
+            for (((o, &cp), &cm), &v) in z.iter_mut().zip(plus).zip(minus).zip(y) {
+                let a = if (cp >> bit) & 1 == 1 { v } else { T::zero() };
+                let b = if (cm >> bit) & 1 == 1 { v } else { T::zero() };
+                *o = a - b;
+            }
+        }
+    }
+}
+
+/// *out = Σ a[i]·b[i]: eight lanes summed in `T` over blocks of 256 products, the block sums
+/// added in `f64`.
+#[inline(always)]
+fn lane_dot<T: Real>(a: &[T], b: &[T], out: &mut f64) {
+    let mut acc = 0.0f64;
+    for (ab, bb) in a.chunks(256).zip(b.chunks(256)) {
+        let mut lanes = [T::zero(); 8];
+        let (ac, bc) = (ab.chunks_exact(8), bb.chunks_exact(8));
+        let (ar, br) = (ac.remainder(), bc.remainder());
+        for (x, y) in ac.zip(bc) {
+            for l in 0..8 {
+                lanes[l] = lanes[l] + x[l] * y[l];
+            }
+        }
+        let mut tail = 0.0f64;
+        for (x, y) in ar.iter().zip(br) {
+            tail += x.as_f64() * y.as_f64();
+        }
+        acc += lanes.iter().map(|v| v.as_f64()).sum::<f64>() + tail;
+    }
+    *out = acc;
+}
+
 /// dst += src (widened to f64), then src = 0: moves the working-precision buckets to f64.
 #[inline(always)]
 fn flush<T: Real>(src: &mut [Lane<T>], dst: &mut [Lane<f64>]) {
@@ -302,6 +345,8 @@ multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &
 multiversion!(fn adj_block_isa<T, const NCH: usize>(a: &AdjBlock<'_, T>, k0: usize, k1: usize, buckets: &mut [Lane<T>]) => adj_block);
 multiversion!(pub(crate) fn flush_isa<T>(src: &mut [Lane<T>], dst: &mut [Lane<f64>]) => flush);
 multiversion!(pub(crate) fn sparse_entry_isa<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
+multiversion!(pub(crate) fn signed_copy_isa<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
+multiversion!(pub(crate) fn lane_dot_isa<T>(a: &[T], b: &[T], out: &mut f64) => lane_dot);
 
 /// Runs the forward block kernel for a slab of `8·nch` bins.
 pub(crate) fn forward_block<T: Real>(

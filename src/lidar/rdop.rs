@@ -250,6 +250,11 @@ impl<T: Real> RdOperator<T> {
         &self.codes
     }
 
+    /// The kernels' instruction set, for kernels run outside the operator.
+    pub(crate) fn isa_kind(&self) -> Isa {
+        self.isa
+    }
+
     /// The instruction set the kernels run with (`"avx512"`, `"avx2+fma"` or `"generic"`).
     pub fn isa(&self) -> &'static str {
         self.isa.name()

@@ -6,7 +6,9 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::operator::LinearOperator;
 use crate::real::Real;
+use crate::solver::VoxelOperator;
 
+use super::kernels::{lane_dot_isa, signed_copy_isa};
 use super::rdop::RdOperator;
 
 /// `A·Rᵀ` for a set S of voxels: the input holds one amplitude per voxel of S (in the order
@@ -18,6 +20,8 @@ use super::rdop::RdOperator;
 pub struct SupportOperator<'a, T: Real> {
     op: &'a RdOperator<T>,
     voxels: Vec<usize>,
+    /// Positions in `voxels` grouped by pixel: (pixel, positions).
+    by_pixel: Vec<(usize, Vec<usize>)>,
 }
 
 impl<'a, T: Real> SupportOperator<'a, T> {
@@ -34,7 +38,22 @@ impl<'a, T: Real> SupportOperator<'a, T> {
                 len: n,
             });
         }
-        Ok(SupportOperator { op, voxels })
+        let ks = op.geometry().ks;
+        let mut order: Vec<usize> = (0..voxels.len()).collect();
+        order.sort_by_key(|&i| voxels[i]);
+        let mut by_pixel: Vec<(usize, Vec<usize>)> = Vec::new();
+        for i in order {
+            let p = voxels[i] / ks;
+            match by_pixel.last_mut() {
+                Some((q, members)) if *q == p => members.push(i),
+                _ => by_pixel.push((p, vec![i])),
+            }
+        }
+        Ok(SupportOperator {
+            op,
+            voxels,
+            by_pixel,
+        })
     }
 
     /// The voxels of the support.
@@ -69,37 +88,55 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
         let pulse = self.op.pulse();
         let kp = pulse.len();
         let codes = self.op.codes();
-        x.par_iter_mut()
-            .zip(self.voxels.par_iter())
-            .for_each(|(xv, &v)| {
-                let (p, j) = (v / ks, v % ks);
-                let bit = (p % 8) as u32;
-                let plus = &codes.plus_group(p / 8)[j..j + kp];
-                let minus = codes.minus_group(p / 8).map(|m| &m[j..j + kp]);
-                let ys = &y[j..j + kp];
-                let mut acc = 0.0f64;
-                // Blocks of 256 samples summed in the working precision, then in f64.
-                for start in (0..kp).step_by(256) {
-                    let end = (start + 256).min(kp);
-                    let mut s = T::zero();
-                    for t in start..end {
-                        let c = ((plus[t] >> bit) & 1) as i32
-                            - minus.map_or(1 - ((plus[t] >> bit) & 1) as i32, |m| {
-                                ((m[t] >> bit) & 1) as i32
-                            });
-                        let w = ys[t] * pulse[t];
-                        s = s + if c > 0 {
-                            w
-                        } else if c < 0 {
-                            -w
-                        } else {
-                            T::zero()
-                        };
+        let isa = self.op.isa_kind();
+        // Per pixel: its codes applied to y once (z = s ⊙ y), then one windowed dot product with
+        // the pulse per voxel of that pixel.
+        let out: Vec<(usize, T)> = self
+            .by_pixel
+            .par_chunks(
+                self.by_pixel
+                    .len()
+                    .div_ceil(4 * rayon::current_num_threads())
+                    .max(1),
+            )
+            .flat_map_iter(|runs| {
+                let mut z = vec![T::zero(); y.len()];
+                let mut res = Vec::new();
+                for run in runs {
+                    let (p, ref members) = *run;
+                    let (g, bit) = (p / 8, (p % 8) as u32);
+                    let lo = members
+                        .iter()
+                        .map(|&i| self.voxels[i] % ks)
+                        .min()
+                        .unwrap_or(0);
+                    let hi = members
+                        .iter()
+                        .map(|&i| self.voxels[i] % ks)
+                        .max()
+                        .unwrap_or(0)
+                        + kp;
+                    signed_copy_isa(
+                        isa,
+                        bit,
+                        &codes.plus_group(g)[lo..hi],
+                        codes.minus_group(g).map(|m| &m[lo..hi]),
+                        &y[lo..hi],
+                        &mut z[lo..hi],
+                    );
+                    for &i in members {
+                        let j = self.voxels[i] % ks;
+                        let mut acc = 0.0;
+                        lane_dot_isa(isa, &z[j..j + kp], pulse, &mut acc);
+                        res.push((i, T::of_f64(acc)));
                     }
-                    acc += s.as_f64();
                 }
-                *xv = T::of_f64(acc);
-            });
+                res
+            })
+            .collect();
+        for (i, v) in out {
+            x[i] = v;
+        }
     }
 
     fn describe(&self) -> String {
@@ -108,5 +145,88 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
             self.voxels.len(),
             self.op.describe()
         )
+    }
+}
+
+impl<T: Real> VoxelOperator<T> for RdOperator<T> {
+    fn column_len(&self) -> usize {
+        self.geometry().ks
+    }
+
+    fn restrict(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        Ok(Box::new(SupportOperator::new(self, columns)?))
+    }
+
+    /// The debiased correlation: the adjoint with the zero-mean pulse (DESIGN.md §4).
+    fn correlate(&self, r: &[T], u: &mut [T]) {
+        self.apply_adjoint_debiased(r, u)
+    }
+
+    /// From the pulse autocorrelation for ±1 codes (s² = 1, the same for every pixel); with
+    /// ternary codes from the pixel's nonzero codes.
+    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
+        let ks = self.geometry().ks;
+        let pulse = self.pulse();
+        let kp = pulse.len();
+        let mean = pulse.iter().map(|v| v.as_f64()).sum::<f64>() / kp as f64;
+        let p64: Vec<f64> = pulse.iter().map(|v| v.as_f64()).collect();
+        // c(lag) = Σ_t (p[t + lag] − mean)·p[t] over the overlap, lag = d − j.
+        let lag_corr = |lag: isize, weight: &dyn Fn(usize) -> f64| -> f64 {
+            let lo = 0.max(-lag) as usize;
+            let hi = (kp as isize).min(kp as isize - lag).max(0) as usize;
+            (lo..hi)
+                .map(|t| (p64[(t as isize + lag) as usize] - mean) * p64[t] * weight(t))
+                .sum()
+        };
+        let codes = self.codes();
+        match codes.minus_plane() {
+            None => {
+                let table: Vec<f64> = (0..2 * ks - 1)
+                    .map(|i| lag_corr(i as isize - (ks as isize - 1), &|_| 1.0))
+                    .collect();
+                voxels
+                    .iter()
+                    .flat_map(|&v| {
+                        let d = v % ks;
+                        let table = &table;
+                        (0..ks).map(move |j| table[d + ks - 1 - j])
+                    })
+                    .collect()
+            }
+            Some(_) => voxels
+                .par_iter()
+                .flat_map_iter(|&v| {
+                    let (p, d) = (v / ks, v % ks);
+                    let nonzero = |t: usize| f64::from(u8::from(codes.get(p, d + t) != 0));
+                    (0..ks)
+                        .map(|j| lag_corr(d as isize - j as isize, &nonzero))
+                        .collect::<Vec<_>>()
+                })
+                .collect(),
+        }
+    }
+
+    /// ‖p‖ for ±1 codes; with ternary codes the pulse energy over the nonzero codes of the window.
+    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
+        let ks = self.geometry().ks;
+        let pulse = self.pulse();
+        let codes = self.codes();
+        match codes.minus_plane() {
+            None => {
+                let e = pulse.iter().map(|v| v.as_f64().powi(2)).sum::<f64>().sqrt();
+                vec![e; columns.len()]
+            }
+            Some(_) => columns
+                .par_iter()
+                .map(|&c| {
+                    let (p, j) = (c / ks, c % ks);
+                    (0..pulse.len())
+                        .filter(|&t| codes.get(p, j + t) != 0)
+                        .map(|t| pulse[t].as_f64().powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .collect(),
+        }
     }
 }

@@ -21,6 +21,7 @@ mod cosamp;
 mod fista;
 mod iht;
 mod iteration;
+mod model_based;
 mod progress;
 
 use std::time::{Duration, Instant};
@@ -32,6 +33,7 @@ pub use cgls::{cgls, CglsParams};
 pub use cosamp::{cosamp, CosampParams};
 pub use fista::{fista, FistaParams, Lambda, Restart, StepRule};
 pub use iht::{iht, IhtParams, IhtStep};
+pub use model_based::{model_based, ModelBasedParams, PixelColumns, VoxelOperator};
 pub use progress::ProgressObserver;
 
 use crate::error::{Error, Result};

@@ -1,0 +1,512 @@
+//! Model-based recovery with at most one reflector per pixel (model-based CoSaMP with an
+//! adaptive support size).
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::linalg::dot;
+use crate::operator::{Counted, LinearOperator, OperatorExt, Restriction};
+use crate::real::Real;
+
+use super::{cgls, check_problem, check_tolerance, CglsParams, Monitor, Observer, Report};
+use super::{Stopping, Termination};
+
+/// An operator whose columns come in pixels of `column_len` consecutive voxels, as the
+/// model-based solvers need it: restricted to a set of columns, correlated with a residual, and
+/// with known column norms.
+///
+/// Any operator can be used through [`PixelColumns`]; the lidar operator implements it with a
+/// support operator whose cost is proportional to the support and with the debiased correlation.
+pub trait VoxelOperator<T: Real>: LinearOperator<T> {
+    /// Number of consecutive columns that make one pixel (K_s).
+    fn column_len(&self) -> usize;
+
+    /// The operator restricted to `columns` (A·Rᵀ, columns in the given order).
+    ///
+    /// # Errors
+    /// [`Error::IndexOutOfBounds`] for a column not below `ncols()`.
+    fn restrict(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>>;
+
+    /// The correlation that proposes candidate depths: u = Aᵀr by default. An operator may use a
+    /// better matched filter (the lidar operator correlates with the zero-mean pulse).
+    fn correlate(&self, r: &[T], u: &mut [T]) {
+        self.apply_adjoint(r, u)
+    }
+
+    /// For each voxel c of `voxels`, the correlations ([`correlate`](Self::correlate)) of the
+    /// `column_len` columns of c's pixel with column c: the pixel's own contribution to its
+    /// correlations, which lets a solver judge a pixel's depth with its current reflector added
+    /// back. Returned row by row (`voxels.len() · column_len` values).
+    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
+        let ks = self.column_len();
+        let mut e = vec![T::zero(); self.ncols()];
+        let mut a = vec![T::zero(); self.nrows()];
+        let mut u = vec![T::zero(); self.ncols()];
+        let mut out = Vec::with_capacity(voxels.len() * ks);
+        for &c in voxels {
+            e[c] = T::one();
+            self.apply(&e, &mut a);
+            e[c] = T::zero();
+            self.correlate(&a, &mut u);
+            let p0 = c / ks * ks;
+            out.extend(u[p0..p0 + ks].iter().map(|v| v.as_f64()));
+        }
+        out
+    }
+
+    /// ‖A e_c‖ for each of `columns`.
+    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
+        let mut e = vec![T::zero(); self.ncols()];
+        let mut a = vec![T::zero(); self.nrows()];
+        columns
+            .iter()
+            .map(|&c| {
+                e[c] = T::one();
+                self.apply(&e, &mut a);
+                e[c] = T::zero();
+                dot(&a, &a).sqrt()
+            })
+            .collect()
+    }
+}
+
+/// Any operator seen as pixels of `column_len` columns: restriction through the operator algebra
+/// and the plain adjoint as correlation.
+#[derive(Debug, Clone, Copy)]
+pub struct PixelColumns<A> {
+    op: A,
+    column_len: usize,
+}
+
+impl<A> PixelColumns<A> {
+    /// `op`, whose columns are pixels of `column_len` voxels.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if `column_len` is 0 or does not divide the number of columns.
+    pub fn new<T: Real>(op: A, column_len: usize) -> Result<Self>
+    where
+        A: LinearOperator<T>,
+    {
+        if column_len == 0 || op.ncols() % column_len != 0 {
+            return Err(Error::param(
+                "column_len",
+                format!(
+                    "must be ≥ 1 and divide the {} columns, got {column_len}",
+                    op.ncols()
+                ),
+            ));
+        }
+        Ok(PixelColumns { op, column_len })
+    }
+}
+
+impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for PixelColumns<A> {
+    fn nrows(&self) -> usize {
+        self.op.nrows()
+    }
+    fn ncols(&self) -> usize {
+        self.op.ncols()
+    }
+    fn scratch_len(&self) -> usize {
+        self.op.scratch_len()
+    }
+    fn forward_kernel(&self, x: &[T], y: &mut [T], scratch: &mut [T]) {
+        self.op.forward_kernel(x, y, scratch)
+    }
+    fn adjoint_kernel(&self, y: &[T], x: &mut [T], scratch: &mut [T]) {
+        self.op.adjoint_kernel(y, x, scratch)
+    }
+    fn describe(&self) -> String {
+        format!("PixelColumns({}, {})", self.op.describe(), self.column_len)
+    }
+}
+
+impl<T: Real, A: LinearOperator<T>> VoxelOperator<T> for PixelColumns<A> {
+    fn column_len(&self) -> usize {
+        self.column_len
+    }
+
+    fn restrict(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        let r = Restriction::new(self.ncols(), columns)?;
+        Ok(Box::new((&self.op).compose(r.adjoint())?))
+    }
+}
+
+/// Parameters of [`model_based`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelBasedParams {
+    /// Reflectivities are nonnegative: depths are chosen by the largest signed correlation and
+    /// pixels whose least-squares amplitude is not positive are dropped (default `true`).
+    pub nonnegative: bool,
+    /// Exploration: the first iterations put every pixel with a positive best correlation in
+    /// the support (within the budget). Least squares then gives each lit pixel at least about
+    /// half its amplitude even at a wrong depth (a pixel's columns overlap by half for a 0/1
+    /// pulse), so that the amplitude test at the end of the exploration separates lit from empty
+    /// pixels even when cross-talk hides the depths (default 3; 0 skips the exploration).
+    pub explore_iterations: usize,
+    /// After the exploration, a pixel outside the support joins it when its best correlation is
+    /// at least this many robust standard deviations (1.4826·MAD) of all correlations: a maximum
+    /// over the pixel's depths, hence a high bar (default 4).
+    pub detection_z: f64,
+    /// A pixel stays in the support when its least-squares amplitude is at least this many
+    /// standard errors σ_r/‖a‖ (σ_r² = ‖r‖²/(K − |S|), ‖a‖ its column's norm) (default 3).
+    pub amplitude_z: f64,
+    /// The support holds at most this fraction of the number of measurements, keeping the
+    /// least-squares step overdetermined (in (0, 1], default 0.8).
+    pub max_support_fraction: f64,
+    /// The residual's standard deviation in the amplitude test is taken as at least this
+    /// fraction of the measurements' RMS, so that noise-free runs drop the round-off amplitudes
+    /// that least squares leaves on empty pixels: it bounds the dynamic range (default 1e-4).
+    pub noise_floor: f64,
+    /// The least-squares step on the support (CGLS on the restricted operator, warm-started).
+    pub inner: CglsParams,
+    /// Stopping rules; the residual is ‖Ax − y‖ / ‖y‖.
+    pub stopping: Stopping,
+}
+
+impl Default for ModelBasedParams {
+    fn default() -> Self {
+        ModelBasedParams {
+            nonnegative: true,
+            explore_iterations: 3,
+            detection_z: 4.0,
+            amplitude_z: 3.0,
+            noise_floor: 1e-4,
+            max_support_fraction: 0.8,
+            inner: CglsParams {
+                damp: 0.0,
+                stopping: Stopping {
+                    max_iter: 10,
+                    rel_residual: Some(1e-6),
+                    ..Stopping::default()
+                },
+            },
+            stopping: Stopping {
+                max_iter: 100,
+                rel_residual: Some(1e-6),
+                ..Stopping::default()
+            },
+        }
+    }
+}
+
+impl ModelBasedParams {
+    fn validate(&self) -> Result<()> {
+        self.stopping.validate()?;
+        self.inner.stopping.validate()?;
+        check_tolerance("detection_z", self.detection_z)?;
+        check_tolerance("amplitude_z", self.amplitude_z)?;
+        check_tolerance("noise_floor", self.noise_floor)?;
+        if !(self.max_support_fraction > 0.0 && self.max_support_fraction <= 1.0) {
+            return Err(Error::param(
+                "max_support_fraction",
+                format!("must be in (0, 1], got {}", self.max_support_fraction),
+            ));
+        }
+        if !(self.inner.damp.is_finite() && self.inner.damp >= 0.0) {
+            return Err(Error::param(
+                "inner.damp",
+                format!("must be finite and ≥ 0, got {}", self.inner.damp),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// 1.4826 · median |u|: a robust standard deviation of the correlations, dominated by the empty
+/// voxels.
+fn robust_sigma<T: Real>(u: &[T]) -> f64 {
+    let mut a: Vec<f64> = u.iter().map(|v| v.as_f64().abs()).collect();
+    if a.is_empty() {
+        return 0.0;
+    }
+    let mid = a.len() / 2;
+    let (_, m, _) = a.select_nth_unstable_by(mid, |x, y| x.total_cmp(y));
+    1.4826 * *m
+}
+
+/// Counts applications of restricted operators (least-squares steps).
+#[derive(Default)]
+struct Applies {
+    forward: usize,
+    adjoint: usize,
+}
+
+/// Least squares on the support `voxels`, warm-started from `b`; returns the residual y − A_S b.
+fn fit<T, A>(
+    op: &A,
+    voxels: &[usize],
+    y: &[T],
+    b: &mut [T],
+    inner: &CglsParams,
+    applies: &mut Applies,
+    it: usize,
+) -> Result<Vec<T>>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+{
+    const NAME: &str = "model-based";
+    let restricted = op.restrict(voxels.to_vec())?;
+    let mut r = vec![T::zero(); y.len()];
+    if !voxels.is_empty() {
+        let rep = cgls(&restricted, y, b, inner, &mut ()).map_err(|e| match e {
+            Error::Breakdown { reason, .. } => Error::Breakdown {
+                solver: NAME,
+                reason: format!("least squares at iteration {it}: {reason}"),
+            },
+            other => other,
+        })?;
+        applies.forward += rep.forward_applies + 1;
+        applies.adjoint += rep.adjoint_applies;
+        restricted.apply(b, &mut r);
+    }
+    for (ri, &yi) in r.iter_mut().zip(y) {
+        *ri = yi - *ri;
+    }
+    Ok(r)
+}
+
+/// y − A_S b.
+fn residual<T, A>(
+    op: &A,
+    voxels: &[usize],
+    y: &[T],
+    b: &[T],
+    applies: &mut Applies,
+) -> Result<Vec<T>>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+{
+    let mut r = vec![T::zero(); y.len()];
+    if !voxels.is_empty() {
+        op.restrict(voxels.to_vec())?.apply(b, &mut r);
+        applies.forward += 1;
+    }
+    for (ri, &yi) in r.iter_mut().zip(y) {
+        *ri = yi - *ri;
+    }
+    Ok(r)
+}
+
+/// Recovers a scene with at most one nonzero per pixel (a pixel is `column_len` consecutive
+/// unknowns: one reflector per lidar pixel, empty pixels allowed) from y ≈ Ax, starting from `x`.
+///
+/// Model-based CoSaMP (Baraniuk et al. 2010) with the one-reflector-per-pixel model and a support
+/// size found from the data. Each iteration
+///
+/// 1. correlates the residual r = y − Ax with every column ([`VoxelOperator::correlate`]: one
+///    adjoint application; the lidar operator uses the zero-mean pulse, whose per-pixel Gram
+///    block is nearly diagonal);
+/// 2. merges the candidates with the current support pixel by pixel: it adds each supported
+///    pixel's own reflector back to that pixel's correlations
+///    ([`VoxelOperator::self_correlations`]), so that every depth of the pixel, the current one
+///    and the new candidates, is judged against the same residual of the *other* pixels;
+/// 3. prunes to the model: per pixel the depth with the largest correlation, kept when it is
+///    significant (at least [`detection_z`](ModelBasedParams::detection_z) robust standard
+///    deviations of all correlations, which measure the cross-talk left and the noise), within a
+///    support budget;
+/// 4. solves least squares on the new support by [`cgls`] on the restricted operator
+///    ([`VoxelOperator::restrict`]: for the lidar operator O(support × K_p) per application,
+///    never the full cube), warm-started, and drops pixels whose amplitude is not positive
+///    (nonnegative scenes).
+///
+/// As the support fills, the residual and with it the cross-talk shrink, so weaker pixels become
+/// detectable and wrong depths are corrected: the iteration stops with
+/// [`Termination::Converged`] when an iteration leaves the support unchanged, with
+/// [`Termination::ZeroResidual`] for y = 0, otherwise by the [`Stopping`] rules (residual
+/// ‖Ax − y‖ / ‖y‖). The report's apply counts include the restricted applications.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] for invalid parameters; [`Error::ShapeMismatch`] /
+/// [`Error::NonFinite`] for inputs that do not fit the operator or are not finite;
+/// [`Error::Breakdown`] if a least-squares step breaks down.
+pub fn model_based<T, A, O>(
+    op: &A,
+    y: &[T],
+    x: &mut [T],
+    params: &ModelBasedParams,
+    observer: &mut O,
+) -> Result<Report>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+{
+    const NAME: &str = "model-based";
+    params.validate()?;
+    let (m, n) = (op.nrows(), op.ncols());
+    check_problem(NAME, m, n, y, x)?;
+    let ks = op.column_len();
+    if ks == 0 || n % ks != 0 {
+        return Err(Error::param(
+            "column_len",
+            format!("must be ≥ 1 and divide the {n} columns, got {ks}"),
+        ));
+    }
+    let counted = Counted::new(op);
+    let mut applies = Applies::default();
+    let mut monitor = Monitor::new(NAME, params.stopping, observer);
+    let ynorm = dot(y, y).sqrt();
+    if ynorm == 0.0 {
+        x.fill(T::zero());
+        return Ok(monitor.finish(0, Termination::ZeroResidual, &counted));
+    }
+    let budget = ((params.max_support_fraction * m as f64) as usize).max(1);
+    let score = |v: f64| if params.nonnegative { v } else { v.abs() };
+
+    // The warm start, pruned to the model (per pixel its largest entry) and re-fitted.
+    let mut voxels: Vec<usize> = x
+        .par_chunks(ks)
+        .enumerate()
+        .filter_map(|(p, col)| {
+            let (j, v) = col
+                .iter()
+                .enumerate()
+                .map(|(j, v)| (j, score(v.as_f64())))
+                .fold((0, 0.0), |b, c| if c.1 > b.1 { c } else { b });
+            (v > 0.0).then_some(p * ks + j)
+        })
+        .collect();
+    let mut amp: Vec<T> = voxels.iter().map(|&v| x[v]).collect();
+    let mut r = fit(op, &voxels, y, &mut amp, &params.inner, &mut applies, 0)?;
+    let mut u = vec![T::zero(); n];
+    let mut prev = x.to_vec();
+    let mut it = 0;
+    loop {
+        it += 1;
+        op.correlate(&r, &mut u);
+        applies.adjoint += 1;
+        let sigma = robust_sigma(&u);
+        let explore = it <= params.explore_iterations;
+        // Each supported pixel's own reflector, added back to its correlations.
+        let own = op.self_correlations(&voxels);
+        let mut slot = vec![usize::MAX; n / ks];
+        for (i, &v) in voxels.iter().enumerate() {
+            slot[v / ks] = i;
+        }
+        let mut picks: Vec<(usize, f64, f64)> = u
+            .par_chunks(ks)
+            .enumerate()
+            .filter_map(|(p, col)| {
+                let i = slot[p];
+                let mut best = (0, f64::NEG_INFINITY, 0.0);
+                for (j, c) in col.iter().enumerate() {
+                    let mut v = c.as_f64();
+                    if i != usize::MAX {
+                        v += amp[i].as_f64() * own[i * ks + j];
+                    }
+                    if score(v) > best.1 {
+                        best = (j, score(v), v);
+                    }
+                }
+                let join = if explore || i != usize::MAX || sigma == 0.0 {
+                    best.1 > 0.0
+                } else {
+                    best.1 >= params.detection_z * sigma
+                };
+                join.then_some((p * ks + best.0, best.1, best.2))
+            })
+            .collect();
+        if picks.len() > budget {
+            picks.sort_by(|a, b| b.1.total_cmp(&a.1));
+            picks.truncate(budget);
+            picks.sort_by_key(|p| p.0);
+        }
+        // Amplitudes to start the least squares from: kept where the depth is unchanged, the
+        // correlation over the pixel's own diagonal Gram entry elsewhere.
+        let new_voxels: Vec<usize> = picks.iter().map(|p| p.0).collect();
+        let diag = op.self_correlations(&new_voxels);
+        let mut new_amp: Vec<T> = picks
+            .iter()
+            .enumerate()
+            .map(|(i, &(v, _, c))| match voxels.binary_search(&v) {
+                Ok(k) => amp[k],
+                Err(_) => {
+                    let d = diag[i * ks + v % ks];
+                    T::of_f64(if d > 0.0 { c / d } else { 0.0 })
+                }
+            })
+            .collect();
+        let mut new_voxels = new_voxels;
+        r = fit(
+            op,
+            &new_voxels,
+            y,
+            &mut new_amp,
+            &params.inner,
+            &mut applies,
+            it,
+        )?;
+        if params.nonnegative && new_amp.iter().any(|a| *a <= T::zero()) {
+            // Drop the pixels whose amplitude came out non-positive; their depth is re-judged
+            // at the next iteration against the residual without them.
+            let keep: Vec<bool> = new_amp.iter().map(|a| *a > T::zero()).collect();
+            let mut k = keep.iter();
+            new_voxels.retain(|_| *k.next().unwrap_or(&false));
+            new_amp.retain(|a| *a > T::zero());
+            r = residual(op, &new_voxels, y, &new_amp, &mut applies)?;
+        }
+        let rel = (dot(&r, &r)).sqrt() / ynorm;
+        if it >= params.explore_iterations || params.stopping.rel_residual.is_some_and(|t| rel <= t)
+        {
+            // The amplitude test, then least squares on what remains.
+            let dof = m.saturating_sub(new_voxels.len()).max(1);
+            let sigma_r = (dot(&r, &r) / dof as f64)
+                .sqrt()
+                .max(params.noise_floor * ynorm / (m as f64).sqrt());
+            let norms = op.column_norms(&new_voxels);
+            let keep: Vec<bool> = new_amp
+                .iter()
+                .zip(&norms)
+                .map(|(a, c)| score(a.as_f64()) * c >= params.amplitude_z * sigma_r)
+                .collect();
+            if keep.iter().any(|k| !k) {
+                let mut k = keep.iter();
+                new_voxels.retain(|_| *k.next().unwrap_or(&false));
+                let mut k = keep.iter();
+                new_amp.retain(|_| *k.next().unwrap_or(&false));
+                r = fit(
+                    op,
+                    &new_voxels,
+                    y,
+                    &mut new_amp,
+                    &params.inner,
+                    &mut applies,
+                    it,
+                )?;
+            }
+        }
+
+        let same = new_voxels == voxels;
+        voxels = new_voxels;
+        amp = new_amp;
+        x.fill(T::zero());
+        for (&v, &a) in voxels.iter().zip(&amp) {
+            x[v] = a;
+        }
+        let rr = dot(&r, &r);
+        if !rr.is_finite() || amp.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Breakdown {
+                solver: NAME,
+                reason: format!("non-finite values at iteration {it}"),
+            });
+        }
+        let change = super::relative_change(x, &prev);
+        prev.copy_from_slice(x);
+        let stop = monitor.step(it, rr.sqrt() / ynorm, 0.5 * rr, change, x);
+        let term = match stop {
+            Some(Termination::MaxIterations) | None if same && !explore => {
+                Some(Termination::Converged)
+            }
+            other => other,
+        };
+        if let Some(t) = term {
+            let mut report = monitor.finish(it, t, &counted);
+            report.forward_applies += applies.forward;
+            report.adjoint_applies += applies.adjoint;
+            return Ok(report);
+        }
+    }
+}

@@ -1,0 +1,233 @@
+//! The model-based one-reflector-per-pixel solver: exact recovery, the model constraint, the
+//! operator hooks it relies on (self-correlations, column norms, restriction), degenerate inputs
+//! and typed errors.
+
+use std::sync::Arc;
+
+use ndarray::Array2;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rdlidar::lidar::{
+    compare, paper_scene, random_opaque_scene, Codes, Geometry, Pulse, RdOperator, Scene,
+};
+use rdlidar::operator::{DenseMatrix, LinearOperator, Zero};
+use rdlidar::solver::{
+    model_based, ModelBasedParams, PixelColumns, Stopping, Termination, VoxelOperator,
+};
+use rdlidar::Error;
+
+fn lidar_problem(g: Geometry, kp: usize, ternary: bool, seed: u64) -> RdOperator<f64> {
+    let pulse = Pulse::<f64>::bernoulli(kp, seed).unwrap().into_inner();
+    let k = g.samples(kp);
+    let codes = if ternary {
+        Codes::random_ternary(g.pixels(), k, 0.3, seed + 1).unwrap()
+    } else {
+        Codes::random_binary(g.pixels(), k, seed + 1).unwrap()
+    };
+    RdOperator::new(g, pulse, Arc::new(codes)).unwrap()
+}
+
+/// At most one nonzero per pixel of `ks` entries.
+fn one_per_pixel(x: &[f64], ks: usize) -> bool {
+    x.chunks(ks)
+        .all(|c| c.iter().filter(|v| **v != 0.0).count() <= 1)
+}
+
+#[test]
+fn recovers_the_paper_scene_exactly_at_a_comfortable_pulse_length() {
+    let g = Geometry::new(24, 24, 32).unwrap();
+    let op = lidar_problem(g, 6000, false, 3);
+    let truth = paper_scene::<f64>(g).unwrap();
+    let mut y = vec![0.0; op.nrows()];
+    op.apply(truth.as_slice(), &mut y);
+    let mut x = vec![0.0; g.voxels()];
+    let report = model_based(&op, &y, &mut x, &ModelBasedParams::default(), &mut ()).unwrap();
+    assert!(one_per_pixel(&x, g.ks));
+    let est = Scene::from_vec(g, x).unwrap();
+    let m = compare(&truth, &est, 200e-12).unwrap();
+    assert_eq!(m.exact, m.lit, "{m} ({report:?})");
+    assert_eq!(m.false_detections, 0, "{m}");
+    assert!(m.relative_error < 1e-4, "{m}");
+    assert!(report.forward_applies > 0 && report.adjoint_applies > 0);
+}
+
+#[test]
+fn recovers_random_opaque_scenes_and_never_puts_two_depths_in_a_pixel() {
+    for seed in 0..3 {
+        let g = Geometry::new(12, 12, 16).unwrap();
+        let op = lidar_problem(g, 3000, false, 10 + seed);
+        let truth = random_opaque_scene::<f64>(g, 0.4, seed).unwrap();
+        let mut y = vec![0.0; op.nrows()];
+        op.apply(truth.as_slice(), &mut y);
+        // A warm start with two depths in every pixel is pruned to the model first.
+        let mut x = vec![0.0; g.voxels()];
+        for (i, v) in x.iter_mut().enumerate() {
+            if i % g.ks < 2 {
+                *v = 0.1;
+            }
+        }
+        let mut observed_model = true;
+        let mut obs = |info: &rdlidar::solver::IterationInfo<'_, f64>| {
+            observed_model &= one_per_pixel(info.x, g.ks);
+            rdlidar::solver::Control::Continue
+        };
+        model_based(&op, &y, &mut x, &ModelBasedParams::default(), &mut obs).unwrap();
+        assert!(observed_model, "an iterate held two depths in a pixel");
+        assert!(one_per_pixel(&x, g.ks));
+        let m = compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap();
+        assert_eq!(m.exact, m.lit, "seed {seed}: {m}");
+        assert_eq!(m.false_detections, 0, "seed {seed}: {m}");
+    }
+}
+
+#[test]
+fn works_on_any_operator_through_pixel_columns() {
+    // A Gaussian matrix with 30 pixels of 5 columns; 8 pixels hold one positive entry each.
+    let (rows, pixels, ks) = (80, 30, 5);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let a = Array2::from_shape_simple_fn((rows, pixels * ks), || {
+        let v: f64 = StandardNormal.sample(&mut rng);
+        v / (rows as f64).sqrt()
+    });
+    let mut truth = vec![0.0; pixels * ks];
+    for p in (0..pixels).step_by(4) {
+        truth[p * ks + (p * 7) % ks] = 1.0 + (p as f64) / 10.0;
+    }
+    let op = PixelColumns::new(DenseMatrix::new(a).unwrap(), ks).unwrap();
+    let mut y = vec![0.0; rows];
+    op.apply(&truth, &mut y);
+    let mut x = vec![0.0; pixels * ks];
+    let report = model_based(&op, &y, &mut x, &ModelBasedParams::default(), &mut ()).unwrap();
+    assert!(matches!(
+        report.termination,
+        Termination::Converged | Termination::Residual
+    ));
+    for (i, (a, b)) in x.iter().zip(&truth).enumerate() {
+        assert!((a - b).abs() < 1e-6, "entry {i}: {a} vs {b}");
+    }
+}
+
+#[test]
+fn self_correlations_and_column_norms_match_their_definitions() {
+    let g = Geometry::new(3, 3, 8).unwrap();
+    for ternary in [false, true] {
+        let op = lidar_problem(g, 50, ternary, 7);
+        let voxels = vec![3, 17, 40, 71];
+        let own = op.self_correlations(&voxels);
+        let norms = op.column_norms(&voxels);
+        for (i, &v) in voxels.iter().enumerate() {
+            let mut e = vec![0.0; g.voxels()];
+            e[v] = 1.0;
+            let mut a = vec![0.0; op.nrows()];
+            op.apply(&e, &mut a);
+            let norm = a.iter().map(|t| t * t).sum::<f64>().sqrt();
+            assert!((norms[i] - norm).abs() <= 1e-12 * norm.max(1.0));
+            let mut u = vec![0.0; g.voxels()];
+            op.apply_adjoint_debiased(&a, &mut u);
+            let p0 = v / g.ks * g.ks;
+            for j in 0..g.ks {
+                assert!(
+                    (u[p0 + j] - own[i * g.ks + j]).abs() <= 1e-10,
+                    "ternary {ternary}, voxel {v}, depth {j}"
+                );
+            }
+        }
+        // The restriction is the operator on the chosen columns.
+        let r = op.restrict(voxels.clone()).unwrap();
+        let b = [0.5, -1.0, 2.0, 0.25];
+        let mut x = vec![0.0; g.voxels()];
+        for (&v, &c) in voxels.iter().zip(&b) {
+            x[v] = c;
+        }
+        let (mut y1, mut y2) = (vec![0.0; op.nrows()], vec![0.0; op.nrows()]);
+        r.apply(&b, &mut y1);
+        op.apply(&x, &mut y2);
+        for (a, c) in y1.iter().zip(&y2) {
+            assert!((a - c).abs() <= 1e-12);
+        }
+    }
+}
+
+#[test]
+fn degenerate_inputs_give_finite_results() {
+    let g = Geometry::new(4, 4, 6).unwrap();
+    let op = lidar_problem(g, 200, false, 1);
+    let params = ModelBasedParams::default();
+    // All-zero measurements (an empty scene): x = 0 at once.
+    let y = vec![0.0; op.nrows()];
+    let mut x = vec![1.0; g.voxels()];
+    let r = model_based(&op, &y, &mut x, &params, &mut ()).unwrap();
+    assert_eq!(r.termination, Termination::ZeroResidual);
+    assert!(x.iter().all(|v| *v == 0.0));
+    // A zero operator with nonzero measurements: nothing can be explained, x stays finite.
+    let zero = PixelColumns::new(Zero::<f64>::new(10, 12), 3).unwrap();
+    let y = vec![1.0; 10];
+    let mut x = vec![0.0; 12];
+    let r = model_based(&zero, &y, &mut x, &params, &mut ()).unwrap();
+    assert!(x.iter().all(|v| v.is_finite() && *v == 0.0), "{r:?}");
+    // Pure noise: the detection and amplitude tests keep the support small.
+    let noise: Vec<f64> = rdlidar_noise(op.nrows(), 9);
+    let mut x = vec![0.0; g.voxels()];
+    model_based(&op, &noise, &mut x, &params, &mut ()).unwrap();
+    assert!(x.iter().all(|v| v.is_finite()));
+}
+
+fn rdlidar_noise(n: usize, seed: u64) -> Vec<f64> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    (0..n).map(|_| StandardNormal.sample(&mut rng)).collect()
+}
+
+#[test]
+fn invalid_parameters_and_shapes_are_typed_errors() {
+    let g = Geometry::new(4, 4, 6).unwrap();
+    let op = lidar_problem(g, 100, false, 2);
+    let y = vec![1.0; op.nrows()];
+    let mut x = vec![0.0; g.voxels()];
+    let bad = [
+        ModelBasedParams {
+            detection_z: -1.0,
+            ..ModelBasedParams::default()
+        },
+        ModelBasedParams {
+            amplitude_z: f64::NAN,
+            ..ModelBasedParams::default()
+        },
+        ModelBasedParams {
+            max_support_fraction: 0.0,
+            ..ModelBasedParams::default()
+        },
+        ModelBasedParams {
+            stopping: Stopping {
+                max_iter: 0,
+                ..Stopping::default()
+            },
+            ..ModelBasedParams::default()
+        },
+    ];
+    for p in bad {
+        assert!(matches!(
+            model_based(&op, &y, &mut x, &p, &mut ()),
+            Err(Error::InvalidParameter { .. })
+        ));
+    }
+    let p = ModelBasedParams::default();
+    assert!(matches!(
+        model_based(&op, &y[1..], &mut x, &p, &mut ()),
+        Err(Error::ShapeMismatch { .. })
+    ));
+    let mut short = vec![0.0; 5];
+    assert!(matches!(
+        model_based(&op, &y, &mut short, &p, &mut ()),
+        Err(Error::ShapeMismatch { .. })
+    ));
+    let mut nan = y.clone();
+    nan[3] = f64::NAN;
+    assert!(matches!(
+        model_based(&op, &nan, &mut x, &p, &mut ()),
+        Err(Error::NonFinite { .. })
+    ));
+    assert!(matches!(
+        PixelColumns::new(Zero::<f64>::new(4, 10), 3),
+        Err(Error::InvalidParameter { .. })
+    ));
+}
