@@ -19,3 +19,4 @@ mod scenes;
 mod solvers;
 mod sparse_solvers;
 mod tight_frame;
+mod tv;

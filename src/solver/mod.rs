@@ -19,6 +19,7 @@ mod cgls;
 mod cosamp;
 mod fista;
 mod iht;
+mod tv;
 
 use std::time::{Duration, Instant};
 
@@ -28,6 +29,7 @@ pub use cgls::{cgls, CglsParams};
 pub use cosamp::{cosamp, CosampParams};
 pub use fista::{fista, FistaParams, Lambda, Restart, StepRule};
 pub use iht::{iht, IhtParams, IhtStep};
+pub use tv::{tv_denoise, TvNorm, TvParams, TvSteps};
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
