@@ -22,3 +22,4 @@ mod scenes;
 mod solvers;
 mod sparse_solvers;
 mod tight_frame;
+mod tv;

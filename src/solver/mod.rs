@@ -23,6 +23,7 @@ mod iht;
 mod iteration;
 mod model_based;
 mod progress;
+mod tv;
 
 use std::time::{Duration, Instant};
 
@@ -35,6 +36,7 @@ pub use fista::{fista, FistaParams, Lambda, Restart, StepRule};
 pub use iht::{iht, IhtParams, IhtStep};
 pub use model_based::{model_based, ModelBasedParams, PixelColumns, VoxelOperator};
 pub use progress::ProgressObserver;
+pub use tv::{tv_denoise, TvNorm, TvParams, TvSteps};
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;

@@ -1,0 +1,749 @@
+//! Weighted total-variation denoising and inpainting of a 2-D map by the primal-dual algorithm of
+//! Chambolle and Pock.
+
+use ndarray::{Array2, ArrayView2};
+
+use crate::error::{Error, Result};
+use crate::operator::{Counted, Gradient2D, LinearOperator};
+
+use super::{Monitor, Observer, Report, Stopping, Termination};
+
+/// Which total variation [`tv_denoise`] penalizes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum TvNorm {
+    /// Σ ‖(∇u)ᵢ‖₂, the usual choice: less biased towards the grid axes.
+    #[default]
+    Isotropic,
+    /// Σ ‖(∇u)ᵢ‖₁ = Σ |vertical difference| + |horizontal difference|: favours edges along
+    /// the grid axes.
+    Anisotropic,
+}
+
+/// How [`tv_denoise`] chooses its primal and dual steps τ and σ (always with σ·τ·8 = 0.99).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum TvSteps {
+    /// θ = 1 and residual balancing (Goldstein et al. 2013), starting from τ = σ: the product
+    /// σ·τ is fixed and their ratio is adapted so that the primal and dual residuals stay
+    /// within a factor 1.5 of each other, by factors (1 − α) with α shrinking geometrically
+    /// (0.5, then × 0.95 per change), so that the adaptation dies out and the convergence of
+    /// Algorithm 1 is kept. The robust default: it works with zero weights, does not depend on
+    /// a good initial ratio, and converges fast in practice.
+    #[default]
+    Adaptive,
+    /// When every weight is positive, the data term is γ-strongly convex
+    /// (γ = min w / max w) and the steps can follow Algorithm 2 of Chambolle & Pock
+    /// (θ = 1/√(1 + 2γτ), τ ← θτ, σ ← σ/θ, starting from τ = 10σ), which guarantees an
+    /// O(1/k²) rate. It can beat [`TvSteps::Adaptive`] to moderate accuracy (relative gap
+    /// 1e-4) when λ is large and smooths strongly, but its shrinking primal step makes it slow
+    /// to high accuracy and when λ is small. With any zero weight the data term is not
+    /// strongly convex and this is [`TvSteps::Adaptive`].
+    Accelerated,
+    /// Algorithm 1 of Chambolle & Pock with θ = 1 and fixed τ = σ.
+    Fixed,
+}
+
+/// Parameters of [`tv_denoise`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TvParams {
+    /// Weight λ ≥ 0 of the total variation (in the units of the weights times those of the
+    /// map).
+    pub lambda: f64,
+    /// Isotropic or anisotropic total variation.
+    pub norm: TvNorm,
+    /// Step-size rule.
+    pub steps: TvSteps,
+    /// Stopping rules. The residual is the relative primal-dual gap (P(u) − D(p)) / P(u), an
+    /// upper bound on the relative distance of the objective to its minimum, so
+    /// `rel_residual` is the gap tolerance; the objective is P(u) and the change is
+    /// ‖u_k − u_{k−1}‖ / ‖u_k‖.
+    pub stopping: Stopping,
+}
+
+impl TvParams {
+    /// λ with the defaults: isotropic total variation, [`TvSteps::Adaptive`], at most 1000
+    /// iterations, stopping when the relative primal-dual gap reaches 1e-4.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if λ is negative or not finite.
+    pub fn new(lambda: f64) -> Result<Self> {
+        let params = TvParams {
+            lambda,
+            norm: TvNorm::default(),
+            steps: TvSteps::default(),
+            stopping: Stopping {
+                max_iter: 1000,
+                rel_residual: Some(1e-4),
+                ..Stopping::default()
+            },
+        };
+        params.validate()?;
+        Ok(params)
+    }
+
+    /// Sets the kind of total variation.
+    pub fn with_norm(mut self, norm: TvNorm) -> Self {
+        self.norm = norm;
+        self
+    }
+
+    /// Sets the step-size rule.
+    pub fn with_steps(mut self, steps: TvSteps) -> Self {
+        self.steps = steps;
+        self
+    }
+
+    /// Sets the stopping rules.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the invalid field.
+    pub fn with_stopping(mut self, stopping: Stopping) -> Result<Self> {
+        stopping.validate()?;
+        self.stopping = stopping;
+        Ok(self)
+    }
+
+    fn validate(&self) -> Result<()> {
+        if !(self.lambda.is_finite() && self.lambda >= 0.0) {
+            return Err(Error::param(
+                "lambda",
+                format!("must be finite and ≥ 0, got {}", self.lambda),
+            ));
+        }
+        self.stopping.validate()
+    }
+}
+
+/// ‖∇‖² ≤ 8 for forward differences on a grid; the steps keep σ·τ·8 at this.
+const STEP_PRODUCT: f64 = 0.99;
+/// Initial τ/σ of the accelerated variant.
+const ACCEL_RATIO: f64 = 10.0;
+/// Residual balancing: first adaptation factor, its decay per change, and the tolerated ratio
+/// of the two residuals.
+const ADAPT_ALPHA: f64 = 0.5;
+const ADAPT_ETA: f64 = 0.95;
+const ADAPT_RATIO: f64 = 1.5;
+
+/// Pixels per block of the pointwise passes. Each pass writes its per-pixel terms into small
+/// buffers and sums them afterwards, so that the per-pixel loops have no floating-point
+/// reduction and vectorize.
+const BLOCK: usize = 64;
+
+/// The normalized problem ½ Σ wᵢ(xᵢ − fᵢ)² + λ·TV(x) over the box [−1, 1]ⁿ (which holds every
+/// minimizer), with max wᵢ = 1, λ > 0 and the data where wᵢ > 0 spanning [−1, 1]; the map
+/// is u = shift + scale·x.
+struct Problem {
+    /// Run the pointwise passes compiled for AVX2.
+    avx2: bool,
+    f: Vec<f64>,
+    w: Vec<f64>,
+    lambda: f64,
+    shift: f64,
+    scale: f64,
+    norm: TvNorm,
+}
+
+/// Sums gathered by the pointwise passes.
+#[derive(Default)]
+struct Sums {
+    /// ½ Σ wᵢ(uᵢ − fᵢ)² at the new u.
+    data: f64,
+    /// ‖u_new − u_old‖².
+    change: f64,
+    /// ‖u_new‖² in the units of the map, divided by scale².
+    norm: f64,
+    /// TV of the new u.
+    tv: f64,
+    /// Σ G*ᵢ((div p)ᵢ) at the new p.
+    conj: f64,
+    /// Squared norm of the primal residual.
+    primal_res: f64,
+    /// Squared norm of the dual residual.
+    dual_res: f64,
+}
+
+/// Block-local buffers of per-pixel terms and their running sums.
+struct Terms<const N: usize> {
+    buf: [[f64; BLOCK]; N],
+    acc: [[f64; 4]; N],
+}
+
+impl<const N: usize> Terms<N> {
+    fn new() -> Self {
+        Terms {
+            buf: [[0.0; BLOCK]; N],
+            acc: [[0.0; 4]; N],
+        }
+    }
+
+    /// Adds the first `len` terms of each buffer to its sum (four lanes, so that it vectorizes).
+    #[inline(always)]
+    fn flush(&mut self, len: usize) {
+        for (acc, buf) in self.acc.iter_mut().zip(&self.buf) {
+            let mut chunks = buf[..len].chunks_exact(4);
+            for c in &mut chunks {
+                for l in 0..4 {
+                    acc[l] += c[l];
+                }
+            }
+            for (l, &t) in chunks.remainder().iter().enumerate() {
+                acc[l] += t;
+            }
+        }
+    }
+
+    fn totals(&self) -> [f64; N] {
+        self.acc.map(|a| (a[0] + a[1]) + (a[2] + a[3]))
+    }
+}
+
+/// min(max(x, lo), hi), with NaN mapped to lo; written with comparisons so that it vectorizes.
+#[inline(always)]
+fn clip(x: f64, lo: f64, hi: f64) -> f64 {
+    let x = if x >= lo { x } else { lo };
+    if x <= hi {
+        x
+    } else {
+        hi
+    }
+}
+
+/// Whether the CPU supports AVX2 (checked at run time).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Runs a kernel compiled for AVX2 when `$avx2` holds (the kernels are `#[inline(always)]`, so
+/// they are compiled into the AVX2 wrapper), else for the baseline instruction set. Both give
+/// the same results: the kernels do not reassociate sums, only the vector width differs.
+macro_rules! dispatch {
+    ($avx2:expr, $problem:expr, $kernel:ident($($arg:ident: $ty:ty),*)) => {{
+        #[cfg(target_arch = "x86_64")]
+        if $avx2 {
+            #[target_feature(enable = "avx2")]
+            unsafe fn wide(problem: &Problem, $($arg: $ty),*) {
+                problem.$kernel($($arg),*)
+            }
+            // SAFETY: `$avx2` is set from `has_avx2`, so the CPU supports AVX2.
+            return unsafe { wide($problem, $($arg),*) };
+        }
+        $problem.$kernel($($arg),*)
+    }};
+}
+
+impl Problem {
+    #[allow(clippy::too_many_arguments)]
+    fn primal_step(
+        &self,
+        x: &mut [f64],
+        out: &mut [f64],
+        adj: &[f64],
+        r: &mut [f64],
+        tau: f64,
+        sums: &mut Sums,
+    ) {
+        dispatch!(self.avx2, self, primal_kernel(x: &mut [f64], out: &mut [f64], adj: &[f64], r: &mut [f64], tau: f64, sums: &mut Sums))
+    }
+
+    fn dual_step(
+        &self,
+        p: &mut [f64],
+        g: &[f64],
+        g_prev: &[f64],
+        sigma: f64,
+        theta: f64,
+        sums: &mut Sums,
+    ) {
+        dispatch!(self.avx2, self, dual_kernel(p: &mut [f64], g: &[f64], g_prev: &[f64], sigma: f64, theta: f64, sums: &mut Sums))
+    }
+
+    fn conjugate(&self, adj: &[f64], r: &[f64], sums: &mut Sums) {
+        dispatch!(self.avx2, self, conjugate_kernel(adj: &[f64], r: &[f64], sums: &mut Sums))
+    }
+
+    /// x ← prox_{τG}(x − τ·adj) with adj = ∇*p = −div p, G the data term plus the indicator of
+    /// the box; `out` receives the map shift + scale·x and r the terms
+    /// rᵢ = (x_oldᵢ − x_newᵢ)/τ − adjᵢ of the primal residual.
+    #[inline(always)]
+    fn primal_kernel(
+        &self,
+        x: &mut [f64],
+        out: &mut [f64],
+        adj: &[f64],
+        r: &mut [f64],
+        tau: f64,
+        sums: &mut Sums,
+    ) {
+        let inv_tau = 1.0 / tau;
+        let (shift, scale) = (self.shift, self.scale);
+        let offset = shift / scale;
+        let mut terms = Terms::<3>::new();
+        for (((((u, out), r), adj), f), w) in x
+            .chunks_mut(BLOCK)
+            .zip(out.chunks_mut(BLOCK))
+            .zip(r.chunks_mut(BLOCK))
+            .zip(adj.chunks(BLOCK))
+            .zip(self.f.chunks(BLOCK))
+            .zip(self.w.chunks(BLOCK))
+        {
+            let len = u.len();
+            let (out, r, adj, f, w) = (
+                &mut out[..len],
+                &mut r[..len],
+                &adj[..len],
+                &f[..len],
+                &w[..len],
+            );
+            let [data, change, norm] = &mut terms.buf;
+            let (data, change, norm) = (&mut data[..len], &mut change[..len], &mut norm[..len]);
+            for i in 0..len {
+                let old = u[i];
+                let tw = tau * w[i];
+                let new = clip((old - tau * adj[i] + tw * f[i]) / (1.0 + tw), -1.0, 1.0);
+                let (e, d) = (new - f[i], new - old);
+                u[i] = new;
+                out[i] = shift + scale * new;
+                r[i] = -d * inv_tau - adj[i];
+                data[i] = w[i] * e * e;
+                change[i] = d * d;
+                norm[i] = (offset + new) * (offset + new);
+            }
+            terms.flush(len);
+        }
+        let [data, change, norm] = terms.totals();
+        sums.data = 0.5 * data;
+        sums.change = change;
+        sums.norm = norm;
+    }
+
+    /// p ← Π(z) with z = p + σ((1 + θ)g − θ g_prev) = p + σ∇ū, ū = u + θ(u − u_prev), Π the
+    /// pointwise projection onto the dual ball (the prox of σF*). Also TV(u) from g = ∇u and the
+    /// dual residual ‖(z − Π(z))/σ − g‖².
+    #[inline(always)]
+    fn dual_kernel(
+        &self,
+        p: &mut [f64],
+        g: &[f64],
+        g_prev: &[f64],
+        sigma: f64,
+        theta: f64,
+        sums: &mut Sums,
+    ) {
+        let (a, b) = (sigma * (1.0 + theta), sigma * theta);
+        let inv_sigma = 1.0 / sigma;
+        let lambda = self.lambda;
+        let mut terms = Terms::<2>::new();
+        match self.norm {
+            TvNorm::Isotropic => {
+                let half = p.len() / 2;
+                let (pv, ph) = p.split_at_mut(half);
+                let (gv, gh) = g.split_at(half);
+                let (qv, qh) = g_prev.split_at(half);
+                for (((((pv, ph), gv), gh), qv), qh) in pv
+                    .chunks_mut(BLOCK)
+                    .zip(ph.chunks_mut(BLOCK))
+                    .zip(gv.chunks(BLOCK))
+                    .zip(gh.chunks(BLOCK))
+                    .zip(qv.chunks(BLOCK))
+                    .zip(qh.chunks(BLOCK))
+                {
+                    let len = pv.len();
+                    let (ph, gv, gh, qv, qh) = (
+                        &mut ph[..len],
+                        &gv[..len],
+                        &gh[..len],
+                        &qv[..len],
+                        &qh[..len],
+                    );
+                    let [tv, res] = &mut terms.buf;
+                    let (tv, res) = (&mut tv[..len], &mut res[..len]);
+                    for i in 0..len {
+                        let x = pv[i] + a * gv[i] - b * qv[i];
+                        let y = ph[i] + a * gh[i] - b * qh[i];
+                        // s = 1 inside the ball (λ/λ), λ/|z| outside.
+                        let r = (x * x + y * y).sqrt();
+                        let s = lambda / if r > lambda { r } else { lambda };
+                        pv[i] = s * x;
+                        ph[i] = s * y;
+                        let ex = (1.0 - s) * x * inv_sigma - gv[i];
+                        let ey = (1.0 - s) * y * inv_sigma - gh[i];
+                        tv[i] = (gv[i] * gv[i] + gh[i] * gh[i]).sqrt();
+                        res[i] = ex * ex + ey * ey;
+                    }
+                    terms.flush(len);
+                }
+            }
+            TvNorm::Anisotropic => {
+                for ((p, g), q) in p
+                    .chunks_mut(BLOCK)
+                    .zip(g.chunks(BLOCK))
+                    .zip(g_prev.chunks(BLOCK))
+                {
+                    let len = p.len();
+                    let (g, q) = (&g[..len], &q[..len]);
+                    let [tv, res] = &mut terms.buf;
+                    let (tv, res) = (&mut tv[..len], &mut res[..len]);
+                    for i in 0..len {
+                        let z = p[i] + a * g[i] - b * q[i];
+                        let new = clip(z, -lambda, lambda);
+                        let e = (z - new) * inv_sigma - g[i];
+                        p[i] = new;
+                        tv[i] = g[i].abs();
+                        res[i] = e * e;
+                    }
+                    terms.flush(len);
+                }
+            }
+        }
+        let [tv, res] = terms.totals();
+        sums.tv = tv;
+        sums.dual_res = res;
+    }
+
+    /// Σ G*ᵢ(qᵢ) with q = div p = −adj, and the primal residual ‖r + adj‖².
+    #[inline(always)]
+    fn conjugate_kernel(&self, adj: &[f64], r: &[f64], sums: &mut Sums) {
+        let mut terms = Terms::<2>::new();
+        for (((adj, r), f), w) in adj
+            .chunks(BLOCK)
+            .zip(r.chunks(BLOCK))
+            .zip(self.f.chunks(BLOCK))
+            .zip(self.w.chunks(BLOCK))
+        {
+            let len = adj.len();
+            let (r, f, w) = (&r[..len], &f[..len], &w[..len]);
+            let [conj, res] = &mut terms.buf;
+            let (conj, res) = (&mut conj[..len], &mut res[..len]);
+            for i in 0..len {
+                // G*ᵢ(q) = sup_{v ∈ [−1, 1]} qv − ½wᵢ(v − fᵢ)², attained at the clipped
+                // unconstrained maximizer fᵢ + q/wᵢ. Where wᵢ = 0 that is ±∞ (an end of the
+                // box) or, for q = 0, NaN, which `clip` maps to −1 (every v attains 0 then).
+                // The division must be exact: a v that is not the maximizer would understate
+                // G*ᵢ and so overstate the dual objective.
+                let q = -adj[i];
+                let v = clip(f[i] + q / w[i], -1.0, 1.0);
+                let e = v - f[i];
+                conj[i] = q * v - 0.5 * w[i] * e * e;
+                res[i] = (r[i] + adj[i]) * (r[i] + adj[i]);
+            }
+            terms.flush(len);
+        }
+        let [conj, res] = terms.totals();
+        sums.conj = conj;
+        sums.primal_res = res;
+    }
+}
+
+/// Checks that `b` has the shape `(m, n)` of the data.
+fn check_shape(name: &str, b: (usize, usize), m: usize, n: usize) -> Result<()> {
+    if b.0 != m {
+        return Err(Error::shape(
+            format!("tv_denoise: rows of {name} vs f"),
+            m,
+            b.0,
+        ));
+    }
+    if b.1 != n {
+        return Err(Error::shape(
+            format!("tv_denoise: columns of {name} vs f"),
+            n,
+            b.1,
+        ));
+    }
+    Ok(())
+}
+
+/// Checks that every entry is finite (and ≥ 0 when `nonnegative`).
+fn check_values(name: &str, a: ArrayView2<'_, f64>, nonnegative: bool) -> Result<()> {
+    for ((i, j), &v) in a.indexed_iter() {
+        if !v.is_finite() {
+            return Err(Error::NonFinite {
+                what: format!("tv_denoise: {name}[{i}, {j}] = {v}"),
+            });
+        }
+        if nonnegative && v < 0.0 {
+            return Err(Error::param(
+                "w",
+                format!("weights must be ≥ 0, got w[{i}, {j}] = {v}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Weighted total-variation denoising and inpainting of an `m × n` map:
+///
+/// min_u P(u) = ½ Σᵢ wᵢ (uᵢ − fᵢ)² + λ · TV(u),
+///
+/// with TV(u) = Σᵢ ‖(∇u)ᵢ‖₂ ([`TvNorm::Isotropic`]) or Σᵢ ‖(∇u)ᵢ‖₁ ([`TvNorm::Anisotropic`]),
+/// ∇ the forward differences with Neumann boundary of [`Gradient2D`]. Pixels with wᵢ = 0 carry
+/// no data and are filled in by the total variation (inpainting). `u` is the warm start and
+/// receives the result; the observer sees the current map flattened in row-major order.
+///
+/// # Algorithm
+/// The primal-dual algorithm of Chambolle & Pock on the saddle-point problem
+/// min_u max_p ⟨∇u, p⟩ + G(u) − F*(p), where F* is the indicator of ‖pᵢ‖₂ ≤ λ (of
+/// ‖pᵢ‖∞ ≤ λ for the anisotropic TV) and G the data term. Every minimizer lies in the box
+/// [a, b]ⁿ spanned by the data (a = min fᵢ, b = max fᵢ over wᵢ > 0), because clipping a map to
+/// it raises neither term; G includes the indicator of that box, which keeps the iterates
+/// bounded and the dual objective finite where wᵢ = 0. Starting from p = 0, iteration k computes
+///
+/// * u⁺ = clip((u + τ div p + τ wᵢ fᵢ) / (1 + τ wᵢ), a, b), the proximal map of τG,
+/// * p ← Π_λ(p + σ∇(u⁺ + θ(u⁺ − u))), Π_λ the pointwise projection onto the dual ball,
+/// * u ← u⁺,
+///
+/// with σ τ ‖∇‖² ≤ 0.99 (‖∇‖² ≤ 8) and θ and the steps set by [`TvSteps`]: by default θ = 1
+/// (Algorithm 1 of the paper) with the ratio τ/σ adapted by residual balancing; Algorithm 2
+/// (accelerated, for positive weights) and fixed steps are options. The problem is solved in normalized form, with the weights divided by
+/// their maximum and the values mapped from [a, b] onto [−1, 1] (λ scaled to match), which
+/// leaves the minimizers unchanged and makes the iterations independent of the units. ∇ of the
+/// extrapolated point is formed from the stored ∇u⁺ and ∇u, so an iteration costs one
+/// gradient and one divergence (the report counts them as forward and adjoint applications of
+/// [`Gradient2D`], plus the gradient of the warm start) and a few pointwise passes, which run
+/// with AVX2 where the CPU has it.
+///
+/// # Stopping
+/// After each iteration the primal objective P(u) and the dual objective
+/// D(p) = −Σᵢ G*ᵢ((div p)ᵢ) are evaluated, G*ᵢ the convex conjugate of the box-constrained data
+/// term of pixel i (finite also where wᵢ = 0). Since D(p) ≤ min P ≤ P(u), the report's residual
+/// (P(u) − D(p)) / P(u) bounds the relative suboptimality of u: `stopping.rel_residual` is a
+/// certified tolerance on the objective. It is 0 when the gap is 0 and +∞ when P(u) = 0 < gap.
+/// The objective history holds P(u) in the units of the input.
+///
+/// # Special cases
+/// Each ends with [`Termination::Converged`] after 0 iterations.
+/// * λ = 0: uᵢ = fᵢ wherever wᵢ > 0 and the warm start is kept where wᵢ = 0 (every such u is
+///   a minimizer).
+/// * All weights zero (λ > 0): the minimizers are the constant maps; u is set to the mean of
+///   the warm start, the minimizer nearest to it.
+/// * The same value of f at every pixel with wᵢ > 0: u is that constant (P(u) = 0).
+/// * λ ≥ Σᵢ wᵢ|fᵢ − c|, c = Σᵢ wᵢfᵢ / Σᵢ wᵢ the weighted mean: u is the constant map c, which
+///   is then a minimizer (a dual certificate exists along a spanning tree of the grid).
+///
+/// # Example
+/// ```
+/// use ndarray::Array2;
+/// use rdlidar::solver::{tv_denoise, TvParams};
+///
+/// # fn main() -> rdlidar::Result<()> {
+/// // A noisy constant map with a hole (weight 0) in the middle.
+/// let f = Array2::from_shape_fn((20, 30), |(i, j)| {
+///     5.0 + 0.1 * (((i * 7 + j * 3) % 5) as f64 - 2.0)
+/// });
+/// let mut w = Array2::ones((20, 30));
+/// w[[10, 15]] = 0.0;
+/// let mut u = f.clone();
+/// let report = tv_denoise(f.view(), w.view(), &mut u, &TvParams::new(0.5)?, &mut ())?;
+/// assert!(report.residual_history.last().unwrap() <= &1e-4);
+/// assert!((u[[10, 15]] - 5.0).abs() < 0.05);
+/// # Ok(())
+/// # }
+/// ```
+///
+/// # References
+/// * A. Chambolle, T. Pock, *A first-order primal-dual algorithm for convex problems with
+///   applications to imaging*, J. Math. Imaging and Vision 40, 2011.
+/// * T. Goldstein, M. Li, X. Yuan, E. Esser, R. Baraniuk, *Adaptive primal-dual hybrid
+///   gradient methods for saddle-point problems*, arXiv:1305.0546, 2013.
+/// * L. Rudin, S. Osher, E. Fatemi, *Nonlinear total variation based noise removal
+///   algorithms*, Physica D 60, 1992.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] for a negative or non-finite λ, invalid stopping rules, a
+/// negative weight or an empty map; [`Error::ShapeMismatch`] if `w` or `u` differs in shape
+/// from `f`; [`Error::NonFinite`] for a non-finite entry of `f`, `w` or the warm start;
+/// [`Error::Breakdown`] if the iteration produces a non-finite objective.
+pub fn tv_denoise<O: Observer<f64> + ?Sized>(
+    f: ArrayView2<'_, f64>,
+    w: ArrayView2<'_, f64>,
+    u: &mut Array2<f64>,
+    params: &TvParams,
+    observer: &mut O,
+) -> Result<Report> {
+    const NAME: &str = "tv_denoise";
+    params.validate()?;
+    let (m, n) = f.dim();
+    if m == 0 || n == 0 {
+        return Err(Error::param(
+            "f",
+            format!("the map must be non-empty, got {m}x{n}"),
+        ));
+    }
+    check_shape("w", w.dim(), m, n)?;
+    check_shape("u", u.dim(), m, n)?;
+    check_values("f", f, false)?;
+    check_values("w", w, true)?;
+    check_values("u (warm start)", u.view(), false)?;
+
+    let grad = Gradient2D::<f64>::new(m, n)?;
+    let op = Counted::new(&grad);
+    let mut monitor = Monitor::new(NAME, params.stopping, observer);
+    let lambda = params.lambda;
+    let wmax = w.iter().fold(0.0f64, |a, &b| a.max(b));
+    if lambda == 0.0 {
+        ndarray::Zip::from(&mut *u)
+            .and(&f)
+            .and(&w)
+            .for_each(|ui, &fi, &wi| {
+                if wi > 0.0 {
+                    *ui = fi;
+                }
+            });
+        return Ok(monitor.finish(0, Termination::Converged, &op));
+    }
+    if wmax == 0.0 {
+        // Summing vᵢ/len keeps the partial sums within about the range of the values;
+        // clamping to that range (where the mean lies) absorbs the rounding, including an
+        // overflow of the last steps at the extremes.
+        let len = (m * n) as f64;
+        let (lo, hi) = u
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let mean = u.iter().map(|&v| v / len).sum::<f64>();
+        u.fill(mean.clamp(lo, hi));
+        return Ok(monitor.finish(0, Termination::Converged, &op));
+    }
+
+    // The normalized problem: weights divided by their maximum, values mapped affinely from
+    // [lo, hi] (their range where w > 0) onto [−1, 1], λ scaled accordingly. Its minimizers
+    // are those of the original problem mapped the same way.
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (&fi, &wi) in f.iter().zip(w.iter()) {
+        if wi > 0.0 {
+            lo = lo.min(fi);
+            hi = hi.max(fi);
+        }
+    }
+    if lo == hi {
+        // Constant data: u = that constant has no cost at all.
+        u.fill(lo);
+        return Ok(monitor.finish(0, Termination::Converged, &op));
+    }
+    let (shift, scale) = (0.5 * lo + 0.5 * hi, 0.5 * hi - 0.5 * lo);
+    let fv: Vec<f64> = f.iter().map(|&v| (v - shift) / scale).collect();
+    let wv: Vec<f64> = w.iter().map(|&v| v / wmax).collect();
+    let lambda = lambda / (wmax * scale);
+    // With c the weighted mean, the constant map c is a minimizer as soon as
+    // λ ≥ Σ wᵢ|fᵢ − c|: along a spanning tree of the grid, a flow p with div p = w(c − f)
+    // (which sums to zero) carries at most ½ Σ wᵢ|fᵢ − c| on any edge, so ‖pᵢ‖₂ ≤ λ and
+    // (u = c, p) satisfies the optimality conditions for either TV. This also covers a λ too
+    // large to represent once normalized.
+    let (sw, swf) = wv
+        .iter()
+        .zip(&fv)
+        .fold((0.0, 0.0), |(a, b), (&wi, &fi)| (a + wi, b + wi * fi));
+    let mean = swf / sw;
+    let spread: f64 = wv
+        .iter()
+        .zip(&fv)
+        .map(|(&wi, &fi)| wi * (fi - mean).abs())
+        .sum();
+    if lambda >= spread {
+        u.fill(shift + scale * mean);
+        return Ok(monitor.finish(0, Termination::Converged, &op));
+    }
+    let wmin = wv.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+    let problem = Problem {
+        avx2: has_avx2(),
+        f: fv,
+        w: wv,
+        lambda,
+        shift,
+        scale,
+        norm: params.norm,
+    };
+    let gamma = match params.steps {
+        TvSteps::Accelerated if wmin > 0.0 => wmin,
+        _ => 0.0,
+    };
+    let mut alpha = match params.steps {
+        TvSteps::Fixed => 0.0,
+        _ if gamma > 0.0 => 0.0,
+        _ => ADAPT_ALPHA,
+    };
+
+    let mut x: Vec<f64> = u
+        .iter()
+        .map(|&v| (v.clamp(lo, hi) - shift) / scale)
+        .collect();
+    let mut g = vec![0.0; 2 * m * n];
+    op.apply(&x, &mut g);
+    let mut g_prev = vec![0.0; 2 * m * n];
+    let mut p = vec![0.0; 2 * m * n];
+    let mut adj = vec![0.0; m * n];
+    let mut r = vec![0.0; m * n];
+    let mut out = vec![0.0; m * n];
+    // τ/σ: 1 for the plain variants (the adaptive one finds its own ratio); a longer first
+    // primal step for the accelerated one, whose τ only shrinks.
+    let ratio = if gamma > 0.0 { ACCEL_RATIO } else { 1.0 };
+    let mut tau = (ratio * STEP_PRODUCT / 8.0).sqrt();
+    let mut sigma = STEP_PRODUCT / (8.0 * tau);
+    let mut sums = Sums::default();
+    let mut it = 0;
+    let termination = loop {
+        it += 1;
+        problem.primal_step(&mut x, &mut out, &adj, &mut r, tau, &mut sums);
+        std::mem::swap(&mut g, &mut g_prev);
+        op.apply(&x, &mut g);
+        let theta = if gamma > 0.0 {
+            let theta = 1.0 / (1.0 + 2.0 * gamma * tau).sqrt();
+            tau *= theta;
+            sigma /= theta;
+            theta
+        } else {
+            1.0
+        };
+        problem.dual_step(&mut p, &g, &g_prev, sigma, theta, &mut sums);
+        op.apply_adjoint(&p, &mut adj);
+        problem.conjugate(&adj, &r, &mut sums);
+
+        let primal = sums.data + problem.lambda * sums.tv;
+        if !(primal.is_finite() && sums.conj.is_finite()) {
+            return Err(Error::Breakdown {
+                solver: NAME,
+                reason: format!("non-finite objective at iteration {it}"),
+            });
+        }
+        let gap = (primal + sums.conj).max(0.0);
+        let residual = if gap == 0.0 {
+            0.0
+        } else if primal > 0.0 {
+            gap / primal
+        } else {
+            f64::INFINITY
+        };
+        let change = if sums.change == 0.0 {
+            0.0
+        } else if sums.norm == 0.0 {
+            f64::INFINITY
+        } else {
+            (sums.change / sums.norm).sqrt()
+        };
+        if alpha > 0.0 {
+            // Residual balancing: a larger primal residual asks for a longer primal step.
+            let (rp, rd) = (sums.primal_res.sqrt(), sums.dual_res.sqrt());
+            if rp > ADAPT_RATIO * rd {
+                tau /= 1.0 - alpha;
+                sigma *= 1.0 - alpha;
+                alpha *= ADAPT_ETA;
+            } else if rd > ADAPT_RATIO * rp {
+                tau *= 1.0 - alpha;
+                sigma /= 1.0 - alpha;
+                alpha *= ADAPT_ETA;
+            }
+        }
+        if let Some(t) = monitor.step(it, residual, wmax * scale * scale * primal, change, &out) {
+            break t;
+        }
+    };
+    u.iter_mut().zip(&out).for_each(|(ui, &v)| *ui = v);
+    Ok(monitor.finish(it, termination, &op))
+}
