@@ -24,6 +24,7 @@ mod iteration;
 mod model_based;
 mod progress;
 mod tv;
+mod tv_depth;
 
 use std::time::{Duration, Instant};
 
@@ -37,6 +38,7 @@ pub use iht::{iht, IhtParams, IhtStep};
 pub use model_based::{model_based, ModelBasedParams, PixelColumns, VoxelOperator};
 pub use progress::ProgressObserver;
 pub use tv::{tv_denoise, TvNorm, TvParams, TvSteps};
+pub use tv_depth::{tv_depth, TvDepthParams};
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;

@@ -334,6 +334,24 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
+    model_based_in(op, y, x, params, None, observer)
+}
+
+/// [`model_based`] with each pixel's depth restricted to a window `lo..=hi` of its depths
+/// (`windows[p] = (lo, hi)`), as the TV-on-depth solver uses it.
+pub(crate) fn model_based_in<T, A, O>(
+    op: &A,
+    y: &[T],
+    x: &mut [T],
+    params: &ModelBasedParams,
+    windows: Option<&[(usize, usize)]>,
+    observer: &mut O,
+) -> Result<Report>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+{
     const NAME: &str = "model-based";
     params.validate()?;
     let (m, n) = (op.nrows(), op.ncols());
@@ -352,6 +370,21 @@ where
     if ynorm == 0.0 {
         x.fill(T::zero());
         return Ok(monitor.finish(0, Termination::ZeroResidual, &counted));
+    }
+    if let Some(w) = windows {
+        if w.len() != n / ks {
+            return Err(Error::shape(
+                "model-based: depth windows vs pixels",
+                n / ks,
+                w.len(),
+            ));
+        }
+        if let Some(p) = w.iter().position(|&(lo, hi)| lo > hi || hi >= ks) {
+            return Err(Error::param(
+                "windows",
+                format!("pixel {p}: window {:?} is not within 0..{ks}", w[p]),
+            ));
+        }
     }
     let budget = ((params.max_support_fraction * m as f64) as usize).max(1);
     let score = |v: f64| if params.nonnegative { v } else { v.abs() };
@@ -392,7 +425,8 @@ where
             .filter_map(|(p, col)| {
                 let i = slot[p];
                 let mut best = (0, f64::NEG_INFINITY, 0.0);
-                for (j, c) in col.iter().enumerate() {
+                let (lo, hi) = windows.map_or((0, ks - 1), |w| w[p]);
+                for (j, c) in col.iter().enumerate().take(hi + 1).skip(lo) {
                     let mut v = c.as_f64();
                     if i != usize::MAX {
                         v += amp[i].as_f64() * own[i * ks + j];
