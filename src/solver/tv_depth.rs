@@ -15,7 +15,7 @@ pub struct TvDepthParams {
     /// The model-based fits (the first from scratch, the later ones restricted to depth windows).
     pub model: ModelBasedParams,
     /// λ of the weighted TV denoising of the depth map, in depth bins per unit of confidence
-    /// weight (the weights are normalized to a maximum of 1; default 1).
+    /// weight (the weights are normalized to a maximum of 1; default 0.3).
     pub lambda: f64,
     /// Half-width, in bins, of the window around the regularized depth within which the next
     /// fit may place each pixel's reflector (default 2).
@@ -30,7 +30,7 @@ impl Default for TvDepthParams {
     fn default() -> Self {
         TvDepthParams {
             model: ModelBasedParams::default(),
-            lambda: 1.0,
+            lambda: 0.3,
             window: 2,
             rounds: 2,
             tv: TvParams::new(1.0).expect("a valid λ"),
