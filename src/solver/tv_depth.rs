@@ -69,7 +69,7 @@ fn peaks<T: Real>(x: &[T], ks: usize) -> Vec<Option<(usize, f64)>> {
 /// towards their neighbours' depths, where the data then confirm or move them.
 ///
 /// `grid` is (M, N), with M·N pixels of `op.column_len()` voxels each. The report sums the
-/// iterations and apply counts of every stage and ends with the last fit's termination.
+/// iterations and the applications of `op` over every fit and ends with the last fit's termination.
 ///
 /// # Errors
 /// As [`model_based`](super::model_based) and [`tv_denoise`]; [`Error::ShapeMismatch`] if
@@ -125,9 +125,7 @@ where
             found[i * n + j].map_or(0.0, |p| (p.1 / amax).powi(2))
         });
         let mut u = f.clone();
-        let r = tv_denoise(f.view(), w.view(), &mut u, &tv, &mut ())?;
-        report.forward_applies += r.forward_applies;
-        report.adjoint_applies += r.adjoint_applies;
+        tv_denoise(f.view(), w.view(), &mut u, &tv, &mut ())?;
         let centre: Vec<usize> = u
             .iter()
             .map(|v| v.round().clamp(0.0, (ks - 1) as f64) as usize)
