@@ -232,6 +232,18 @@ struct Applies {
     adjoint: usize,
 }
 
+/// y − A_S b for the restriction `restricted` of the operator to a support.
+fn residual_of<T: Real>(restricted: &dyn LinearOperator<T>, y: &[T], b: &[T]) -> Vec<T> {
+    let mut r = vec![T::zero(); y.len()];
+    if !b.is_empty() {
+        restricted.apply(b, &mut r);
+    }
+    for (ri, &yi) in r.iter_mut().zip(y) {
+        *ri = yi - *ri;
+    }
+    r
+}
+
 /// Least squares on the support `voxels`, warm-started from `b`; returns the residual y − A_S b.
 fn fit<T, A>(
     op: &A,
@@ -248,7 +260,6 @@ where
 {
     const NAME: &str = "model-based";
     let restricted = op.restrict(voxels.to_vec())?;
-    let mut r = vec![T::zero(); y.len()];
     if !voxels.is_empty() {
         let rep = cgls(&restricted, y, b, inner, &mut ()).map_err(|e| match e {
             Error::Breakdown { reason, .. } => Error::Breakdown {
@@ -259,12 +270,8 @@ where
         })?;
         applies.forward += rep.forward_applies + 1;
         applies.adjoint += rep.adjoint_applies;
-        restricted.apply(b, &mut r);
     }
-    for (ri, &yi) in r.iter_mut().zip(y) {
-        *ri = yi - *ri;
-    }
-    Ok(r)
+    Ok(residual_of(restricted.as_ref(), y, b))
 }
 
 /// y − A_S b.
@@ -279,15 +286,18 @@ where
     T: Real,
     A: VoxelOperator<T> + ?Sized,
 {
-    let mut r = vec![T::zero(); y.len()];
-    if !voxels.is_empty() {
-        op.restrict(voxels.to_vec())?.apply(b, &mut r);
-        applies.forward += 1;
-    }
-    for (ri, &yi) in r.iter_mut().zip(y) {
-        *ri = yi - *ri;
-    }
-    Ok(r)
+    applies.forward += usize::from(!voxels.is_empty());
+    Ok(residual_of(op.restrict(voxels.to_vec())?.as_ref(), y, b))
+}
+
+/// Keeps the rows of `v` (rows of `width` entries) whose flag in `keep` is set.
+fn retain_rows<U: Copy>(v: &mut Vec<U>, keep: &[bool], width: usize) {
+    *v = v
+        .chunks(width)
+        .zip(keep)
+        .filter(|(_, k)| **k)
+        .flat_map(|(row, _)| row.iter().copied())
+        .collect();
 }
 
 /// Recovers a scene with at most one nonzero per pixel (a pixel is `column_len` consecutive
@@ -403,6 +413,8 @@ where
         })
         .collect();
     let mut amp: Vec<T> = voxels.iter().map(|&v| x[v]).collect();
+    // Each supported pixel's Gram row (its own reflector's correlations), kept with the support.
+    let mut own = op.self_correlations(&voxels);
     let mut r = fit(op, &voxels, y, &mut amp, &params.inner, &mut applies, 0)?;
     let mut u = vec![T::zero(); n];
     let mut prev = x.to_vec();
@@ -413,8 +425,7 @@ where
         applies.adjoint += 1;
         let sigma = robust_sigma(&u);
         let explore = it <= params.explore_iterations;
-        // Each supported pixel's own reflector, added back to its correlations.
-        let own = op.self_correlations(&voxels);
+        // Each supported pixel's own reflector is added back to its correlations.
         let mut slot = vec![usize::MAX; n / ks];
         for (i, &v) in voxels.iter().enumerate() {
             slot[v / ks] = i;
@@ -450,20 +461,19 @@ where
         }
         // Amplitudes to start the least squares from: kept where the depth is unchanged, the
         // correlation over the pixel's own diagonal Gram entry elsewhere.
-        let new_voxels: Vec<usize> = picks.iter().map(|p| p.0).collect();
-        let diag = op.self_correlations(&new_voxels);
+        let mut new_voxels: Vec<usize> = picks.iter().map(|p| p.0).collect();
+        let mut new_own = op.self_correlations(&new_voxels);
         let mut new_amp: Vec<T> = picks
             .iter()
             .enumerate()
             .map(|(i, &(v, _, c))| match voxels.binary_search(&v) {
                 Ok(k) => amp[k],
                 Err(_) => {
-                    let d = diag[i * ks + v % ks];
+                    let d = new_own[i * ks + v % ks];
                     T::of_f64(if d > 0.0 { c / d } else { 0.0 })
                 }
             })
             .collect();
-        let mut new_voxels = new_voxels;
         r = fit(
             op,
             &new_voxels,
@@ -477,9 +487,9 @@ where
             // Drop the pixels whose amplitude came out non-positive; their depth is re-judged
             // at the next iteration against the residual without them.
             let keep: Vec<bool> = new_amp.iter().map(|a| *a > T::zero()).collect();
-            let mut k = keep.iter();
-            new_voxels.retain(|_| *k.next().unwrap_or(&false));
-            new_amp.retain(|a| *a > T::zero());
+            retain_rows(&mut new_voxels, &keep, 1);
+            retain_rows(&mut new_amp, &keep, 1);
+            retain_rows(&mut new_own, &keep, ks);
             r = residual(op, &new_voxels, y, &new_amp, &mut applies)?;
         }
         let rel = (dot(&r, &r)).sqrt() / ynorm;
@@ -497,10 +507,9 @@ where
                 .map(|(a, c)| score(a.as_f64()) * c >= params.amplitude_z * sigma_r)
                 .collect();
             if keep.iter().any(|k| !k) {
-                let mut k = keep.iter();
-                new_voxels.retain(|_| *k.next().unwrap_or(&false));
-                let mut k = keep.iter();
-                new_amp.retain(|_| *k.next().unwrap_or(&false));
+                retain_rows(&mut new_voxels, &keep, 1);
+                retain_rows(&mut new_amp, &keep, 1);
+                retain_rows(&mut new_own, &keep, ks);
                 r = fit(
                     op,
                     &new_voxels,
@@ -516,6 +525,7 @@ where
         let same = new_voxels == voxels;
         voxels = new_voxels;
         amp = new_amp;
+        own = new_own;
         x.fill(T::zero());
         for (&v, &a) in voxels.iter().zip(&amp) {
             x[v] = a;
