@@ -7,6 +7,7 @@ mod architectures;
 mod argmin_solvers;
 mod cli;
 mod cli_lidar;
+mod cli_reconstruct;
 mod convolution;
 mod errors;
 #[cfg(feature = "lapack")]
@@ -18,6 +19,7 @@ mod norm;
 mod operators;
 mod plot;
 mod rdop;
+mod reconstruct;
 mod scenes;
 mod solvers;
 mod sparse_solvers;

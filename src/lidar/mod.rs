@@ -12,6 +12,7 @@ mod metrics;
 mod noise;
 mod pulse;
 mod rdop;
+mod reconstruct;
 mod scene;
 mod scenes;
 mod support;
@@ -27,6 +28,10 @@ pub use noise::{
 };
 pub use pulse::Pulse;
 pub use rdop::{composed_operator, ForwardPath, RdOperator};
+pub use reconstruct::{
+    is_piecewise_smooth, reconstruct, Method, ReconstructOptions, Reconstruction, SMOOTH_BINS,
+    SMOOTH_FRACTION, TV_RESIDUAL_MARGIN,
+};
 pub use scene::{DepthMap, Scene, NO_RETURN};
 pub use scenes::{
     attenuate, composite_nearest, paper_scene, paper_surfaces, random_opaque_scene,

@@ -1,0 +1,539 @@
+//! One entry point for every reconstruction method, with lidar defaults: from measurements to a
+//! one-return-per-pixel scene and its depth map.
+//!
+//! [`reconstruct`] runs a [`Method`] on an [`RdOperator`] and its measurements and returns a
+//! [`Reconstruction`]. Generic solvers (CGLS, FISTA, IHT, CoSaMP) estimate the whole voxel cube;
+//! their estimate is reduced to at most one return per pixel by the per-pixel peak rule of
+//! [`backprojection`] (the largest positive entry of each pixel, kept above a robust threshold).
+//! The model-based and TV solvers produce one return per pixel themselves.
+
+use std::str::FromStr;
+use std::time::{Duration, Instant};
+
+use crate::error::{Error, Result};
+use crate::linalg::{norm2, norm_inf};
+use crate::operator::{Identity, LinearOperator, PowerIteration};
+use crate::real::Real;
+use crate::solver::{
+    backprojection, cgls, cosamp, fista, iht, model_based, tv_depth, Backprojection, CglsParams,
+    CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams, ProgressObserver, Report,
+    Restart, StepRule, Stopping, Threshold, TvDepthParams,
+};
+
+use super::geometry::{Geometry, Regime};
+use super::rdop::RdOperator;
+use super::scene::{DepthMap, Scene, NO_RETURN};
+
+/// How many robust standard deviations above the median a per-pixel peak must be to count as a
+/// return ([`Threshold::Auto`]).
+const AUTO_K: f64 = 3.0;
+
+/// Peaks of an iterative estimate below this fraction of the strongest peak are dropped: they are
+/// the numerical residue of empty pixels, not returns.
+const RELATIVE_FLOOR: f64 = 0.05;
+
+/// λ of [`Method::Fista`] as a fraction of ‖Aᵀy‖∞.
+const FISTA_LAMBDA_FRACTION: f64 = 0.05;
+
+/// Default iteration limits.
+const CGLS_MAX_ITER: usize = 300;
+const FISTA_MAX_ITER: usize = 200;
+const GREEDY_MAX_ITER: usize = 100;
+
+/// Fraction of the lit pixels of an [`Method::Auto`] model-based result that must have a lit
+/// 4-neighbour within [`SMOOTH_BINS`] of their depth for the depth map to count as piecewise
+/// smooth (and TV to be run).
+pub const SMOOTH_FRACTION: f64 = 0.6;
+
+/// Depth difference, in bins, up to which two neighbouring returns belong to one surface.
+pub const SMOOTH_BINS: i32 = 1;
+
+/// [`Method::Auto`] keeps the TV refinement only if its residual ‖Ax − y‖ is at most this factor
+/// times the model-based one (plus 10⁻⁶‖y‖): TV must not buy smoothness with a worse data fit.
+pub const TV_RESIDUAL_MARGIN: f64 = 1.05;
+
+/// A reconstruction method, named on the command line as [`Method::name`] gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// The paper's method: plain backprojection Aᵀy normalized by ‖p‖², per-pixel peak, robust
+    /// threshold ([`Threshold::Auto`] with k = 3).
+    Backprojection,
+    /// Backprojection with the zero-mean pulse, normalized by Σ(p − mean p)·p (≈ K_p/4 for a 0/1
+    /// pulse) so that peaks estimate amplitudes; per-pixel peak, robust threshold.
+    BackprojectionDebiased,
+    /// Least squares by CGLS (at most 300 iterations or a relative normal-equation residual of
+    /// 1e-8), then per-pixel peaks.
+    Cgls,
+    /// Nonnegative lasso by FISTA (λ = 0.05·‖Aᵀy‖∞, power-iteration step, function restart, at
+    /// most 200 iterations), then per-pixel peaks.
+    Fista,
+    /// Iterative hard thresholding (at most 100 iterations) with the sparsity estimated from the
+    /// debiased backprojection, then per-pixel peaks.
+    Iht,
+    /// CoSaMP (at most 100 iterations) with the sparsity estimated from the debiased
+    /// backprojection, then per-pixel peaks.
+    Cosamp,
+    /// Model-based recovery, at most one reflector per pixel ([`ModelBasedParams::default`]).
+    ModelBased,
+    /// Total variation on the depth map ([`TvDepthParams::default`]).
+    Tv,
+    /// Chosen from the regime of the pulse length; see [`reconstruct`].
+    Auto,
+}
+
+impl Method {
+    /// Every method, in the order of the command-line help.
+    pub const ALL: [Method; 9] = [
+        Method::Backprojection,
+        Method::BackprojectionDebiased,
+        Method::Cgls,
+        Method::Fista,
+        Method::Iht,
+        Method::Cosamp,
+        Method::ModelBased,
+        Method::Tv,
+        Method::Auto,
+    ];
+
+    /// The command-line names of [`Method::ALL`].
+    pub const NAMES: [&'static str; 9] = [
+        "backprojection",
+        "backprojection-debiased",
+        "cgls",
+        "fista",
+        "iht",
+        "cosamp",
+        "model-based",
+        "tv",
+        "auto",
+    ];
+
+    /// The command-line name (`"model-based"`, …).
+    pub fn name(self) -> &'static str {
+        let i = Method::ALL
+            .iter()
+            .position(|&m| m == self)
+            .expect("ALL lists every method");
+        Method::NAMES[i]
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = Error;
+
+    /// Parses a command-line name (exactly as [`Method::name`] writes it).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`method`) listing the valid names.
+    fn from_str(s: &str) -> Result<Self> {
+        Method::NAMES
+            .iter()
+            .position(|&n| n == s)
+            .map(|i| Method::ALL[i])
+            .ok_or_else(|| {
+                Error::param(
+                    "method",
+                    format!(
+                        "unknown method {s:?}; expected one of {}",
+                        Method::NAMES.join(", ")
+                    ),
+                )
+            })
+    }
+}
+
+/// Settings of [`reconstruct`] shared by every method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ReconstructOptions {
+    /// Overrides the method's iteration limit (ignored by the backprojections).
+    pub max_iter: Option<usize>,
+    /// Shows a progress bar on stderr (when it is a terminal) during iterative solves.
+    pub progress: bool,
+    /// Seed of the randomized parts (the power iteration behind FISTA's step).
+    pub seed: u64,
+}
+
+/// What [`reconstruct`] returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reconstruction<T> {
+    /// The estimate, at most one nonzero voxel per pixel.
+    pub scene: Scene<T>,
+    /// Its depth map ([`Scene::depth_map`]): depth bin and amplitude per pixel, [`NO_RETURN`]
+    /// where there is none.
+    pub depth: DepthMap<T>,
+    /// The method that produced the estimate: the one asked for, or what [`Method::Auto`] chose
+    /// ([`Method::Tv`] when it refined a model-based fit).
+    pub method_used: Method,
+    /// The regime of the pulse length (eq. 8–9).
+    pub regime: Regime,
+    /// The iterative solver's report (`None` for the backprojections). For [`Method::Auto`]
+    /// refined by TV, the model-based and TV reports are summed (iterations, applies, elapsed).
+    pub report: Option<Report>,
+    /// Wall-clock time of the whole reconstruction, peak extraction included.
+    pub elapsed: Duration,
+}
+
+/// Reconstructs a scene from the measurements `y = A x` of the lidar operator `op`.
+///
+/// Each [`Method`] runs with lidar defaults (see its documentation). The iterative solvers'
+/// estimates are reduced to one return per pixel: each pixel's largest positive entry, kept if it
+/// is above median + 3σ of all entries (σ = 1.4826·MAD) and at least 5% of the strongest peak
+/// (for the model-based and TV solvers, which already give one return per pixel, this only drops
+/// returns too weak to be real).
+///
+/// **The [`Method::Auto`] rule.** From the regime of K_p ([`Geometry::regime`]):
+///
+/// * redundant (K > M·N·K_s): [`Method::BackprojectionDebiased`] — the operator is close to a
+///   frame and one zero-mean adjoint approximately inverts it;
+/// * critical (K = M·N·K_s): [`Method::Cgls`] — A is square and least squares suffices;
+/// * compressive: [`Method::ModelBased`]; then, if the resulting depth map is piecewise smooth —
+///   at least [`SMOOTH_FRACTION`] (60%) of the lit pixels have a lit 4-neighbour within
+///   [`SMOOTH_BINS`] (1) bin of their own depth — [`Method::Tv`] refines it, warm-started from the
+///   model-based scene. The refinement is kept only if it fits the data about as well
+///   ([`TV_RESIDUAL_MARGIN`]); otherwise the model-based scene is returned (and the report, which
+///   then still includes the TV run, says `tv-depth` while `method_used` says model-based).
+///
+/// # Errors
+/// [`Error::ShapeMismatch`] / [`Error::NonFinite`] if `y` does not fit the operator or is not
+/// finite; [`Error::InvalidParameter`] for a zero `max_iter` or an all-zero pulse; the solvers'
+/// own errors (e.g. [`Error::Breakdown`]).
+pub fn reconstruct<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    method: Method,
+    options: &ReconstructOptions,
+) -> Result<Reconstruction<T>> {
+    let start = Instant::now();
+    if options.max_iter == Some(0) {
+        return Err(Error::param("max_iter", "must be at least 1"));
+    }
+    if y.len() != op.nrows() {
+        return Err(Error::shape(
+            "reconstruct: measurements vs operator rows",
+            op.nrows(),
+            y.len(),
+        ));
+    }
+    let g = op.geometry();
+    let regime = g.regime(op.pulse().len());
+    let chosen = match method {
+        Method::Auto => match regime {
+            Regime::Redundant => Method::BackprojectionDebiased,
+            Regime::Critical => Method::Cgls,
+            Regime::Compressive => Method::ModelBased,
+        },
+        m => m,
+    };
+    let (mut x, mut report) = run(op, y, chosen, options)?;
+    let mut method_used = chosen;
+    if method == Method::Auto && chosen == Method::ModelBased {
+        let scene = Scene::from_vec(g, x.clone())?;
+        if is_piecewise_smooth(&scene.depth_map().depth) {
+            let params = TvDepthParams {
+                model: model_params(options),
+                ..TvDepthParams::default()
+            };
+            let mut progress = progress_bar(params.model.stopping.max_iter, options);
+            let mut x_tv = x.clone();
+            let tv = tv_depth(op, (g.m, g.n), y, &mut x_tv, &params, &mut progress)?;
+            progress.finish();
+            let (r_mb, r_tv) = (residual_norm(op, y, &x), residual_norm(op, y, &x_tv));
+            let y_norm = norm2(y);
+            if r_tv <= TV_RESIDUAL_MARGIN * r_mb + 1e-6 * y_norm {
+                x = x_tv;
+                method_used = Method::Tv;
+            }
+            report = Some(match report {
+                Some(mut r) => {
+                    r.solver = tv.solver;
+                    r.iterations += tv.iterations;
+                    r.termination = tv.termination;
+                    r.residual_history.extend(tv.residual_history);
+                    r.objective_history.extend(tv.objective_history);
+                    r.forward_applies += tv.forward_applies;
+                    r.adjoint_applies += tv.adjoint_applies;
+                    r.elapsed += tv.elapsed;
+                    r
+                }
+                None => tv,
+            });
+        }
+    }
+    if report.is_some() {
+        x = pixel_peaks(&x, g)?;
+    }
+    let scene = Scene::from_vec(g, x)?;
+    let depth = scene.depth_map();
+    Ok(Reconstruction {
+        scene,
+        depth,
+        method_used,
+        regime,
+        report,
+        elapsed: start.elapsed(),
+    })
+}
+
+/// ‖Ax − y‖ in `f64`.
+fn residual_norm<T: Real>(op: &RdOperator<T>, y: &[T], x: &[T]) -> f64 {
+    let mut r = vec![T::zero(); y.len()];
+    op.apply(x, &mut r);
+    r.iter()
+        .zip(y)
+        .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// Whether at least [`SMOOTH_FRACTION`] of the lit pixels of `depth` have a lit 4-neighbour
+/// within [`SMOOTH_BINS`] bins of their depth (false for a map with no lit pixel).
+pub fn is_piecewise_smooth(depth: &ndarray::Array2<i32>) -> bool {
+    let (m, n) = depth.dim();
+    let (mut lit, mut smooth) = (0usize, 0usize);
+    for ((i, j), &d) in depth.indexed_iter() {
+        if d == NO_RETURN {
+            continue;
+        }
+        lit += 1;
+        let neighbours = [
+            (i.wrapping_sub(1), j),
+            (i + 1, j),
+            (i, j.wrapping_sub(1)),
+            (i, j + 1),
+        ];
+        if neighbours.iter().any(|&(a, b)| {
+            a < m && b < n && {
+                let e = depth[[a, b]];
+                e != NO_RETURN && (e - d).abs() <= SMOOTH_BINS
+            }
+        }) {
+            smooth += 1;
+        }
+    }
+    lit > 0 && smooth as f64 >= SMOOTH_FRACTION * lit as f64
+}
+
+fn progress_bar(max_iter: usize, options: &ReconstructOptions) -> ProgressObserver {
+    ProgressObserver::new(max_iter).quiet(!options.progress)
+}
+
+fn stopping(default: Stopping, options: &ReconstructOptions) -> Stopping {
+    Stopping {
+        max_iter: options.max_iter.unwrap_or(default.max_iter),
+        ..default
+    }
+}
+
+fn model_params(options: &ReconstructOptions) -> ModelBasedParams {
+    let d = ModelBasedParams::default();
+    ModelBasedParams {
+        stopping: stopping(d.stopping, options),
+        ..d
+    }
+}
+
+/// Runs one concrete method (not [`Method::Auto`]); returns the estimate and the solver's report.
+/// The backprojections' estimates have one return per pixel at most; the iterative ones still
+/// need [`pixel_peaks`].
+fn run<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    method: Method,
+    options: &ReconstructOptions,
+) -> Result<(Vec<T>, Option<Report>)> {
+    let g = op.geometry();
+    let n = g.voxels();
+    let mut x = vec![T::zero(); n];
+    let report = match method {
+        Method::Backprojection | Method::BackprojectionDebiased => {
+            let bp = backproject(op, y, method == Method::BackprojectionDebiased)?;
+            return Ok((bp.x, None));
+        }
+        Method::Cgls => {
+            let params = CglsParams {
+                damp: 0.0,
+                stopping: stopping(
+                    Stopping {
+                        max_iter: CGLS_MAX_ITER,
+                        rel_residual: Some(1e-8),
+                        ..Stopping::default()
+                    },
+                    options,
+                ),
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = cgls(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Fista => {
+            let params = FistaParams {
+                lambda: Lambda::Fraction(FISTA_LAMBDA_FRACTION),
+                nonnegative: true,
+                step: StepRule::PowerIteration {
+                    settings: PowerIteration {
+                        seed: options.seed,
+                        ..PowerIteration::default()
+                    },
+                    margin: 1.01,
+                },
+                restart: Restart::Function,
+                stopping: stopping(
+                    Stopping {
+                        max_iter: FISTA_MAX_ITER,
+                        rel_residual: Some(1e-6),
+                        rel_change: Some(1e-6),
+                        ..Stopping::default()
+                    },
+                    options,
+                ),
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = fista(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Iht => {
+            let s = estimate_sparsity(op, y)?;
+            let d = IhtParams::new(s);
+            let params = IhtParams {
+                stopping: stopping(
+                    Stopping {
+                        max_iter: GREEDY_MAX_ITER,
+                        ..d.stopping
+                    },
+                    options,
+                ),
+                ..d
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = iht(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Cosamp => {
+            let s = estimate_sparsity(op, y)?;
+            let d = CosampParams::new(s);
+            let params = CosampParams {
+                stopping: stopping(
+                    Stopping {
+                        max_iter: GREEDY_MAX_ITER,
+                        ..d.stopping
+                    },
+                    options,
+                ),
+                ..d
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = cosamp(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::ModelBased => {
+            let params = model_params(options);
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = model_based(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Tv => {
+            let params = TvDepthParams {
+                model: model_params(options),
+                ..TvDepthParams::default()
+            };
+            let mut progress = progress_bar(params.model.stopping.max_iter, options);
+            let r = tv_depth(op, (g.m, g.n), y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Auto => unreachable!("Auto is resolved before run"),
+    };
+    Ok((x, Some(report)))
+}
+
+/// The (plain or debiased) backprojection with the lidar normalization and the robust threshold.
+fn backproject<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    debiased: bool,
+) -> Result<crate::solver::BackprojectionResult<T>> {
+    let p = op.pulse();
+    let (filter, normalization) = if debiased {
+        let z = op.zero_mean();
+        // Σ (p − mean p)·p: the lag-0 correlation of the matched filter with the pulse.
+        let norm: f64 = z
+            .pulse()
+            .iter()
+            .zip(p)
+            .map(|(a, b)| a.as_f64() * b.as_f64())
+            .sum();
+        (Some(z), norm)
+    } else {
+        (None, p.iter().map(|v| v.as_f64().powi(2)).sum())
+    };
+    if !(normalization.is_finite() && normalization > 0.0) {
+        return Err(Error::param(
+            "pulse",
+            "backprojection needs a pulse with at least two distinct values (its matched-filter \
+             gain is zero)",
+        ));
+    }
+    let params = Backprojection {
+        column_len: op.geometry().ks,
+        normalization,
+        threshold: Threshold::Auto { k: AUTO_K },
+    };
+    match &filter {
+        Some(z) => backprojection(z, y, &params),
+        None => backprojection(op, y, &params),
+    }
+}
+
+/// The sparsity for IHT and CoSaMP: twice the number of pixels the debiased backprojection
+/// detects (cross-talk hides weak returns from it, and too small a sparsity cannot be recovered
+/// from, whereas a larger one only costs some accuracy), clamped to [1, min(M·N, K/3)]: one
+/// return per pixel at most, and K/3 keeps CoSaMP's least squares on up to 3s columns
+/// overdetermined.
+fn estimate_sparsity<T: Real>(op: &RdOperator<T>, y: &[T]) -> Result<usize> {
+    let bp = backproject(op, y, true)?;
+    let found = bp.peaks.iter().filter(|&&p| p != NO_RETURN).count();
+    let cap = (op.nrows() / 3).min(op.geometry().pixels()).max(1);
+    Ok((2 * found).clamp(1, cap))
+}
+
+/// One return per pixel from a voxel estimate: the per-pixel peak rule of [`backprojection`]
+/// (applied through the identity), then peaks below [`RELATIVE_FLOOR`] of the strongest dropped.
+fn pixel_peaks<T: Real>(x: &[T], g: Geometry) -> Result<Vec<T>> {
+    if x.iter().all(|v| v.as_f64() <= 0.0) {
+        return Ok(vec![T::zero(); x.len()]);
+    }
+    let id = Identity::<T>::new(x.len());
+    let auto = backprojection(
+        &id,
+        x,
+        &Backprojection {
+            column_len: g.ks,
+            normalization: 1.0,
+            threshold: Threshold::Auto { k: AUTO_K },
+        },
+    )?;
+    if norm_inf(&auto.x) == 0.0 {
+        return Ok(auto.x);
+    }
+    let floor = backprojection(
+        &id,
+        &auto.x,
+        &Backprojection {
+            column_len: g.ks,
+            normalization: 1.0,
+            threshold: Threshold::RelativeToMax(RELATIVE_FLOOR),
+        },
+    )?;
+    Ok(floor.x)
+}

@@ -1,0 +1,144 @@
+//! The reconstruction entry point: method names, the automatic choice by regime, exact recovery
+//! of small scenes and the one-return-per-pixel output of every method.
+
+use std::sync::Arc;
+
+use ndarray::{array, Array3};
+use rdlidar::lidar::{
+    compare, is_piecewise_smooth, paper_scene, reconstruct, Codes, Geometry, Method, Pulse,
+    RdOperator, ReconstructOptions, Regime, Scene, NO_RETURN,
+};
+use rdlidar::{Error, LinearOperator, Real};
+
+fn problem<T: Real>(g: Geometry, kp: usize, seed: u64) -> RdOperator<T> {
+    let pulse = Pulse::<T>::bernoulli(kp, seed).unwrap().into_inner();
+    let codes = Codes::random_binary(g.pixels(), g.samples(kp), seed + 1).unwrap();
+    RdOperator::new(g, pulse, Arc::new(codes)).unwrap()
+}
+
+fn measure<T: Real>(op: &RdOperator<T>, x: &Scene<T>) -> Vec<T> {
+    let mut y = vec![T::zero(); op.nrows()];
+    op.apply(x.as_slice(), &mut y);
+    y
+}
+
+/// Two isolated returns: no lit pixel has a lit neighbour, so the depth map is not smooth.
+fn sparse_scene(g: Geometry) -> Scene<f64> {
+    let mut x = Array3::zeros((g.m, g.n, g.ks));
+    x[[0, 0, 1]] = 0.8;
+    x[[g.m - 1, g.n - 1, g.ks - 2]] = 0.5;
+    Scene::new(x).unwrap()
+}
+
+#[test]
+fn names_round_trip_and_unknown_names_list_the_valid_ones() {
+    for m in Method::ALL {
+        assert_eq!(m.name().parse::<Method>().unwrap(), m);
+        assert_eq!(m.to_string(), m.name());
+    }
+    assert_eq!("model-based".parse::<Method>().unwrap(), Method::ModelBased);
+    let e = "lasso".parse::<Method>().unwrap_err();
+    assert!(matches!(e, Error::InvalidParameter { .. }), "{e:?}");
+    let text = e.to_string();
+    for name in Method::NAMES {
+        assert!(text.contains(name), "{text}");
+    }
+}
+
+#[test]
+fn auto_picks_the_solver_of_the_regime() {
+    let g = Geometry::new(3, 3, 4).unwrap();
+    let crit = g.critical_pulse_len();
+    let truth = sparse_scene(g);
+    let cases = [
+        (4 * crit, Regime::Redundant, Method::BackprojectionDebiased),
+        (crit, Regime::Critical, Method::Cgls),
+        (crit / 2, Regime::Compressive, Method::ModelBased),
+    ];
+    for (kp, regime, method) in cases {
+        let op = problem::<f64>(g, kp, 5);
+        let y = measure(&op, &truth);
+        let r = reconstruct(&op, &y, Method::Auto, &ReconstructOptions::default()).unwrap();
+        assert_eq!(r.regime, regime, "K_p {kp}");
+        assert_eq!(r.method_used, method, "K_p {kp}");
+        assert_eq!(r.report.is_some(), method != Method::BackprojectionDebiased);
+        let m = compare(&truth, &r.scene, 200e-12).unwrap();
+        assert_eq!(m.exact, m.lit, "K_p {kp}: {m}");
+    }
+}
+
+#[test]
+fn model_based_and_auto_recover_a_small_paper_scene_exactly() {
+    let g = Geometry::new(8, 8, 8).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    for (kp, method) in [(2000, Method::ModelBased), (300, Method::Auto)] {
+        let op = problem::<f64>(g, kp, 11);
+        let y = measure(&op, &truth);
+        let r = reconstruct(&op, &y, method, &ReconstructOptions::default()).unwrap();
+        let m = compare(&truth, &r.scene, 200e-12).unwrap();
+        assert_eq!(m.exact, m.lit, "{method} at K_p {kp}: {m}");
+        assert_eq!(m.false_detections, 0, "{m}");
+        assert!(m.relative_error < 1e-3, "{m}");
+        assert_eq!(r.depth, r.scene.depth_map());
+    }
+}
+
+#[test]
+fn every_method_returns_at_most_one_positive_return_per_pixel() {
+    let g = Geometry::new(6, 6, 8).unwrap();
+    let truth = paper_scene::<f32>(g).unwrap();
+    let op = problem::<f32>(g, 1200, 2);
+    let y = measure(&op, &truth);
+    let options = ReconstructOptions {
+        max_iter: Some(30),
+        ..ReconstructOptions::default()
+    };
+    for method in Method::ALL {
+        let r = reconstruct(&op, &y, method, &options).unwrap();
+        assert_eq!(r.scene.geometry(), g);
+        for col in r.scene.as_slice().chunks(g.ks) {
+            assert!(col.iter().filter(|v| **v != 0.0).count() <= 1, "{method}");
+            assert!(col.iter().all(|v| *v >= 0.0), "{method}");
+        }
+        assert_eq!(r.depth.lit(), r.scene.nnz(), "{method}");
+        if method != Method::Auto {
+            assert_eq!(r.method_used, method);
+        }
+        if let Some(rep) = &r.report {
+            assert!(rep.iterations <= 30 * 5, "{method}: {}", rep.iterations);
+        }
+    }
+}
+
+#[test]
+fn piecewise_smooth_needs_most_lit_pixels_next_to_a_similar_depth() {
+    let n = NO_RETURN;
+    assert!(is_piecewise_smooth(&array![[3, 3, n], [4, 3, n]]));
+    assert!(!is_piecewise_smooth(&array![[3, n, 5], [n, 7, n]]));
+    assert!(!is_piecewise_smooth(&array![[3, 6, 1], [8, 4, 9]]));
+    assert!(!is_piecewise_smooth(&array![[n, n], [n, n]]));
+}
+
+#[test]
+fn bad_inputs_are_errors() {
+    let g = Geometry::new(2, 2, 3).unwrap();
+    let op = problem::<f64>(g, 40, 0);
+    let y = vec![0.0; op.nrows()];
+    let zero_iter = ReconstructOptions {
+        max_iter: Some(0),
+        ..ReconstructOptions::default()
+    };
+    assert!(matches!(
+        reconstruct(&op, &y, Method::Cgls, &zero_iter),
+        Err(Error::InvalidParameter { .. })
+    ));
+    assert!(matches!(
+        reconstruct(&op, &y[1..], Method::Cgls, &ReconstructOptions::default()),
+        Err(Error::ShapeMismatch { .. })
+    ));
+    // All-zero data: every method returns the empty scene.
+    for method in Method::ALL {
+        let r = reconstruct(&op, &y, method, &ReconstructOptions::default()).unwrap();
+        assert_eq!(r.depth.lit(), 0, "{method}");
+    }
+}
