@@ -3,6 +3,7 @@
 mod common;
 
 mod algebra;
+mod amp;
 mod architectures;
 mod argmin_solvers;
 mod cli;

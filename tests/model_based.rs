@@ -239,7 +239,7 @@ fn tv_on_depth_beats_the_plain_model_at_a_short_pulse_in_noise() {
     // The paper scene (a slanted plane, a disk and a square) at 20 dB SNR with a pulse too short
     // for the per-pixel model alone.
     let g = Geometry::new(24, 24, 32).unwrap();
-    let op = lidar_problem(g, 1500, false, 0);
+    let op = lidar_problem(g, 1000, false, 0);
     let truth = paper_scene::<f64>(g).unwrap();
     let mut y = vec![0.0; op.nrows()];
     op.apply(truth.as_slice(), &mut y);

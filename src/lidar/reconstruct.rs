@@ -15,9 +15,9 @@ use crate::linalg::{norm2, norm_inf};
 use crate::operator::{Identity, LinearOperator, PowerIteration};
 use crate::real::Real;
 use crate::solver::{
-    backprojection, cgls, cosamp, fista, iht, model_based, tv_depth, Backprojection, CglsParams,
-    CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams, ProgressObserver, Report,
-    Restart, StepRule, Stopping, Threshold, TvDepthParams,
+    backprojection, cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, Backprojection,
+    CglsParams, CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams, ProgressObserver,
+    ReflectorAmpParams, Report, Restart, StepRule, Stopping, Termination, Threshold, TvDepthParams,
 };
 
 use super::geometry::{Geometry, Regime};
@@ -73,7 +73,12 @@ pub enum Method {
     /// CoSaMP (at most 100 iterations) with the sparsity estimated from the debiased
     /// backprojection, then per-pixel peaks.
     Cosamp,
-    /// Model-based recovery, at most one reflector per pixel ([`ModelBasedParams::default`]).
+    /// Message passing with the one-reflector-per-pixel prior alone
+    /// ([`ReflectorAmpParams::default`](crate::solver::ReflectorAmpParams)): the most probable
+    /// scene, without the least-squares refinement of [`Method::ModelBased`].
+    Amp,
+    /// Model-based recovery, at most one reflector per pixel ([`ModelBasedParams::default`]):
+    /// started by message passing, refined by least squares on the support.
     ModelBased,
     /// Total variation on the depth map ([`TvDepthParams::default`]).
     Tv,
@@ -83,26 +88,28 @@ pub enum Method {
 
 impl Method {
     /// Every method, in the order of the command-line help.
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 10] = [
         Method::Backprojection,
         Method::BackprojectionDebiased,
         Method::Cgls,
         Method::Fista,
         Method::Iht,
         Method::Cosamp,
+        Method::Amp,
         Method::ModelBased,
         Method::Tv,
         Method::Auto,
     ];
 
     /// The command-line names of [`Method::ALL`].
-    pub const NAMES: [&'static str; 9] = [
+    pub const NAMES: [&'static str; 10] = [
         "backprojection",
         "backprojection-debiased",
         "cgls",
         "fista",
         "iht",
         "cosamp",
+        "amp",
         "model-based",
         "tv",
         "auto",
@@ -195,7 +202,9 @@ pub struct Reconstruction<T> {
 /// * compressive: [`Method::ModelBased`]; then, if the resulting depth map is piecewise smooth —
 ///   at least [`SMOOTH_FRACTION`] (60%) of the lit pixels have a lit 4-neighbour within
 ///   [`SMOOTH_BINS`] (1) bin of their own depth — [`Method::Tv`] refines it, warm-started from the
-///   model-based scene. The refinement is kept only if it fits the data about as well
+///   model-based scene, unless the model-based fit already explains the data (its relative
+///   residual reached the solver's tolerance, as on noise-free data it recovers exactly). The
+///   refinement is kept only if it fits the data about as well
 ///   ([`TV_RESIDUAL_MARGIN`]); otherwise the model-based scene is returned (and the report, which
 ///   then still includes the TV run, says `tv-depth` while `method_used` says model-based).
 ///
@@ -234,7 +243,10 @@ pub fn reconstruct<T: Real>(
     let mut method_used = chosen;
     if method == Method::Auto && chosen == Method::ModelBased {
         let scene = Scene::from_vec(g, x.clone())?;
-        if is_piecewise_smooth(&scene.depth_map().depth) {
+        let explained = report
+            .as_ref()
+            .is_some_and(|r| r.termination == Termination::Residual);
+        if !explained && is_piecewise_smooth(&scene.depth_map().depth) {
             let params = TvDepthParams {
                 model: model_params(options),
                 ..TvDepthParams::default()
@@ -432,6 +444,17 @@ fn run<T: Real>(
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
             let r = cosamp(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Amp => {
+            let d = ReflectorAmpParams::default();
+            let params = ReflectorAmpParams {
+                stopping: stopping(d.stopping, options),
+                ..d
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = reflector_amp(op, y, &mut x, &params, &mut progress)?;
             progress.finish();
             r
         }

@@ -206,6 +206,35 @@ impl<T: Real> VoxelOperator<T> for RdOperator<T> {
         }
     }
 
+    /// With ±1 codes (s² = 1) the pulse's plain autocorrelation, Toeplitz and the same for
+    /// every pixel. With ternary codes an approximation: that block scaled by the fraction of
+    /// the pixel's codes that are nonzero, exact for pixels whose codes are all zero or all
+    /// nonzero (a coded aperture) and the expected block for randomly placed zeros.
+    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
+        let ks = self.geometry().ks;
+        let p64: Vec<f64> = self.pulse().iter().map(|v| v.as_f64()).collect();
+        let kp = p64.len();
+        let lags: Vec<f64> = (0..ks)
+            .map(|l| (0..kp.saturating_sub(l)).map(|t| p64[t] * p64[t + l]).sum())
+            .collect();
+        let codes = self.codes();
+        let scale = match codes.minus_plane() {
+            None => 1.0,
+            Some(_) => {
+                let k = self.nrows();
+                let nonzero = (0..k).filter(|&t| codes.get(pixel, t) != 0).count();
+                nonzero as f64 / k.max(1) as f64
+            }
+        };
+        (0..ks * ks)
+            .map(|i| scale * lags[(i / ks).abs_diff(i % ks)])
+            .collect()
+    }
+
+    fn uniform_pixel_gram(&self) -> bool {
+        self.codes().minus_plane().is_none()
+    }
+
     /// ‖p‖ for ±1 codes; with ternary codes the pulse energy over the nonzero codes of the window.
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
         let ks = self.geometry().ks;

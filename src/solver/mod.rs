@@ -13,6 +13,7 @@
 //! Reaching the iteration limit is a termination reason, not an error; invalid parameters,
 //! mismatched shapes, non-finite data and numerical breakdowns are [`Error`]s.
 
+mod amp;
 mod argmin_cgls;
 mod argmin_sparse;
 mod backprojection;
@@ -28,6 +29,7 @@ mod tv_depth;
 
 use std::time::{Duration, Instant};
 
+pub use amp::{reflector_amp, ReflectorAmpParams};
 pub use argmin_cgls::{ArgminCgls, CglsState, LinearLeastSquares};
 pub use argmin_sparse::{ArgminCosamp, ArgminFista, ArgminIht, SparseState};
 pub use backprojection::{backprojection, Backprojection, BackprojectionResult, Threshold};

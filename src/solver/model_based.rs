@@ -8,6 +8,7 @@ use crate::linalg::dot;
 use crate::operator::{Counted, LinearOperator, OperatorExt, Restriction};
 use crate::real::Real;
 
+use super::amp::{reflector_amp_in, ReflectorAmpParams};
 use super::{cgls, check_problem, check_tolerance, CglsParams, Monitor, Observer, Report};
 use super::{Stopping, Termination};
 
@@ -52,6 +53,38 @@ pub trait VoxelOperator<T: Real>: LinearOperator<T> {
             out.extend(u[p0..p0 + ks].iter().map(|v| v.as_f64()));
         }
         out
+    }
+
+    /// The Gram block AₚᵀAₚ of pixel `pixel`'s `column_len` columns, row-major, in f64 (the
+    /// plain inner products, whatever [`correlate`](Self::correlate) uses). By default from
+    /// `column_len` forward applications.
+    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
+        let ks = self.column_len();
+        let mut e = vec![T::zero(); self.ncols()];
+        let cols: Vec<Vec<T>> = (0..ks)
+            .map(|j| {
+                let mut a = vec![T::zero(); self.nrows()];
+                e[pixel * ks + j] = T::one();
+                self.apply(&e, &mut a);
+                e[pixel * ks + j] = T::zero();
+                a
+            })
+            .collect();
+        let mut g = vec![0.0; ks * ks];
+        for i in 0..ks {
+            for j in i..ks {
+                let v = dot(&cols[i], &cols[j]);
+                g[i * ks + j] = v;
+                g[j * ks + i] = v;
+            }
+        }
+        g
+    }
+
+    /// Whether every pixel has the same Gram block, so that [`pixel_gram`](Self::pixel_gram)
+    /// need only be asked for pixel 0 (default `false`).
+    fn uniform_pixel_gram(&self) -> bool {
+        false
     }
 
     /// ‖A e_c‖ for each of `columns`.
@@ -160,6 +193,11 @@ pub struct ModelBasedParams {
     pub noise_floor: f64,
     /// The least-squares step on the support (CGLS on the restricted operator, warm-started).
     pub inner: CglsParams,
+    /// Without a warm start, the first support comes from message passing with the
+    /// one-reflector prior ([`reflector_amp`](super::reflector_amp)), and the exploration is
+    /// skipped; `None` starts from the exploration instead (default: AMP with its defaults, but
+    /// stopping once its support has been stable for 3 iterations).
+    pub amp: Option<ReflectorAmpParams>,
     /// Stopping rules; the residual is ‖Ax − y‖ / ‖y‖.
     pub stopping: Stopping,
 }
@@ -173,6 +211,10 @@ impl Default for ModelBasedParams {
             amplitude_z: 3.0,
             noise_floor: 1e-4,
             max_support_fraction: 0.8,
+            amp: Some(ReflectorAmpParams {
+                stable_support: Some(3),
+                ..ReflectorAmpParams::default()
+            }),
             inner: CglsParams {
                 damp: 0.0,
                 stopping: Stopping {
@@ -194,6 +236,9 @@ impl ModelBasedParams {
     fn validate(&self) -> Result<()> {
         self.stopping.validate()?;
         self.inner.stopping.validate()?;
+        if let Some(a) = &self.amp {
+            a.validate()?;
+        }
         check_tolerance("detection_z", self.detection_z)?;
         check_tolerance("amplitude_z", self.amplitude_z)?;
         check_tolerance("noise_floor", self.noise_floor)?;
@@ -399,6 +444,17 @@ where
     let budget = ((params.max_support_fraction * m as f64) as usize).max(1);
     let score = |v: f64| if params.nonnegative { v } else { v.abs() };
 
+    // Without a warm start, message passing proposes the first support.
+    let mut explore_iterations = params.explore_iterations;
+    if let Some(amp_params) = &params.amp {
+        if x.iter().all(|v| *v == T::zero()) {
+            let rep = reflector_amp_in(op, y, x, amp_params, windows, &mut ())?;
+            applies.forward += rep.forward_applies;
+            applies.adjoint += rep.adjoint_applies;
+            explore_iterations = 0;
+        }
+    }
+
     // The warm start, pruned to the model (per pixel its largest entry) and re-fitted.
     let mut voxels: Vec<usize> = x
         .par_chunks(ks)
@@ -424,7 +480,7 @@ where
         op.correlate(&r, &mut u);
         applies.adjoint += 1;
         let sigma = robust_sigma(&u);
-        let explore = it <= params.explore_iterations;
+        let explore = it <= explore_iterations;
         // Each supported pixel's own reflector is added back to its correlations.
         let mut slot = vec![usize::MAX; n / ks];
         for (i, &v) in voxels.iter().enumerate() {
@@ -493,8 +549,7 @@ where
             r = residual(op, &new_voxels, y, &new_amp, &mut applies)?;
         }
         let rel = (dot(&r, &r)).sqrt() / ynorm;
-        if it >= params.explore_iterations || params.stopping.rel_residual.is_some_and(|t| rel <= t)
-        {
+        if it >= explore_iterations || params.stopping.rel_residual.is_some_and(|t| rel <= t) {
             // The amplitude test, then least squares on what remains.
             let dof = m.saturating_sub(new_voxels.len()).max(1);
             let sigma_r = (dot(&r, &r) / dof as f64)

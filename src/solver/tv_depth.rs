@@ -7,7 +7,7 @@ use crate::error::{Error, Result};
 use crate::real::Real;
 
 use super::model_based::model_based_in;
-use super::{tv_denoise, ModelBasedParams, Observer, Report, TvParams, VoxelOperator};
+use super::{tv_denoise, ModelBasedParams, Observer, Report, Termination, TvParams, VoxelOperator};
 
 /// Parameters of [`tv_depth`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,11 +60,15 @@ fn peaks<T: Real>(x: &[T], ks: usize) -> Vec<Option<(usize, f64)>> {
 ///    weighs by its squared amplitude (normalized to 1), a measure of its confidence; empty
 ///    pixels weigh 0, so that their depth is inpainted from their neighbours.
 /// 3. Every pixel's depth is then restricted to a window of ±[`window`](TvDepthParams::window)
-///    bins around the regularized depth, the reflectors are moved to it, and the model-based
-///    fit runs again within the windows (amplitudes re-fitted by least squares, pixels joining or
-///    leaving the support by the same significance tests).
+///    bins around the regularized depth and the model-based fit runs again within the windows.
+///    When the fits start by message passing ([`ModelBasedParams::amp`], the default), the
+///    windowed fit starts afresh: message passing with each pixel's prior confined to its window
+///    (a few depths instead of K_s, which is what lets it resolve pulses too short for the
+///    unconstrained prior), then the least-squares refinement. Otherwise the reflectors are moved
+///    into their windows and the greedy fit continues from them.
 ///
-/// Steps 2–3 repeat [`rounds`](TvDepthParams::rounds) times. Isolated wrong depths, which cross-
+/// Steps 2–3 repeat [`rounds`](TvDepthParams::rounds) times; none run when the first fit already
+/// explains the data (it stopped on its residual tolerance). Isolated wrong depths, which cross-
 /// talk and noise cause and which the per-pixel model cannot tell from true ones, are pulled
 /// towards their neighbours' depths, where the data then confirm or move them.
 ///
@@ -108,6 +112,11 @@ where
         ..params.tv
     };
     let mut report = model_based_in(op, y, x, &params.model, None, observer)?;
+    if report.termination == Termination::Residual {
+        // The fit explains the data to the solver's tolerance: nothing for TV to correct.
+        report.solver = "tv-depth";
+        return Ok(report);
+    }
     let windowed = ModelBasedParams {
         explore_iterations: 0,
         ..params.model
@@ -139,8 +148,15 @@ where
                 )
             })
             .collect();
+        if params.model.amp.is_some() {
+            x.fill(T::zero());
+        }
         // Move each reflector to its regularized depth unless its own depth is in the window.
-        for (p, found) in found.iter().enumerate() {
+        for (p, found) in found
+            .iter()
+            .enumerate()
+            .filter(|_| params.model.amp.is_none())
+        {
             if let Some((d, a)) = *found {
                 let (lo, hi) = windows[p];
                 if d < lo || d > hi {

@@ -1,0 +1,453 @@
+//! Approximate message passing with the one-reflector-per-pixel prior.
+//!
+//! The scene prior: a pixel is empty with probability 1 − λ; otherwise it holds one reflector at
+//! a depth drawn uniformly from its admissible depths, with an amplitude a ~ N(μ, σ²). AMP turns
+//! the coupled problem into one small denoising problem per pixel: after the Onsager-corrected
+//! residual z, each pixel sees its correlations g = Aₚᵀz + Gₚx̂ₚ (Gₚ = AₚᵀAₚ, the pixel's own
+//! Gram block) as its own reflector observed in Gaussian noise of covariance τ²Gₚ,
+//! τ² = ‖z‖²/K. For that model the evidence of depth d is a closed-form Gaussian integral in
+//! gᵈ and Gₚ[d, d] alone, so the posterior over "empty or depth d" and the posterior mean are
+//! exact and cheap (O(K_s²) per pixel).
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::linalg::dot;
+use crate::operator::Counted;
+use crate::real::Real;
+
+use super::model_based::VoxelOperator;
+use super::{check_problem, Monitor, Observer, Report, Stopping, Termination};
+
+/// Parameters of [`reflector_amp`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReflectorAmpParams {
+    /// Prior probability λ that a pixel has a return: the starting value when the prior is
+    /// learned (in (0, 1), default 0.5).
+    pub lit_probability: f64,
+    /// Learns the prior (λ, μ, σ²) from the posteriors after every iteration
+    /// (expectation-maximization; default `true`). Otherwise λ stays fixed and μ, σ² keep their
+    /// starting values, which come from the measurements' energy.
+    pub learn_prior: bool,
+    /// Stops when the residual has not improved on its best value for this many iterations, and
+    /// returns the best iterate (at least 1, default 5). AMP is not a descent method: on
+    /// operators far from its assumptions, or beyond its phase transition, it can drift.
+    pub patience: usize,
+    /// Stops with [`Termination::Converged`] once the most probable scene's support (which
+    /// pixels are lit, at which depth) has stayed the same for this many iterations; `None`
+    /// iterates on by the other rules (default `None`; the start of
+    /// [`model_based`](super::model_based), which re-fits the amplitudes by least squares, uses 3).
+    pub stable_support: Option<usize>,
+    /// The estimate keeps a pixel when its posterior probability of a return exceeds this
+    /// (in (0, 1), default 0.5).
+    pub decision: f64,
+    /// Stopping rules; the residual is ‖y − Ax̂‖ / ‖y‖ for the posterior mean x̂.
+    pub stopping: Stopping,
+}
+
+impl Default for ReflectorAmpParams {
+    fn default() -> Self {
+        ReflectorAmpParams {
+            lit_probability: 0.5,
+            learn_prior: true,
+            patience: 5,
+            stable_support: None,
+            decision: 0.5,
+            stopping: Stopping {
+                max_iter: 60,
+                rel_residual: Some(1e-6),
+                ..Stopping::default()
+            },
+        }
+    }
+}
+
+impl ReflectorAmpParams {
+    pub(crate) fn validate(&self) -> Result<()> {
+        self.stopping.validate()?;
+        for (name, v) in [
+            ("lit_probability", self.lit_probability),
+            ("decision", self.decision),
+        ] {
+            if !(v > 0.0 && v < 1.0) {
+                return Err(Error::param(name, format!("must be in (0, 1), got {v}")));
+            }
+        }
+        if self.stable_support == Some(0) {
+            return Err(Error::param("stable_support", "must be at least 1"));
+        }
+        if self.patience == 0 {
+            return Err(Error::param("patience", "must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// The pixels' Gram blocks: one shared block or one per pixel (row-major K_s × K_s each).
+enum Grams {
+    Shared(Vec<f64>),
+    PerPixel(Vec<f64>),
+}
+
+impl Grams {
+    fn of<T: Real, A: VoxelOperator<T> + ?Sized>(op: &A, pixels: usize) -> Self {
+        if op.uniform_pixel_gram() {
+            Grams::Shared(op.pixel_gram(0))
+        } else {
+            Grams::PerPixel((0..pixels).flat_map(|p| op.pixel_gram(p)).collect())
+        }
+    }
+
+    fn block(&self, pixel: usize, ks: usize) -> &[f64] {
+        match self {
+            Grams::Shared(g) => g,
+            Grams::PerPixel(g) => &g[pixel * ks * ks..(pixel + 1) * ks * ks],
+        }
+    }
+}
+
+/// The prior's parameters.
+#[derive(Debug, Clone, Copy)]
+struct Prior {
+    lit: f64,
+    mean: f64,
+    var: f64,
+}
+
+/// One pixel's posterior.
+struct PixelPosterior {
+    /// Probability of a return.
+    lit: f64,
+    /// Σ_d w_d E[a | d] and Σ_d w_d E[a² | d] (for the prior's update).
+    amp1: f64,
+    amp2: f64,
+    /// trace(Cov(x | g) Gₚ) / τ²: the pixel's share of the Onsager term.
+    divergence: f64,
+    /// The most probable depth and its amplitude E[a | d].
+    best: Option<(usize, f64)>,
+}
+
+/// The posterior of one pixel given its correlations `g` (Gram block `gram`, noise τ²),
+/// writing the posterior mean into `mean`. Depths outside `lo..=hi` or with a zero column are
+/// not admissible.
+fn denoise(
+    g: &[f64],
+    gram: &[f64],
+    (lo, hi): (usize, usize),
+    tau2: f64,
+    prior: Prior,
+    mean: &mut [f64],
+) -> PixelPosterior {
+    let ks = g.len();
+    mean.fill(0.0);
+    let admissible = |d: usize| d >= lo && d <= hi && gram[d * ks + d] > 0.0;
+    let count = (lo..=hi).filter(|&d| admissible(d)).count();
+    if count == 0 {
+        return PixelPosterior {
+            lit: 0.0,
+            amp1: 0.0,
+            amp2: 0.0,
+            divergence: 0.0,
+            best: None,
+        };
+    }
+    // log p(g | d) / p(g | empty) integrated over a ~ N(μ, σ²), plus the log prior.
+    let log_empty = (1.0 - prior.lit).ln();
+    let log_depth = (prior.lit / count as f64).ln() - prior.mean * prior.mean / (2.0 * prior.var);
+    let mut logw = [f64::NEG_INFINITY; 256];
+    let mut big;
+    let logw: &mut [f64] = if ks <= logw.len() {
+        &mut logw[..ks]
+    } else {
+        big = vec![f64::NEG_INFINITY; ks];
+        &mut big
+    };
+    let mut top = log_empty;
+    for d in (lo..=hi).filter(|&d| admissible(d)) {
+        let prec = gram[d * ks + d] / tau2 + 1.0 / prior.var;
+        let b = g[d] / tau2 + prior.mean / prior.var;
+        logw[d] = log_depth - 0.5 * (prior.var * prec).ln() + b * b / (2.0 * prec);
+        top = top.max(logw[d]);
+    }
+    let mut total = (log_empty - top).exp();
+    for w in logw.iter_mut() {
+        *w = (*w - top).exp();
+        total += *w;
+    }
+    let (mut lit, mut amp1, mut amp2, mut energy) = (0.0, 0.0, 0.0, 0.0);
+    let mut best: Option<(usize, f64, f64)> = None;
+    for d in (lo..=hi).filter(|&d| admissible(d)) {
+        let w = logw[d] / total;
+        let prec = gram[d * ks + d] / tau2 + 1.0 / prior.var;
+        let a = (g[d] / tau2 + prior.mean / prior.var) / prec;
+        let a2 = a * a + 1.0 / prec;
+        mean[d] = w * a;
+        lit += w;
+        amp1 += w * a;
+        amp2 += w * a2;
+        energy += w * a2 * gram[d * ks + d];
+        if best.is_none_or(|b| w > b.1) {
+            best = Some((d, w, a));
+        }
+    }
+    let mut quad = 0.0;
+    for (d, &md) in mean.iter().enumerate() {
+        if md != 0.0 {
+            quad += md * dot_f64(&gram[d * ks..(d + 1) * ks], mean);
+        }
+    }
+    PixelPosterior {
+        lit,
+        amp1,
+        amp2,
+        divergence: (energy - quad).max(0.0) / tau2,
+        best: best.map(|(d, _, a)| (d, a)),
+    }
+}
+
+fn dot_f64(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Recovers a scene with at most one reflector per pixel by approximate message passing (AMP)
+/// with the one-reflector prior, learned from the data; writes the most probable scene into `x`.
+///
+/// Each iteration costs one forward and one adjoint application of the full operator:
+///
+/// 1. the Onsager-corrected residual z = y − Ax̂ + (z/K)·Σ divergences, τ² = ‖z‖²/K;
+/// 2. per pixel, the correlations g = Aₚᵀz + Gₚx̂ₚ ([`VoxelOperator::pixel_gram`]) and the exact
+///    posterior of "empty, or one reflector at depth d with amplitude a" under the prior
+///    (module documentation); x̂ₚ becomes the posterior mean, and the divergence of this
+///    denoiser, trace(Cov(xₚ | g)·Gₚ)/τ², feeds the next Onsager term;
+/// 3. when [`learn_prior`](ReflectorAmpParams::learn_prior), λ, μ and σ² are re-estimated from
+///    the posteriors (expectation-maximization).
+///
+/// Unlike the greedy solvers, AMP keeps every depth of every pixel in play with a weight, which
+/// is what lets it escape the wrong-depth fixed points that cross-talk creates. When the
+/// measurements suffice it converges to the exact scene in a few tens of iterations; beyond its
+/// phase transition it stalls at a partial estimate (which [`model_based`](super::model_based)
+/// then refines).
+///
+/// The result in `x` is the most probable scene: a pixel holds a return when its posterior
+/// probability of one exceeds [`decision`](ReflectorAmpParams::decision), at its most probable
+/// depth with the posterior mean amplitude there. The run keeps the iterate with the smallest
+/// residual and stops with [`Termination::Stagnation`] after
+/// [`patience`](ReflectorAmpParams::patience) iterations without improving it; the report's
+/// residuals are those of the posterior means. `x` is not used as a warm start (AMP's state is
+/// the residual and the posterior, not an estimate).
+///
+/// # Errors
+/// [`Error::InvalidParameter`] for invalid parameters or a column length that does not divide
+/// the columns; [`Error::ShapeMismatch`] / [`Error::NonFinite`] for inputs that do not fit;
+/// [`Error::Breakdown`] if the iteration produces non-finite values.
+pub fn reflector_amp<T, A, O>(
+    op: &A,
+    y: &[T],
+    x: &mut [T],
+    params: &ReflectorAmpParams,
+    observer: &mut O,
+) -> Result<Report>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+{
+    reflector_amp_in(op, y, x, params, None, observer)
+}
+
+/// [`reflector_amp`] with each pixel's depth restricted to a window `lo..=hi`.
+pub(crate) fn reflector_amp_in<T, A, O>(
+    op: &A,
+    y: &[T],
+    x: &mut [T],
+    params: &ReflectorAmpParams,
+    windows: Option<&[(usize, usize)]>,
+    observer: &mut O,
+) -> Result<Report>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+{
+    const NAME: &str = "reflector-amp";
+    params.validate()?;
+    let (m, n) = (op.nrows(), op.ncols());
+    check_problem(NAME, m, n, y, x)?;
+    let ks = op.column_len();
+    if ks == 0 || n % ks != 0 {
+        return Err(Error::param(
+            "column_len",
+            format!("must be ≥ 1 and divide the {n} columns, got {ks}"),
+        ));
+    }
+    let pixels = n / ks;
+    if let Some(w) = windows {
+        if w.len() != pixels {
+            return Err(Error::shape(
+                "reflector-amp: depth windows vs pixels",
+                pixels,
+                w.len(),
+            ));
+        }
+        if let Some(p) = w.iter().position(|&(lo, hi)| lo > hi || hi >= ks) {
+            return Err(Error::param(
+                "windows",
+                format!("pixel {p}: window {:?} is not within 0..{ks}", w[p]),
+            ));
+        }
+    }
+    let counted = Counted::new(op);
+    let mut monitor = Monitor::new(NAME, params.stopping, observer);
+    let y64: Vec<f64> = y.iter().map(|v| v.as_f64()).collect();
+    let yy = dot(y, y);
+    x.fill(T::zero());
+    if yy == 0.0 {
+        return Ok(monitor.finish(0, Termination::ZeroResidual, &counted));
+    }
+    let grams = Grams::of(op, pixels);
+    let observable: Vec<bool> = (0..pixels)
+        .map(|p| {
+            let g = grams.block(p, ks);
+            (0..ks).any(|d| g[d * ks + d] > 0.0)
+        })
+        .collect();
+    let seen = observable.iter().filter(|o| **o).count().max(1);
+    let diag_mean = (0..pixels)
+        .filter(|&p| observable[p])
+        .map(|p| {
+            let g = grams.block(p, ks);
+            (0..ks).map(|d| g[d * ks + d]).sum::<f64>() / ks as f64
+        })
+        .sum::<f64>()
+        / seen as f64;
+    // E‖y‖² ≈ Σₚ aₚ² ‖a‖²: the mean squared amplitude of a lit pixel under λ.
+    let a2 = yy / (params.lit_probability * seen as f64 * diag_mean);
+    let mut prior = Prior {
+        lit: params.lit_probability,
+        mean: 0.8 * a2.sqrt(),
+        var: 0.3 * a2,
+    };
+
+    let mut mean = vec![0.0f64; n];
+    let mut z = y64.clone();
+    let mut xt = vec![T::zero(); n];
+    let mut u = vec![T::zero(); n];
+    let mut ax = vec![T::zero(); m];
+    let mut zt = vec![T::zero(); m];
+    let mut best_x = vec![T::zero(); n];
+    let mut best_res = f64::INFINITY;
+    let mut since_best = 0;
+    let mut prev = vec![T::zero(); n];
+    let mut stable = 0;
+    let mut it = 0;
+    // Applications: one adjoint and one forward per iteration (counted by hand, as `op` may be
+    // unsized).
+    let mut applies = 0;
+    let finish = |monitor: Monitor<'_, T, O>, it: usize, t: Termination, applies: usize| {
+        let mut report = monitor.finish(it, t, &counted);
+        report.adjoint_applies += applies;
+        report.forward_applies += it;
+        report
+    };
+    loop {
+        it += 1;
+        let tau2 = z.iter().map(|v| v * v).sum::<f64>() / m as f64;
+        if !(tau2 > 0.0 && tau2.is_finite()) {
+            // z = 0 exactly: the last posterior mean explains y, and x holds its scene.
+            return Ok(finish(monitor, it - 1, Termination::ZeroResidual, applies));
+        }
+        for (t, v) in zt.iter_mut().zip(&z) {
+            *t = T::of_f64(*v);
+        }
+        op.apply_adjoint(&zt, &mut u);
+        applies += 1;
+        let posts: Vec<PixelPosterior> = mean
+            .par_chunks_mut(ks)
+            .zip(u.par_chunks(ks))
+            .enumerate()
+            .map(|(p, (mp, up))| {
+                let gram = grams.block(p, ks);
+                let mut g = [0.0f64; 256];
+                let mut big;
+                let g: &mut [f64] = if ks <= g.len() {
+                    &mut g[..ks]
+                } else {
+                    big = vec![0.0; ks];
+                    &mut big
+                };
+                for (d, gd) in g.iter_mut().enumerate() {
+                    *gd = up[d].as_f64() + dot_f64(&gram[d * ks..(d + 1) * ks], mp);
+                }
+                let window = windows.map_or((0, ks - 1), |w| w[p]);
+                denoise(g, gram, window, tau2, prior, mp)
+            })
+            .collect();
+
+        // The most probable scene, the Onsager sum and the prior's statistics.
+        x.fill(T::zero());
+        let (mut lit, mut amp1, mut amp2, mut div) = (0.0, 0.0, 0.0, 0.0);
+        for (p, post) in posts.iter().enumerate() {
+            lit += post.lit;
+            amp1 += post.amp1;
+            amp2 += post.amp2;
+            div += post.divergence;
+            if let Some((d, a)) = post.best {
+                if post.lit > params.decision {
+                    x[p * ks + d] = T::of_f64(a);
+                }
+            }
+        }
+        if params.learn_prior && lit > 0.0 {
+            prior.lit = (lit / seen as f64).clamp(1e-4, 1.0 - 1e-4);
+            prior.mean = amp1 / lit;
+            prior.var = (amp2 / lit - prior.mean * prior.mean)
+                .max(1e-6 * prior.mean * prior.mean)
+                .max(f64::MIN_POSITIVE);
+        }
+
+        for (t, v) in xt.iter_mut().zip(&mean) {
+            *t = T::of_f64(*v);
+        }
+        op.apply(&xt, &mut ax);
+        let onsager = div / m as f64;
+        let mut rr = 0.0;
+        for ((zi, &yi), ai) in z.iter_mut().zip(&y64).zip(&ax) {
+            let r = yi - ai.as_f64();
+            rr += r * r;
+            *zi = r + onsager * *zi;
+        }
+        let res = (rr / yy).sqrt();
+        if !res.is_finite() || x.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Breakdown {
+                solver: NAME,
+                reason: format!("non-finite values at iteration {it}"),
+            });
+        }
+        if res < best_res {
+            best_res = res;
+            best_x.copy_from_slice(x);
+            since_best = 0;
+        } else {
+            since_best += 1;
+        }
+        let same_support = it > 1
+            && x.iter()
+                .zip(&prev)
+                .all(|(a, b)| (*a == T::zero()) == (*b == T::zero()));
+        stable = if same_support { stable + 1 } else { 0 };
+        let change = super::relative_change(x, &prev);
+        prev.copy_from_slice(x);
+        let stop = monitor.step(it, res, 0.5 * rr, change, x);
+        let term = match stop {
+            None if params.stable_support.is_some_and(|s| stable >= s) && since_best == 0 => {
+                Some(Termination::Converged)
+            }
+            None if since_best >= params.patience => Some(Termination::Stagnation),
+            other => other,
+        };
+        if let Some(t) = term {
+            x.copy_from_slice(&best_x);
+            return Ok(finish(monitor, it, t, applies));
+        }
+    }
+}
