@@ -6,6 +6,7 @@ mod algebra;
 mod architectures;
 mod argmin_solvers;
 mod cli;
+mod cli_errors;
 mod cli_lidar;
 mod cli_reconstruct;
 mod cli_support;
