@@ -25,7 +25,7 @@ pub struct InfoArgs {
     /// Sampling period τ in picoseconds (the same as --tau PSps).
     #[arg(long, value_name = "PS", allow_negative_numbers = true)]
     tau_ps: Option<f64>,
-    /// Estimate the times from a calibration on this machine (about a second of timed
+    /// Estimate the times from a calibration on this machine (a second or two of timed
     /// applications of the operator on the configuration capped at 64x64x64, K_p 16384) instead
     /// of the documented rates of the reference machine.
     #[arg(long)]

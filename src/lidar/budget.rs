@@ -238,7 +238,7 @@ impl Throughput {
 
     /// The grid and pulse length [`Throughput::calibrate`] times for a configuration: the
     /// configuration itself, capped at 64×64 pixels, 64 depth bins and K_p = 16 384 so that a
-    /// calibration takes about a second.
+    /// calibration takes a second or two.
     pub fn calibration_problem(geometry: Geometry, pulse_len: usize) -> Result<(Geometry, usize)> {
         if pulse_len == 0 {
             return Err(Error::param("pulse_len", "must be at least 1"));
