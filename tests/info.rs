@@ -301,6 +301,13 @@ fn invalid_inputs_are_typed_errors() {
     let big = geometry("100000x100000x1");
     let r = Budget::new(big, 1 << 40, 2e-10, 1, Throughput::documented());
     assert_eq!(param_name(r), "pulse_len");
+    // Rates that are zero, negative or NaN.
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let mut t = Throughput::documented();
+        t.rates.f64.adjoint_flops_per_s = bad;
+        let r = Budget::new(g, 10, 2e-10, 1, t);
+        assert_eq!(param_name(r), "throughput", "rate {bad}");
+    }
     // Zero and overflowing sizes never reach a budget.
     assert_eq!(param_name(Geometry::parse("0x10x10")), "size");
     assert_eq!(

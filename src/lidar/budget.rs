@@ -415,8 +415,9 @@ impl Budget {
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] if `pulse_len` or `threads` is zero, if τ is not a finite
-    /// positive number (`tau`), if the physical scales overflow or underflow at that τ, or if a
-    /// sample or byte count does not fit in 64 bits.
+    /// positive number (`tau`), if the physical scales overflow or underflow at that τ, if a
+    /// sample or byte count does not fit in 64 bits, or if a rate of `throughput` is not a
+    /// finite positive number.
     pub fn new(
         geometry: Geometry,
         pulse_len: usize,
@@ -432,6 +433,24 @@ impl Budget {
             return Err(Error::param("threads", "must be at least 1"));
         }
         let tau_s = check_tau(tau_s)?;
+        let r = &throughput.rates;
+        let rates = [r.f32, r.f64].map(|q| {
+            [
+                q.forward_flops_per_s,
+                q.adjoint_flops_per_s,
+                q.sparse_voxel_samples_per_s,
+            ]
+        });
+        if let Some(bad) = rates
+            .iter()
+            .flatten()
+            .find(|v| !(v.is_finite() && **v > 0.0))
+        {
+            return Err(Error::param(
+                "throughput",
+                format!("every rate must be finite and > 0, got {bad}"),
+            ));
+        }
         let overflow = |what: &str| {
             Error::param(
                 "pulse_len",
@@ -511,7 +530,6 @@ impl Budget {
 
         let flops = 2.0 * g.pixels() as f64 * samples as f64 * g.ks as f64;
         let sparse_work = g.pixels() as f64 * pulse_len as f64;
-        let r = &throughput.rates;
         let per = |f: &dyn Fn(&OperatorRates) -> f64| PerPrecision {
             f32: f(&r.f32),
             f64: f(&r.f64),
