@@ -22,6 +22,8 @@ use rdlidar::operator::{
 use rdlidar::{LinearOperator, Real};
 use serde::Serialize;
 
+mod cli_info;
+
 /// Compressive time-of-flight lidar by random demodulation.
 ///
 /// Arrays are exchanged as C-order NumPy `.npy` files: scene (M, N, K_s) float32/float64, pulse
@@ -237,6 +239,27 @@ enum Command {
     ///
     /// Example: `rdlidar reconstruct --pulse run0/pulse.npy --codes run0/codes.npy --meas run0/meas.npy --depth-bins 40 --solver auto --out-depth d.npy --out-scene xh.npy --png d.png --truth run0/scene.npy`
     Reconstruct(ReconstructArgs),
+
+    /// What a configuration costs: regime, physical scales, memory and time per apply.
+    ///
+    /// For a grid MxNxKS and a pulse of K_p samples: the regime (compressive, critical or
+    /// redundant) and the critical K_p = (M·N − 1)·K_s + 1; at the sampling period τ (default
+    /// 200 ps) the depth resolution τc/2, the range K_s·τc/2, the pulse duration K_p·τ, the frame
+    /// time K·τ with K = K_p + K_s − 1 and the maximum frame rate 1/(K·τ); the memory of the
+    /// codes (packed bits, int8, dense float), pulse, measurements, a dense scene and the fused
+    /// operator; and the estimated time of one forward, adjoint and sparse forward application
+    /// in f32 and f64.
+    ///
+    /// Times are the work (2·M·N·K·K_s GEMM-equivalent flops for the forward and the adjoint,
+    /// M·N·K_p voxel-samples for the sparse forward over one return per pixel) divided by a
+    /// rate: by default the documented rates of the 2-core reference machine (docs/lidar.md);
+    /// with --calibrate rates measured on this machine by timing the operator on the
+    /// configuration capped at 64x64x64 and K_p 16384. The output says which.
+    ///
+    /// Nothing is read or written. --json prints the same numbers as one line of JSON.
+    ///
+    /// Example: `rdlidar info --size 100x100x40 --pulse-len 30000 --tau 200ps`
+    Info(cli_info::InfoArgs),
 
     /// Time the forward, adjoint and sparse forward operators on a generated problem.
     ///
@@ -1786,8 +1809,8 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
     let Some(command) = cli.command else {
         println!("rdlidar {}", env!("CARGO_PKG_VERSION"));
         println!(
-            "subcommands: simulate, forward, adjoint, dottest, reconstruct, bench, selfcheck (run \
-             `rdlidar --help`)"
+            "subcommands: simulate, forward, adjoint, dottest, reconstruct, bench, info, selfcheck \
+             (run `rdlidar --help`)"
         );
         return Ok(ExitCode::SUCCESS);
     };
@@ -1882,6 +1905,10 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
                 Precision::F32 => reconstruct_cmd::<f32>(&a)?,
                 Precision::F64 => reconstruct_cmd::<f64>(&a)?,
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Info(a) => {
+            cli_info::run(&a)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench {

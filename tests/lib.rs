@@ -7,10 +7,14 @@ mod amp;
 mod architectures;
 mod argmin_solvers;
 mod cli;
+mod cli_errors;
 mod cli_lidar;
 mod cli_reconstruct;
+mod cli_support;
 mod convolution;
+mod end_to_end;
 mod errors;
+mod info;
 #[cfg(feature = "lapack")]
 mod lapack;
 mod metrics;

@@ -93,8 +93,9 @@ impl std::fmt::Display for Geometry {
     }
 }
 
-/// Measurements versus unknowns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// Measurements versus unknowns. Serialized as its lower-case name (`"compressive"`, …).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Regime {
     /// K < M·N·K_s: regularization (sparsity, a scene model, TV) is required.
     Compressive,

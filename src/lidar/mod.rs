@@ -5,6 +5,7 @@
 //! samples the sum: `y[k] = Σ_{m,n} s[m,n,k]·(x[m,n,:] ⊛ p)[k]`, k < K = K_p + K_s − 1.
 
 mod architectures;
+mod budget;
 mod codes;
 mod geometry;
 mod kernels;
@@ -18,6 +19,10 @@ mod scenes;
 mod support;
 
 pub use architectures::{coded_aperture, multi_adc, pixel_groups, tiles};
+pub use budget::{
+    parse_tau, Budget, MemoryBudget, OperatorRates, PerPrecision, PhysicalScales, Throughput,
+    ThroughputSource, TimeBudget, DEFAULT_TAU_S,
+};
 pub use codes::{CodeAlphabet, Codes};
 pub use geometry::{Geometry, Regime};
 pub use metrics::{compare, compare_depth, depth_bin_m, relative_error, Metrics, SPEED_OF_LIGHT};

@@ -27,6 +27,25 @@ const ADJ_BLOCK_BYTES: usize = 256 * 1024;
 /// Blocks whose lane partial sums are accumulated in `T` before a flush to `f64`.
 const FLUSH_BLOCKS: usize = 8;
 
+/// The depth slabs of K_s bins: (first bin, chunks of eight bins), at most [`SLAB`] bins each.
+fn depth_slabs(ks: usize) -> Vec<(usize, usize)> {
+    let mut slabs = Vec::new();
+    let mut j0 = 0;
+    while j0 < ks {
+        let width = (ks - j0).min(SLAB);
+        slabs.push((j0, width.div_ceil(8)));
+        j0 += width;
+    }
+    slabs
+}
+
+/// Groups of eight pixels whose 256-row tables of `max_nch` chunks fit in `budget` bytes
+/// (between 1 and 64).
+fn groups_per_block<T: Real>(budget: usize, max_nch: usize) -> usize {
+    let table_bytes = 256 * 8 * max_nch * std::mem::size_of::<T>();
+    (budget / table_bytes).clamp(1, 64)
+}
+
 /// How [`RdOperator`]'s forward product is evaluated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ForwardPath {
@@ -90,7 +109,7 @@ fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
 ///
 /// **Adjoint.** The transpose of the same scheme: for every sample the row `y[k]·p[k − j]` is added
 /// into one of 256 buckets per group, selected by the group's code byte; the buckets are flushed to
-/// `f64` every 4096 samples, and each pixel's backprojection is a signed sum of its group's
+/// `f64` every 16 384 samples, and each pixel's backprojection is a signed sum of its group's
 /// buckets.
 ///
 /// Blocks are processed in parallel with rayon; the kernels are compiled for AVX-512, AVX2+FMA and
@@ -159,13 +178,7 @@ impl<T: Real> RdOperator<T> {
             ));
         }
         let ks = geom.ks;
-        let mut slabs = Vec::new();
-        let mut j0 = 0;
-        while j0 < ks {
-            let width = (ks - j0).min(SLAB);
-            slabs.push((j0, width.div_ceil(8)));
-            j0 += width;
-        }
+        let slabs = depth_slabs(ks);
         let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch);
         let pad = ks;
         let kp = pulse.len();
@@ -174,9 +187,8 @@ impl<T: Real> RdOperator<T> {
             prev[pad + t] = v;
         }
         let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
-        let table_bytes = 256 * 8 * max_nch * std::mem::size_of::<T>();
-        let block_groups = (BLOCK_BYTES / table_bytes).clamp(1, 64);
-        let adj_block_groups = (ADJ_BLOCK_BYTES / table_bytes).clamp(1, 64);
+        let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
+        let adj_block_groups = groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch);
         Ok(RdOperator {
             geom,
             codes,
@@ -261,21 +273,72 @@ impl<T: Real> RdOperator<T> {
     }
 
     /// Bytes held by the operator: codes, pulse and the working buffers of one application per
-    /// thread.
+    /// thread (of the current rayon pool).
     pub fn memory_bytes(&self) -> usize {
         let threads = rayon::current_num_threads();
-        let lane = 8 * std::mem::size_of::<T>();
-        let max_nch = self.slabs.iter().map(|s| s.1).max().unwrap_or(1);
-        let planes = if self.codes.minus_plane().is_some() {
-            2
-        } else {
-            1
+        // The operator exists, so its own sizes fit; only an absurd thread count could overflow.
+        Self::estimated_memory_bytes(self.geom, self.pulse.len(), self.codes.alphabet(), threads)
+            .unwrap_or(usize::MAX)
+    }
+
+    /// The bytes [`memory_bytes`](Self::memory_bytes) would report for an operator on `geom`
+    /// with a pulse of `pulse_len` samples, codes of `alphabet` and `threads` worker threads,
+    /// computed without building it: the packed codes (⌈M·N/8⌉·K bytes per bit plane), the
+    /// pulse twice (as given and reversed, padded), and per thread an `f64` accumulator of K
+    /// samples and one block of lookup tables.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if `pulse_len` or `threads` is zero, or if the count does not
+    /// fit in `usize`.
+    pub fn estimated_memory_bytes(
+        geom: Geometry,
+        pulse_len: usize,
+        alphabet: super::codes::CodeAlphabet,
+        threads: usize,
+    ) -> Result<usize> {
+        if pulse_len == 0 {
+            return Err(Error::param("pulse_len", "must be at least 1"));
+        }
+        if threads == 0 {
+            return Err(Error::param("threads", "must be at least 1"));
+        }
+        let overflow = || {
+            Error::param(
+                "pulse_len",
+                format!("the operator's memory for {geom} and K_p = {pulse_len} overflows usize"),
+            )
         };
-        let per_task =
-            self.codes.len() * 8 + self.block_groups * 256 * max_nch * planes * (lane + 64);
-        self.codes.memory_bytes()
-            + (self.pulse.len() + self.prev.len()) * std::mem::size_of::<T>()
-            + threads * per_task
+        let size = std::mem::size_of::<T>();
+        let slabs = depth_slabs(geom.ks);
+        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch);
+        let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
+        let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
+        let planes = match alphabet {
+            super::codes::CodeAlphabet::Binary => 1,
+            super::codes::CodeAlphabet::Ternary => 2,
+        };
+        let k = pulse_len.checked_add(geom.ks - 1).ok_or_else(overflow)?;
+        let codes = geom
+            .pixels()
+            .div_ceil(8)
+            .checked_mul(k)
+            .and_then(|v| v.checked_mul(planes))
+            .ok_or_else(overflow)?;
+        let pulses = pulse_len
+            .checked_mul(2)
+            .and_then(|v| v.checked_add(geom.ks + ks_pad))
+            .and_then(|v| v.checked_mul(size))
+            .ok_or_else(overflow)?;
+        let tables = block_groups * 256 * max_nch * planes * (8 * size + 64);
+        let per_task = k
+            .checked_mul(8)
+            .and_then(|v| v.checked_add(tables))
+            .ok_or_else(overflow)?;
+        threads
+            .checked_mul(per_task)
+            .and_then(|v| v.checked_add(codes))
+            .and_then(|v| v.checked_add(pulses))
+            .ok_or_else(overflow)
     }
 
     fn block_range(&self, b: usize) -> std::ops::Range<usize> {

@@ -1,0 +1,99 @@
+//! Helpers for the tests that run the binary: running it, temporary directories, and the checks
+//! every failing run must pass.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Runs `rdlidar` with `args`.
+pub fn rdlidar(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rdlidar"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+pub fn stdout(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A path as the `&str` a command line takes.
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("temporary paths are UTF-8")
+}
+
+/// A fresh directory under the system temporary directory, removed when dropped.
+pub struct TempDir(pub PathBuf);
+
+static DIRS: AtomicUsize = AtomicUsize::new(0);
+
+impl TempDir {
+    pub fn new(tag: &str) -> Self {
+        let n = DIRS.fetch_add(1, Ordering::Relaxed);
+        let p = std::env::temp_dir().join(format!(
+            "rdlidar-cli-support-{}-{tag}-{n}",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_dir_all(&p);
+        std::fs::create_dir_all(&p).unwrap();
+        TempDir(p)
+    }
+
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    /// The names of the entries of the directory, sorted.
+    pub fn listing(&self) -> Vec<String> {
+        listing(&self.0)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The names of the entries of `dir`, sorted.
+pub fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// The run failed at run time: exit status 1, nothing on stdout, and exactly one line on stderr,
+/// `error: …`, containing every one of `needles`.
+pub fn assert_one_line_error(out: &Output, needles: &[&str]) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("error: "), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(out.stdout.is_empty(), "stdout: {}", stdout(out));
+    for n in needles {
+        assert!(err.contains(n), "{n:?} missing from {err}");
+    }
+}
+
+/// The command line was refused before anything ran: exit status 2, nothing on stdout, and a
+/// message `error: …` (before the usage reminder) containing every one of `needles`.
+pub fn assert_usage_error(out: &Output, needles: &[&str]) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.starts_with("error: "), "{err}");
+    assert!(out.stdout.is_empty(), "stdout: {}", stdout(out));
+    let message = err.split("\n\n").next().unwrap_or_default();
+    for n in needles {
+        assert!(
+            message.contains(n),
+            "{n:?} missing from the message of {err}"
+        );
+    }
+}
