@@ -127,19 +127,39 @@ struct PixelPosterior {
     best: Option<(usize, f64)>,
 }
 
+/// Per-pixel priors that replace the uniform one: the probability of a return and a depth
+/// distribution (K_s weights per pixel, renormalized over the admissible depths).
+pub(crate) struct PixelPriors {
+    pub(crate) lit: Vec<f64>,
+    pub(crate) depth: Vec<f64>,
+}
+
+/// What a run leaves besides the estimate: the posterior of its best iterate.
+pub(crate) struct Posteriors {
+    /// P(return at depth d), K_s per pixel.
+    pub(crate) depth: Vec<f64>,
+    /// P(return), one per pixel.
+    pub(crate) lit: Vec<f64>,
+}
+
 /// The posterior of one pixel given its correlations `g` (Gram block `gram`, noise τ²),
-/// writing the posterior mean into `mean`. Depths outside `lo..=hi` or with a zero column are
-/// not admissible.
+/// writing the posterior mean into `mean` and the depth probabilities into `post`. Depths
+/// outside `lo..=hi` or with a zero column are not admissible. `pixel_prior` replaces the
+/// uniform depth prior and λ when given.
+#[allow(clippy::too_many_arguments)]
 fn denoise(
     g: &[f64],
     gram: &[f64],
     (lo, hi): (usize, usize),
     tau2: f64,
     prior: Prior,
+    pixel_prior: Option<(f64, &[f64])>,
     mean: &mut [f64],
+    post: &mut [f64],
 ) -> PixelPosterior {
     let ks = g.len();
     mean.fill(0.0);
+    post.fill(0.0);
     let admissible = |d: usize| d >= lo && d <= hi && gram[d * ks + d] > 0.0;
     let count = (lo..=hi).filter(|&d| admissible(d)).count();
     if count == 0 {
@@ -151,9 +171,17 @@ fn denoise(
             best: None,
         };
     }
+    let lit_prior = pixel_prior.map_or(prior.lit, |p| p.0);
+    let depth_mass: f64 = pixel_prior.map_or(count as f64, |p| {
+        (lo..=hi).filter(|&d| admissible(d)).map(|d| p.1[d]).sum()
+    });
     // log p(g | d) / p(g | empty) integrated over a ~ N(μ, σ²), plus the log prior.
-    let log_empty = (1.0 - prior.lit).ln();
-    let log_depth = (prior.lit / count as f64).ln() - prior.mean * prior.mean / (2.0 * prior.var);
+    let log_empty = (1.0 - lit_prior).ln();
+    let log_depth = lit_prior.ln() - prior.mean * prior.mean / (2.0 * prior.var);
+    let log_q = |d: usize| match pixel_prior {
+        Some((_, q)) if depth_mass > 0.0 => (q[d] / depth_mass).ln(),
+        _ => -(count as f64).ln(),
+    };
     let mut logw = [f64::NEG_INFINITY; 256];
     let mut big;
     let logw: &mut [f64] = if ks <= logw.len() {
@@ -166,7 +194,7 @@ fn denoise(
     for d in (lo..=hi).filter(|&d| admissible(d)) {
         let prec = gram[d * ks + d] / tau2 + 1.0 / prior.var;
         let b = g[d] / tau2 + prior.mean / prior.var;
-        logw[d] = log_depth - 0.5 * (prior.var * prec).ln() + b * b / (2.0 * prec);
+        logw[d] = log_depth + log_q(d) - 0.5 * (prior.var * prec).ln() + b * b / (2.0 * prec);
         top = top.max(logw[d]);
     }
     let mut total = (log_empty - top).exp();
@@ -178,6 +206,7 @@ fn denoise(
     let mut best: Option<(usize, f64, f64)> = None;
     for d in (lo..=hi).filter(|&d| admissible(d)) {
         let w = logw[d] / total;
+        post[d] = w;
         let prec = gram[d * ks + d] / tau2 + 1.0 / prior.var;
         let a = (g[d] / tau2 + prior.mean / prior.var) / prec;
         let a2 = a * a + 1.0 / prec;
@@ -269,6 +298,25 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
+    reflector_amp_run(op, y, x, params, windows, None, observer).map(|(r, _)| r)
+}
+
+/// [`reflector_amp_in`] with optional per-pixel priors; also returns the posteriors of the
+/// best iterate.
+pub(crate) fn reflector_amp_run<T, A, O>(
+    op: &A,
+    y: &[T],
+    x: &mut [T],
+    params: &ReflectorAmpParams,
+    windows: Option<&[(usize, usize)]>,
+    priors: Option<&PixelPriors>,
+    observer: &mut O,
+) -> Result<(Report, Posteriors)>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+{
     const NAME: &str = "reflector-amp";
     params.validate()?;
     let (m, n) = (op.nrows(), op.ncols());
@@ -296,13 +344,33 @@ where
             ));
         }
     }
+    if let Some(pr) = priors {
+        if pr.lit.len() != pixels || pr.depth.len() != n {
+            return Err(Error::shape(
+                "reflector-amp: priors vs pixels",
+                pixels,
+                pr.lit.len(),
+            ));
+        }
+    }
     let counted = Counted::new(op);
     let mut monitor = Monitor::new(NAME, params.stopping, observer);
+    let mut posteriors = Posteriors {
+        depth: vec![0.0; n],
+        lit: vec![0.0; pixels],
+    };
+    let mut best_post = Posteriors {
+        depth: vec![0.0; n],
+        lit: vec![0.0; pixels],
+    };
     let y64: Vec<f64> = y.iter().map(|v| v.as_f64()).collect();
     let yy = dot(y, y);
     x.fill(T::zero());
     if yy == 0.0 {
-        return Ok(monitor.finish(0, Termination::ZeroResidual, &counted));
+        return Ok((
+            monitor.finish(0, Termination::ZeroResidual, &counted),
+            best_post,
+        ));
     }
     let grams = Grams::of(op, pixels);
     let observable: Vec<bool> = (0..pixels)
@@ -354,7 +422,10 @@ where
         let tau2 = z.iter().map(|v| v * v).sum::<f64>() / m as f64;
         if !(tau2 > 0.0 && tau2.is_finite()) {
             // z = 0 exactly: the last posterior mean explains y, and x holds its scene.
-            return Ok(finish(monitor, it - 1, Termination::ZeroResidual, applies));
+            return Ok((
+                finish(monitor, it - 1, Termination::ZeroResidual, applies),
+                posteriors,
+            ));
         }
         for (t, v) in zt.iter_mut().zip(&z) {
             *t = T::of_f64(*v);
@@ -364,8 +435,9 @@ where
         let posts: Vec<PixelPosterior> = mean
             .par_chunks_mut(ks)
             .zip(u.par_chunks(ks))
+            .zip(posteriors.depth.par_chunks_mut(ks))
             .enumerate()
-            .map(|(p, (mp, up))| {
+            .map(|(p, ((mp, up), wp))| {
                 let gram = grams.block(p, ks);
                 let mut g = [0.0f64; 256];
                 let mut big;
@@ -379,7 +451,8 @@ where
                     *gd = up[d].as_f64() + dot_f64(&gram[d * ks..(d + 1) * ks], mp);
                 }
                 let window = windows.map_or((0, ks - 1), |w| w[p]);
-                denoise(g, gram, window, tau2, prior, mp)
+                let pixel_prior = priors.map(|pr| (pr.lit[p], &pr.depth[p * ks..(p + 1) * ks]));
+                denoise(g, gram, window, tau2, prior, pixel_prior, mp, wp)
             })
             .collect();
 
@@ -387,6 +460,7 @@ where
         x.fill(T::zero());
         let (mut lit, mut amp1, mut amp2, mut div) = (0.0, 0.0, 0.0, 0.0);
         for (p, post) in posts.iter().enumerate() {
+            posteriors.lit[p] = post.lit;
             lit += post.lit;
             amp1 += post.amp1;
             amp2 += post.amp2;
@@ -426,6 +500,8 @@ where
         if res < best_res {
             best_res = res;
             best_x.copy_from_slice(x);
+            best_post.depth.copy_from_slice(&posteriors.depth);
+            best_post.lit.copy_from_slice(&posteriors.lit);
             since_best = 0;
         } else {
             since_best += 1;
@@ -447,7 +523,7 @@ where
         };
         if let Some(t) = term {
             x.copy_from_slice(&best_x);
-            return Ok(finish(monitor, it, t, applies));
+            return Ok((finish(monitor, it, t, applies), best_post));
         }
     }
 }

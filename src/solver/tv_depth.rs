@@ -6,6 +6,9 @@ use ndarray::Array2;
 use crate::error::{Error, Result};
 use crate::real::Real;
 
+use rayon::prelude::*;
+
+use super::amp::{reflector_amp_run, PixelPriors, Posteriors};
 use super::model_based::model_based_in;
 use super::{tv_denoise, ModelBasedParams, Observer, Report, Termination, TvParams, VoxelOperator};
 
@@ -22,6 +25,15 @@ pub struct TvDepthParams {
     pub window: usize,
     /// Alternations of TV denoising and windowed fitting (default 2).
     pub rounds: usize,
+    /// Rounds of the neighbourhood prior before the first fit, when it starts by message passing
+    /// ([`ModelBasedParams::amp`]): each round runs message passing again with every pixel's prior
+    /// built from its neighbours' posteriors (default 4; 0 disables it).
+    pub neighbour_rounds: usize,
+    /// The neighbourhood: pixels within this many rows and columns (default 2, a 5×5 square).
+    pub neighbour_radius: usize,
+    /// The share of the uniform depth distribution mixed into each neighbourhood depth prior,
+    /// so that no depth is excluded (in (0, 1], default 0.1).
+    pub neighbour_floor: f64,
     /// The TV denoising's own stopping rules.
     pub tv: TvParams,
 }
@@ -33,9 +45,93 @@ impl Default for TvDepthParams {
             lambda: 0.3,
             window: 2,
             rounds: 2,
+            neighbour_rounds: 4,
+            neighbour_radius: 2,
+            neighbour_floor: 0.1,
             tv: TvParams::new(1.0).expect("a valid λ"),
         }
     }
+}
+
+/// The neighbourhood prior of every pixel from the posteriors of the others: its probability of a
+/// return halfway between the global rate and its neighbours' mean, and its depth distribution
+/// the neighbours' depth posteriors summed, spread over ±1 bin (slanted surfaces), normalized
+/// and mixed with `floor` of the uniform distribution. The pixel's own posterior is left out.
+fn neighbour_priors(
+    post: &Posteriors,
+    (m, n): (usize, usize),
+    ks: usize,
+    radius: usize,
+    floor: f64,
+) -> PixelPriors {
+    let global = post.lit.iter().sum::<f64>() / post.lit.len().max(1) as f64;
+    let rows: Vec<(Vec<f64>, Vec<f64>)> = (0..m)
+        .into_par_iter()
+        .map(|i| {
+            let mut lit = Vec::with_capacity(n);
+            let mut depth = Vec::with_capacity(n * ks);
+            let mut h = vec![0.0; ks];
+            for j in 0..n {
+                h.fill(0.0);
+                let (mut sum_lit, mut count) = (0.0, 0usize);
+                for a in i.saturating_sub(radius)..(i + radius + 1).min(m) {
+                    for b in j.saturating_sub(radius)..(j + radius + 1).min(n) {
+                        if (a, b) == (i, j) {
+                            continue;
+                        }
+                        let q = a * n + b;
+                        sum_lit += post.lit[q];
+                        count += 1;
+                        for (d, &w) in post.depth[q * ks..(q + 1) * ks].iter().enumerate() {
+                            h[d] += w;
+                            if d > 0 {
+                                h[d - 1] += w;
+                            }
+                            if d + 1 < ks {
+                                h[d + 1] += w;
+                            }
+                        }
+                    }
+                }
+                let near = if count > 0 {
+                    sum_lit / count as f64
+                } else {
+                    global
+                };
+                lit.push((0.5 * global + 0.5 * near).clamp(0.02, 0.98));
+                let total: f64 = h.iter().sum();
+                depth.extend(h.iter().map(|&v| {
+                    let shaped = if total > 0.0 {
+                        v / total
+                    } else {
+                        1.0 / ks as f64
+                    };
+                    (1.0 - floor) * shaped + floor / ks as f64
+                }));
+            }
+            (lit, depth)
+        })
+        .collect();
+    let mut priors = PixelPriors {
+        lit: Vec::with_capacity(m * n),
+        depth: Vec::with_capacity(m * n * ks),
+    };
+    for (lit, depth) in rows {
+        priors.lit.extend(lit);
+        priors.depth.extend(depth);
+    }
+    priors
+}
+
+/// Adds the counts and histories of `more` to `report`.
+fn absorb(report: &mut Report, more: Report) {
+    report.iterations += more.iterations;
+    report.forward_applies += more.forward_applies;
+    report.adjoint_applies += more.adjoint_applies;
+    report.residual_history.extend(more.residual_history);
+    report.objective_history.extend(more.objective_history);
+    report.termination = more.termination;
+    report.elapsed += more.elapsed;
 }
 
 /// Per pixel of `x` (pixels of `ks` entries): the depth and amplitude of its largest positive
@@ -111,7 +207,46 @@ where
         lambda: params.lambda,
         ..params.tv
     };
+    if !(params.neighbour_floor > 0.0 && params.neighbour_floor <= 1.0) {
+        return Err(Error::param(
+            "neighbour_floor",
+            format!("must be in (0, 1], got {}", params.neighbour_floor),
+        ));
+    }
+    // The neighbourhood prior: message passing, then again with priors from the neighbours'
+    // posteriors, until a run explains the data or the rounds are used up.
+    let mut start: Option<Report> = None;
+    if let Some(amp) = params
+        .model
+        .amp
+        .as_ref()
+        .filter(|_| params.neighbour_rounds > 0)
+    {
+        if x.iter().all(|v| *v == T::zero()) {
+            let (mut rep, mut post) = reflector_amp_run(op, y, x, amp, None, None, &mut ())?;
+            for _ in 0..params.neighbour_rounds {
+                if rep.termination == Termination::Residual {
+                    break;
+                }
+                let priors = neighbour_priors(
+                    &post,
+                    grid,
+                    ks,
+                    params.neighbour_radius,
+                    params.neighbour_floor,
+                );
+                let (more, p) = reflector_amp_run(op, y, x, amp, None, Some(&priors), &mut ())?;
+                absorb(&mut rep, more);
+                post = p;
+            }
+            start = Some(rep);
+        }
+    }
     let mut report = model_based_in(op, y, x, &params.model, None, observer)?;
+    if let Some(mut first) = start {
+        absorb(&mut first, report);
+        report = first;
+    }
     if report.termination == Termination::Residual {
         // The fit explains the data to the solver's tolerance: nothing for TV to correct.
         report.solver = "tv-depth";
@@ -166,13 +301,7 @@ where
             }
         }
         let r = model_based_in(op, y, x, &windowed, Some(&windows), observer)?;
-        report.iterations += r.iterations;
-        report.forward_applies += r.forward_applies;
-        report.adjoint_applies += r.adjoint_applies;
-        report.residual_history.extend(r.residual_history);
-        report.objective_history.extend(r.objective_history);
-        report.termination = r.termination;
-        report.elapsed += r.elapsed;
+        absorb(&mut report, r);
     }
     report.solver = "tv-depth";
     Ok(report)
