@@ -979,6 +979,7 @@ fn reconstruct_cmd<T: Real + WritableElement>(a: &ReconstructArgs) -> CliResult 
         max_iter: a.max_iter,
         progress: !a.quiet,
         seed: a.seed,
+        power_iterations: None,
     };
     let r = reconstruct(&op, &y, a.solver, &options)?;
     let metrics = match &truth {
