@@ -6,10 +6,12 @@ mod algebra;
 mod architectures;
 mod argmin_solvers;
 mod cli;
+mod cli_experiments;
 mod cli_lidar;
 mod cli_reconstruct;
 mod convolution;
 mod errors;
+mod experiments;
 #[cfg(feature = "lapack")]
 mod lapack;
 mod metrics;
