@@ -114,10 +114,10 @@ pub fn error_vs_time(config: &ExperimentConfig, rows: &[Row]) -> Result<ChartFig
         kps.join(", ")
     ))
     .x_label("wall time (s), log scale")
-    .y_label("relative error |X - X^|/|X|")
+    .y_label("relative error |X - X^|/|X| (floor 1e-12)")
     .log_x(true)
     .log_y(true)
-    .size(960, 600)
+    .size(1100, 620)
     .legend(LegendPosition::Outside);
     for s in per_solver(config, rows, |r| {
         r.relative_error
@@ -143,7 +143,7 @@ fn pareto_front(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
 
 /// The compare sweep's Pareto plot: wall time against ‖X − X̂‖/‖X‖ for every finished run (log
 /// axes), one marker per solver, and the Pareto front (the runs no other run beats in both) as
-/// a black line.
+/// a grey line.
 ///
 /// # Errors
 /// The errors of [`scatter_plot`] (e.g. no finished run).
@@ -153,16 +153,16 @@ pub fn pareto_chart(config: &ExperimentConfig, rows: &[Row]) -> Result<ChartFigu
             .map(|e| (floor(e, ERROR_FLOOR), floor(r.time_s, TIME_FLOOR)))
     };
     let mut chart = Chart::new(format!(
-        "Run time against error: {}, every run ({} seed(s), {} noise level(s))",
+        "Time against error: {}, every run ({} seed(s), {} noise level(s))",
         describe(config),
         config.seeds,
         config.snr_db.len()
     ))
-    .x_label("relative error |X - X^|/|X|, log scale")
+    .x_label("relative error |X - X^|/|X| (floor 1e-12), log scale")
     .y_label("wall time (s)")
     .log_x(true)
     .log_y(true)
-    .size(960, 600)
+    .size(1100, 620)
     .legend(LegendPosition::Outside);
     for s in per_solver(config, rows, point) {
         chart = chart.series(s);
@@ -172,7 +172,7 @@ pub fn pareto_chart(config: &ExperimentConfig, rows: &[Row]) -> Result<ChartFigu
     if !front.is_empty() {
         chart = chart.series(
             Series::new("Pareto front", front)
-                .colour(Rgb::BLACK)
+                .colour(Rgb::hex(0x9a9a9a))
                 .marker(Marker::Plus)
                 .style(SeriesStyle::Lines),
         );
@@ -195,16 +195,16 @@ pub fn phase_chart(
     let mut kps = config.pulse_lens.clone();
     kps.sort_unstable();
     let mut chart = Chart::new(format!(
-        "Error against pulse length: {}, {}, median of {} seed(s)",
+        "Error against K_p: {}, {}, median of {} seed(s)",
         describe(config),
         noise_text(level),
         config.seeds
     ))
     .x_label("pulse length K_p, log scale")
-    .y_label("relative error |X - X^|/|X|")
+    .y_label("relative error |X - X^|/|X| (floor 1e-12)")
     .log_x(true)
     .log_y(true)
-    .size(960, 600)
+    .size(1100, 620)
     .legend(LegendPosition::Outside)
     .vline(critical as f64, format!("critical K_p = {critical}"));
     for m in &config.solvers {

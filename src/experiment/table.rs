@@ -336,16 +336,17 @@ pub fn summary_markdown(config: &ExperimentConfig, rows: &[Row]) -> String {
     };
     for &level in &config.snr_db {
         s += &format!("\n## {}\n", noise_text(level));
-        for (title, digits, value) in [
+        for (title, digits, scientific, value) in [
             (
-                "relative error ‖X−X̂‖/‖X‖",
+                "relative error ‖X − X̂‖/‖X‖",
                 4usize,
+                true,
                 (|r: &Row| r.relative_error) as fn(&Row) -> Option<f64>,
             ),
-            ("lit pixels at the exact depth (%)", 1, |r: &Row| {
+            ("lit pixels at the exact depth (%)", 1, false, |r: &Row| {
                 r.exact_pct
             }),
-            ("wall time (s)", 3, |r: &Row| Some(r.time_s)),
+            ("wall time (s)", 4, false, |r: &Row| Some(r.time_s)),
         ] {
             s += &format!("\n{title}, by K_p:\n\n");
             s += &header("solver");
@@ -353,7 +354,9 @@ pub fn summary_markdown(config: &ExperimentConfig, rows: &[Row]) -> String {
                 s += &format!("| {} |", m.name());
                 for &kp in &kps {
                     let cell = match medians(rows, level, m.name(), kp, value) {
-                        Some(v) if v != 0.0 && v.abs() < 1e-3 => format!("{v:.2e}"),
+                        Some(v) if scientific && v != 0.0 && v.abs() < 1e-3 => {
+                            format!("{v:.2e}")
+                        }
                         Some(v) => format!("{v:.digits$}"),
                         None => "-".into(),
                     };
