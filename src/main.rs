@@ -107,8 +107,9 @@ enum Command {
     /// The paper scene (100x100x40, three extended reflectors) acquired with K_p = 10000,
     /// 20000 and 30000 (noise-free, seed --seed) and reconstructed by every solver
     /// (backprojection plain and debiased, cgls, fista, cosamp, model-based, tv, auto) within
-    /// iteration budgets that keep the whole demo under three minutes on two cores: cgls 20,
-    /// fista 20, cosamp 8, model-based 8, tv and auto 6 (each of their model-based fits).
+    /// iteration budgets that keep the whole demo under three minutes on two cores: cgls 15,
+    /// fista 15 (its step from 30 power iterations), cosamp 1, model-based 6, tv and auto 4
+    /// (each of their model-based fits); change them with --max-iter or a config file.
     ///
     /// Prints a table (per solver and K_p: lit pixels at the exact depth, false detections,
     /// depth RMSE in bins, relative error ‖X − X̂‖/‖X‖, wall time, iterations/budget, why the

@@ -99,8 +99,9 @@ fn per_solver(
         .collect()
 }
 
-/// The demo's error against run time: ‖X − X̂‖/‖X‖ against wall time, both on logarithmic axes,
-/// one line per solver joining its runs in increasing K_p.
+/// The demo's error against run time: ‖X − X̂‖/‖X‖ against wall time (logarithmic axis), one
+/// line per solver joining its runs in increasing K_p. The error axis is logarithmic when the
+/// errors span more than a decade, linear otherwise.
 ///
 /// # Errors
 /// The errors of [`line_plot`] (e.g. no finished run).
@@ -108,21 +109,34 @@ pub fn error_vs_time(config: &ExperimentConfig, rows: &[Row]) -> Result<ChartFig
     let mut kps = config.pulse_lens.clone();
     kps.sort_unstable();
     let kps: Vec<String> = kps.iter().map(usize::to_string).collect();
+    let series = per_solver(config, rows, |r| {
+        r.relative_error
+            .map(|e| (floor(r.time_s, TIME_FLOOR), floor(e, ERROR_FLOOR)))
+    });
+    // A logarithmic error axis only when the errors span more than a decade.
+    let (lo, hi) = series
+        .iter()
+        .flat_map(|s| s.points().iter().map(|p| p.1))
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), e| {
+            (lo.min(e), hi.max(e))
+        });
+    let log_y = hi > 10.0 * lo;
     let mut chart = Chart::new(format!(
         "Error against run time: {}, K_p = {}",
         describe(config),
         kps.join(", ")
     ))
     .x_label("wall time (s), log scale")
-    .y_label("relative error |X - X^|/|X| (floor 1e-12)")
+    .y_label(if log_y {
+        "relative error |X - X^|/|X| (floor 1e-12), log scale"
+    } else {
+        "relative error |X - X^|/|X|"
+    })
     .log_x(true)
-    .log_y(true)
+    .log_y(log_y)
     .size(1100, 620)
     .legend(LegendPosition::Outside);
-    for s in per_solver(config, rows, |r| {
-        r.relative_error
-            .map(|e| (floor(r.time_s, TIME_FLOOR), floor(e, ERROR_FLOOR)))
-    }) {
+    for s in series {
         chart = chart.series(s);
     }
     line_plot(&chart)
