@@ -39,6 +39,7 @@
 #![warn(missing_docs)]
 
 pub mod error;
+pub mod experiment;
 pub mod io;
 #[cfg(feature = "lapack")]
 pub mod lapack;

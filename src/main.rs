@@ -9,6 +9,10 @@ use clap::{Parser, Subcommand, ValueEnum};
 use ndarray_npy::WritableElement;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rdlidar::experiment::{
+    self, Budgets, ConfigFile, Console, ExperimentConfig, ExperimentPatch, NoiseLevel,
+    SceneKind as ExpSceneKind,
+};
 use rdlidar::io::{self, NpyDtype, ShapeExpectation, StagedFile};
 use rdlidar::lidar::{
     coded_aperture, compare, depth_bin_m, multi_adc, paper_scene, pixel_groups,
@@ -26,6 +30,9 @@ mod cli_info;
 
 /// Compressive time-of-flight lidar by random demodulation.
 ///
+/// With no subcommand, runs the main job, `demo` (the options below are the demo's): the
+/// paper's experiment with every solver, a table on stdout and tables and figures in out/.
+///
 /// Arrays are exchanged as C-order NumPy `.npy` files: scene (M, N, K_s) float32/float64, pulse
 /// (K_p,) float32/float64 ≥ 0, codes (M, N, K) int8 in {-1, 0, 1}, measurements (K,)
 /// float32/float64, with K = K_p + K_s − 1. Errors are printed as one line `error: ...` naming
@@ -36,6 +43,27 @@ struct Cli {
     /// Worker threads of the parallel kernels (default: one per core).
     #[arg(long, global = true, value_parser = parse_positive)]
     threads: Option<usize>,
+
+    /// Base seed of every random draw (default 0). simulate, bench, demo and compare draw the
+    /// pulse from SEED, the codes from SEED+1, the noise from SEED+2 and random scenes from
+    /// SEED+3; selfcheck and dottest seed their test vectors with it, reconstruct the solvers'
+    /// randomized parts.
+    #[arg(long, global = true)]
+    seed: Option<u64>,
+
+    /// Floating-point precision of the computation and of the float arrays written (default:
+    /// f64 for simulate and compare, f32 for bench and demo; for forward, adjoint and reconstruct,
+    /// f64 if an input array is float64, f32 otherwise).
+    #[arg(long, global = true, value_enum)]
+    precision: Option<Precision>,
+
+    /// Hide progress bars and progress lines.
+    #[arg(long, global = true)]
+    quiet: bool,
+
+    /// The demo's options, when no subcommand is given.
+    #[command(flatten)]
+    demo: ExperimentArgs,
 
     #[command(subcommand)]
     command: Option<Command>,
@@ -76,14 +104,54 @@ impl SceneKind {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// The main job (also what runs with no subcommand): the paper's experiment, extended.
+    ///
+    /// The paper scene (100x100x40, three extended reflectors) acquired with K_p = 10000,
+    /// 20000 and 30000 (noise-free, seed --seed) and reconstructed by every solver
+    /// (backprojection plain and debiased, cgls, fista, cosamp, model-based, tv, auto) within
+    /// iteration budgets that keep the whole demo under three minutes on two cores: cgls 15,
+    /// fista 15 (its step from 30 power iterations), cosamp 1, model-based 6, tv and auto 4
+    /// (each of their model-based fits); change them with --max-iter or a config file.
+    ///
+    /// Prints a table (per solver and K_p: lit pixels at the exact depth, false detections,
+    /// depth RMSE in bins, relative error ‖X − X̂‖/‖X‖, wall time, iterations/budget, why the
+    /// solver stopped) and writes to --out (default out/): results.csv, results.json,
+    /// results.md, config.toml (the resolved experiment, loadable with --config), one
+    /// depth_kp{K_p}.png per pulse length (true and reconstructed depth maps side by side, a
+    /// colour bar in metres, pixels without a return in grey) and error_vs_time.png.
+    ///
+    /// An existing non-empty output folder is refused unless --force. Rows are appended to
+    /// results.csv.partial and results.jsonl.partial as each run finishes; Ctrl-C stops after
+    /// the current run and still writes the tables and figures of the finished runs (exit
+    /// status 130); a second Ctrl-C quits at once, leaving the partial files.
+    ///
+    /// Example: `rdlidar demo --pulse-lens 10000,30000 --solvers backprojection-debiased,model-based --out run1`
+    Demo(ExperimentArgs),
+
+    /// Sweep K_p across the compressive, critical and redundant regimes, every solver, several
+    /// seeds and noise levels.
+    ///
+    /// Default: the paper scene 16x16x16 (critical K_p 4081), K_p = 256 … 32768 (10 lengths),
+    /// 3 seeds, noise-free, 20 dB and 10 dB SNR, every solver with its default iteration limit,
+    /// in f64. --quick: K_p = 512 … 16384 (6 lengths), 2 seeds, noise-free and 20 dB. Seed i
+    /// of the sweep is SEED + 10·i.
+    ///
+    /// Writes to --out (default out-compare/): results.csv, results.json and results.md (one
+    /// row per run), summary.md (median over seeds of the relative error, exact-depth
+    /// percentage and time, solver x K_p, per noise level), config.toml, pareto.png (time
+    /// against error, every run, with the Pareto front) and phase_{noise}.png per noise level
+    /// (median error against K_p, the critical K_p marked). Existing folders, partial files
+    /// and Ctrl-C behave as for `demo`.
+    ///
+    /// Example: `rdlidar compare --quick --solvers cgls,fista,model-based --snr-db none,30`
+    Compare(CompareArgs),
+
     /// Run the dot test on every operator and combinator, in f32 and f64, and print the gaps.
     ///
+    /// The global --seed seeds the random operators and test vectors (default 0).
+    ///
     /// Example: `rdlidar selfcheck --seed 3`
-    Selfcheck {
-        /// Seed of the random operators and test vectors.
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-    },
+    Selfcheck,
 
     /// Generate a scene, a pulse and codes, and simulate the measurements.
     ///
@@ -142,10 +210,6 @@ enum Command {
         /// Output measurements file (K,), or (ADCs, K) for several ADCs.
         #[arg(long, value_name = "Y")]
         out: PathBuf,
-        /// Precision of the computation and of OUT (default: f64 if the scene or the pulse is
-        /// float64, f32 otherwise).
-        #[arg(long, value_enum)]
-        precision: Option<Precision>,
         /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
         #[arg(long, value_name = "AxB", value_parser = parse_tile)]
         tiles: Option<Tile>,
@@ -181,10 +245,6 @@ enum Command {
         /// Correlate with the zero-mean pulse (debiased backprojection).
         #[arg(long)]
         debiased: bool,
-        /// Precision of the computation and of OUT (default: f64 if the measurements or the
-        /// pulse are float64, f32 otherwise).
-        #[arg(long, value_enum)]
-        precision: Option<Precision>,
         /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
         #[arg(long, value_name = "AxB", value_parser = parse_tile)]
         tiles: Option<Tile>,
@@ -211,9 +271,6 @@ enum Command {
         /// Depth bins K_s of the scene.
         #[arg(long, value_name = "KS", value_parser = parse_positive)]
         depth_bins: usize,
-        /// Seed of the test vectors.
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
         /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
         #[arg(long, value_name = "AxB", value_parser = parse_tile)]
         tiles: Option<Tile>,
@@ -280,19 +337,113 @@ enum Command {
         /// Pulse length K_p.
         #[arg(long, value_parser = parse_positive, default_value_t = 30000)]
         pulse_len: usize,
-        /// Precision of the operator.
-        #[arg(long, value_enum, default_value_t = Precision::F32)]
-        precision: Precision,
         /// Print the timings as JSON.
         #[arg(long)]
         json: bool,
         /// Timed runs of each operation, after one warm-up run.
         #[arg(long, value_parser = parse_positive, default_value_t = 7)]
         repeats: usize,
-        /// Seed of the pulse (the codes use SEED+1).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
     },
+}
+
+/// The options of `demo` (and of the command with no subcommand) and `compare`.
+///
+/// Each option overrides the experiment's preset and the config file's section.
+#[derive(clap::Args, Debug, Default, PartialEq)]
+struct ExperimentArgs {
+    /// TOML file describing the experiment: top-level seed, precision, threads, quiet, and
+    /// [demo] / [compare] sections with the keys out, scene, size, lit_fraction, pulse_lens,
+    /// solvers, snr_db, seeds, max_iter, power_iterations (see docs/experiments.md). Flags
+    /// override it.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Output folder (default: out/ for demo, out-compare/ for compare).
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Write into an existing non-empty output folder, replacing the experiment's files.
+    #[arg(long)]
+    force: bool,
+    /// A small preset that runs in seconds (demo: 8x8x8, K_p 100,300,1000; compare: 6x6x6,
+    /// K_p 50,211,800).
+    #[arg(long)]
+    tiny: bool,
+    /// Scene: paper (the default) or random.
+    #[arg(long, value_parser = parse_scene)]
+    scene: Option<ExpScene>,
+    /// Scene grid MxNxKS (at most 1024 rows and columns, 2^26 voxels).
+    #[arg(long, value_name = "MxNxKS", value_parser = parse_size)]
+    size: Option<Geometry>,
+    /// Fraction of lit pixels of --scene random, in [0, 1] (default 0.5).
+    #[arg(long, value_name = "F")]
+    lit_fraction: Option<f64>,
+    /// Pulse lengths K_p, comma-separated.
+    #[arg(long, value_name = "LIST", value_parser = parse_pulse_lens)]
+    pulse_lens: Option<PulseLens>,
+    /// Solvers, comma-separated, or `all` (every solver but iht): backprojection,
+    /// backprojection-debiased, cgls, fista, iht, cosamp, model-based, tv, auto.
+    #[arg(long, value_name = "LIST", value_parser = parse_solver_list)]
+    solvers: Option<Solvers>,
+    /// Noise levels in dB SNR, comma-separated; `none` for noise-free.
+    #[arg(long, value_name = "LIST", value_parser = parse_noise_list, allow_hyphen_values = true)]
+    snr_db: Option<NoiseLevels>,
+    /// Number of seeds (SEED, SEED+10, …).
+    #[arg(long, value_name = "N", value_parser = parse_positive)]
+    seeds: Option<usize>,
+    /// Iteration budgets, e.g. `fista=50,model-based=12` (other solvers keep the preset's).
+    #[arg(long, value_name = "SOLVER=N,...", value_parser = parse_budgets)]
+    max_iter: Option<Budgets>,
+    /// Power iterations that estimate ‖A‖² for FISTA's step (demo default 30; compare: the
+    /// solver's default of up to 200).
+    #[arg(long, value_name = "N", value_parser = parse_positive)]
+    power_iterations: Option<usize>,
+}
+
+/// The options of `compare`.
+#[derive(clap::Args, Debug)]
+struct CompareArgs {
+    #[command(flatten)]
+    common: ExperimentArgs,
+    /// The quick sweep: 6 pulse lengths, 2 seeds, 2 noise levels (under 5 minutes on 2 cores).
+    #[arg(long, conflicts_with = "tiny")]
+    quick: bool,
+}
+
+/// Values of the experiment flags (newtypes, so that clap takes each list as one value).
+#[derive(Debug, Clone, PartialEq)]
+struct PulseLens(Vec<usize>);
+#[derive(Debug, Clone, PartialEq)]
+struct Solvers(Vec<Method>);
+#[derive(Debug, Clone, PartialEq)]
+struct NoiseLevels(Vec<NoiseLevel>);
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ExpScene(ExpSceneKind);
+
+fn parse_scene(text: &str) -> Result<ExpScene, String> {
+    text.parse()
+        .map(ExpScene)
+        .map_err(|e: rdlidar::Error| e.to_string())
+}
+
+fn parse_pulse_lens(text: &str) -> Result<PulseLens, String> {
+    experiment::parse_pulse_lens(text)
+        .map(PulseLens)
+        .map_err(|e| e.to_string())
+}
+
+fn parse_solver_list(text: &str) -> Result<Solvers, String> {
+    experiment::parse_solvers(text)
+        .map(Solvers)
+        .map_err(|e| e.to_string())
+}
+
+fn parse_noise_list(text: &str) -> Result<NoiseLevels, String> {
+    experiment::parse_noise_levels(text)
+        .map(NoiseLevels)
+        .map_err(|e| e.to_string())
+}
+
+fn parse_budgets(text: &str) -> Result<Budgets, String> {
+    Budgets::parse(text).map_err(|e| e.to_string())
 }
 
 /// The options of `simulate`.
@@ -307,14 +458,15 @@ struct SimulateArgs {
     /// Pulse length K_p (Bernoulli 0/1 samples).
     #[arg(long, value_parser = parse_positive)]
     pulse_len: usize,
-    /// Base seed (see above for the derived seeds).
-    #[arg(long, default_value_t = 0)]
+    /// Base seed (the global --seed, default 0; see above for the derived seeds).
+    #[arg(skip)]
     seed: u64,
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Precision of the computation and dtype of scene.npy, pulse.npy and meas.npy.
-    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    /// Precision of the computation and dtype of scene.npy, pulse.npy and meas.npy (the
+    /// global --precision, default f64).
+    #[arg(skip = Precision::F64)]
     precision: Precision,
     /// Fraction of lit pixels of `--scene random`, in [0, 1] (default 0.5).
     #[arg(long, value_name = "F")]
@@ -366,9 +518,9 @@ struct ReconstructArgs {
     /// Output scene (M, N, K_s), float32 or float64 as --precision.
     #[arg(long, value_name = "XH")]
     out_scene: PathBuf,
-    /// Precision of the computation and of the scene file (default: f64 if the measurements or
-    /// the pulse are float64, f32 otherwise).
-    #[arg(long, value_enum)]
+    /// Precision of the computation and of the scene file (the global --precision; default:
+    /// f64 if the measurements or the pulse are float64, f32 otherwise).
+    #[arg(skip)]
     precision: Option<Precision>,
     /// Overrides the solver's iteration limit.
     #[arg(long, value_name = "N", value_parser = parse_positive)]
@@ -379,11 +531,11 @@ struct ReconstructArgs {
     /// The true scene (M, N, K_s): print how well the estimate matches it.
     #[arg(long, value_name = "SCENE")]
     truth: Option<PathBuf>,
-    /// Seed of the solvers' randomized parts.
-    #[arg(long, default_value_t = 0)]
+    /// Seed of the solvers' randomized parts (the global --seed, default 0).
+    #[arg(skip)]
     seed: u64,
-    /// Hide the progress bar.
-    #[arg(long)]
+    /// Hide the progress bar (the global --quiet).
+    #[arg(skip)]
     quiet: bool,
 }
 
@@ -1002,6 +1154,7 @@ fn reconstruct_cmd<T: Real + WritableElement>(a: &ReconstructArgs) -> CliResult 
         max_iter: a.max_iter,
         progress: !a.quiet,
         seed: a.seed,
+        power_iterations: None,
     };
     let r = reconstruct(&op, &y, a.solver, &options)?;
     let metrics = match &truth {
@@ -1799,21 +1952,39 @@ fn simulate<T: Real + WritableElement>(a: &SimulateArgs, arch: Architecture) -> 
     Ok(())
 }
 
-fn run(cli: Cli) -> CliResult<ExitCode> {
-    if let Some(n) = cli.threads {
+fn set_threads(threads: Option<usize>, source: &str) -> CliResult {
+    if let Some(n) = threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()
-            .map_err(|e| format!("--threads {n}: {e}"))?;
+            .map_err(|e| format!("{source} {n}: {e}"))?;
     }
-    let Some(command) = cli.command else {
-        println!("rdlidar {}", env!("CARGO_PKG_VERSION"));
-        println!(
-            "subcommands: simulate, forward, adjoint, dottest, reconstruct, bench, info, selfcheck \
-             (run `rdlidar --help`)"
-        );
-        return Ok(ExitCode::SUCCESS);
+    Ok(())
+}
+
+fn run(cli: Cli) -> CliResult<ExitCode> {
+    let globals = Globals {
+        threads: cli.threads,
+        seed: cli.seed,
+        precision: cli.precision,
+        quiet: cli.quiet,
     };
+    let Some(command) = cli.command else {
+        return experiment_cmd(Experiment::Demo, &cli.demo, false, &globals);
+    };
+    if cli.demo != ExperimentArgs::default() {
+        return Err(
+            "the demo's options (--out, --tiny, --pulse-lens, …) before a subcommand \
+                    apply only without one: put them after the subcommand"
+                .to_string()
+                .into(),
+        );
+    }
+    // The experiments may also take the thread count from their config file.
+    if !matches!(command, Command::Demo(_) | Command::Compare(_)) {
+        set_threads(cli.threads, "--threads")?;
+    }
+    let (seed, precision, quiet) = (cli.seed.unwrap_or(0), cli.precision, cli.quiet);
     let ok = |b: bool| {
         if b {
             ExitCode::SUCCESS
@@ -1822,14 +1993,18 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         }
     };
     match command {
-        Command::Selfcheck { seed } => {
+        Command::Demo(a) => experiment_cmd(Experiment::Demo, &a, false, &globals),
+        Command::Compare(a) => experiment_cmd(Experiment::Compare, &a.common, a.quick, &globals),
+        Command::Selfcheck => {
             let passed = selfcheck(seed)?;
             if !passed {
                 eprintln!("error: some operators failed the dot test");
             }
             Ok(ok(passed))
         }
-        Command::Simulate(a) => {
+        Command::Simulate(mut a) => {
+            a.seed = seed;
+            a.precision = precision.unwrap_or(Precision::F64);
             let arch = check_simulate_flags(&a)?;
             match a.precision {
                 Precision::F32 => simulate::<f32>(&a, arch)?,
@@ -1842,7 +2017,6 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             codes,
             scene,
             out,
-            precision,
             tiles,
         } => {
             check_out_file(&out)?;
@@ -1863,7 +2037,6 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             depth_bins,
             out,
             debiased,
-            precision,
             tiles,
         } => {
             check_out_file(&out)?;
@@ -1887,10 +2060,12 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             pulse,
             codes,
             depth_bins,
-            seed,
             tiles,
         } => Ok(ok(dottest(&pulse, &codes, depth_bins, seed, tiles)?)),
-        Command::Reconstruct(a) => {
+        Command::Reconstruct(mut a) => {
+            a.seed = seed;
+            a.precision = precision;
+            a.quiet = quiet;
             check_out_file(&a.out_depth)?;
             check_out_file(&a.out_scene)?;
             if let Some(png) = &a.png {
@@ -1914,18 +2089,232 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         Command::Bench {
             size,
             pulse_len,
-            precision,
             json,
             repeats,
-            seed,
         } => {
-            match precision {
+            match precision.unwrap_or(Precision::F32) {
                 Precision::F32 => bench::<f32>(size, pulse_len, repeats, seed, json)?,
                 Precision::F64 => bench::<f64>(size, pulse_len, repeats, seed, json)?,
             }
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// The global flags.
+#[derive(Debug, Clone, Copy)]
+struct Globals {
+    threads: Option<usize>,
+    seed: Option<u64>,
+    precision: Option<Precision>,
+    quiet: bool,
+}
+
+/// The two experiments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Experiment {
+    Demo,
+    Compare,
+}
+
+impl Experiment {
+    fn name(self) -> &'static str {
+        match self {
+            Experiment::Demo => "demo",
+            Experiment::Compare => "compare",
+        }
+    }
+}
+
+/// Set by the first Ctrl-C: the experiment stops after the run under way.
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// The flag an experiment setting (a configuration key) is given with on the command line.
+fn flag_of(key: &str) -> String {
+    format!("--{}", key.replace('_', "-"))
+}
+
+/// Resolves an experiment's configuration: the preset (--tiny, --quick or the default), the
+/// config file's section and top-level keys over it, the flags over both.
+fn experiment_config(
+    which: Experiment,
+    a: &ExperimentArgs,
+    quick: bool,
+    globals: &Globals,
+) -> CliResult<(ExperimentConfig, Option<usize>, bool)> {
+    let mut config = match (which, a.tiny, quick) {
+        (Experiment::Demo, true, _) => ExperimentConfig::demo_tiny(),
+        (Experiment::Demo, false, _) => ExperimentConfig::demo(),
+        (Experiment::Compare, true, _) => ExperimentConfig::compare_tiny(),
+        (Experiment::Compare, false, true) => ExperimentConfig::compare_quick(),
+        (Experiment::Compare, false, false) => ExperimentConfig::compare(),
+    };
+    let file = match &a.config {
+        Some(path) => ConfigFile::load(path)?,
+        None => ConfigFile::default(),
+    };
+    let section = match which {
+        Experiment::Demo => &file.demo,
+        Experiment::Compare => &file.compare,
+    };
+    if let Some(patch) = section {
+        config = config.patched(patch);
+    }
+    let flags = ExperimentPatch {
+        out: a.out.clone(),
+        scene: a.scene.map(|s| s.0),
+        size: a.size,
+        lit_fraction: a.lit_fraction,
+        pulse_lens: a.pulse_lens.as_ref().map(|v| v.0.clone()),
+        solvers: a.solvers.as_ref().map(|v| v.0.clone()),
+        snr_db: a.snr_db.as_ref().map(|v| v.0.clone()),
+        seeds: a.seeds,
+        max_iter: a.max_iter,
+        power_iterations: a.power_iterations,
+    };
+    config = config.patched(&flags);
+    config.seed = globals.seed.or(file.seed).unwrap_or(config.seed);
+    config.precision = match globals.precision {
+        Some(Precision::F32) => experiment::Precision::F32,
+        Some(Precision::F64) => experiment::Precision::F64,
+        None => file.precision.unwrap_or(config.precision),
+    };
+    if let Err(e) = config.validate() {
+        let msg = match e {
+            rdlidar::Error::InvalidParameter { name, reason } => {
+                let place = match &a.config {
+                    Some(path) => format!(" (or `{name}` in {})", path.display()),
+                    None => String::new(),
+                };
+                format!("{}{place}: {reason}", flag_of(name))
+            }
+            other => other.to_string(),
+        };
+        return Err(msg.into());
+    }
+    let threads = globals.threads.or(file.threads);
+    let quiet = globals.quiet || file.quiet.unwrap_or(false);
+    Ok((config, threads, quiet))
+}
+
+/// Refuses an existing non-empty output folder without --force, before any work.
+fn check_experiment_out(dir: &Path, force: bool) -> CliResult {
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(format!("{}: exists and is not a folder (--out)", dir.display()).into());
+        }
+        let mut entries = std::fs::read_dir(dir)
+            .map_err(|e| format!("{}: cannot read the folder: {e}", dir.display()))?;
+        if entries.next().is_some() && !force {
+            return Err(format!(
+                "{}: the output folder exists and is not empty; pass --force to overwrite the \
+                 results in it, or --out DIR to write elsewhere",
+                dir.display()
+            )
+            .into());
+        }
+    } else {
+        let parent = parent_dir(dir);
+        if !parent.is_dir() {
+            return Err(format!(
+                "{}: the parent folder {} does not exist (--out)",
+                dir.display(),
+                parent.display()
+            )
+            .into());
+        }
+    }
+    Ok(())
+}
+
+/// `demo` (also the command with no subcommand) and `compare`.
+fn experiment_cmd(
+    which: Experiment,
+    a: &ExperimentArgs,
+    quick: bool,
+    globals: &Globals,
+) -> CliResult<ExitCode> {
+    let (config, threads, quiet) = experiment_config(which, a, quick, globals)?;
+    check_experiment_out(&config.out, a.force)?;
+    set_threads(threads, "threads")?;
+    let out = config.out.display().to_string();
+    ctrlc::set_handler(move || {
+        if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
+            eprintln!(
+                "\ninterrupted again: quitting; finished rows are in {out}/results.csv.partial"
+            );
+            std::process::exit(130);
+        }
+        eprintln!("\nCtrl-C: stopping after the current run (Ctrl-C again to quit at once)");
+    })
+    .map_err(|e| format!("cannot handle Ctrl-C: {e}"))?;
+
+    let kps: Vec<String> = config.pulse_lens.iter().map(usize::to_string).collect();
+    let levels: Vec<String> = config
+        .snr_db
+        .iter()
+        .map(|l| experiment::noise_text(*l))
+        .collect();
+    println!(
+        "rdlidar {}: {} scene {} (critical K_p {}), K_p {}, {}, {} seed(s) from {}, {}, {} \
+         threads; {} runs",
+        which.name(),
+        config.scene.name(),
+        config.size,
+        config.size.critical_pulse_len(),
+        kps.join(", "),
+        levels.join(", "),
+        config.seeds,
+        config.seed,
+        config.precision,
+        rayon::current_num_threads(),
+        config.runs()
+    );
+    println!(
+        "iteration budgets: {}; FISTA step from {} power iterations",
+        config.max_iter,
+        config
+            .power_iterations
+            .map_or_else(|| "up to 200".to_string(), |n| n.to_string())
+    );
+    let mut console = Console::new(quiet);
+    let outcome = match which {
+        Experiment::Demo => experiment::run_demo(&config, a.force, &mut console, &STOP),
+        Experiment::Compare => experiment::run_compare(&config, a.force, &mut console, &STOP),
+    };
+    console.finish();
+    let outcome = outcome?;
+    let names: Vec<String> = outcome
+        .files
+        .iter()
+        .map(|f| {
+            f.file_name()
+                .map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into())
+        })
+        .collect();
+    let failed = outcome.rows.iter().filter(|r| r.error.is_some()).count();
+    println!(
+        "{} of {} runs finished{} in {:.1} s (total {:.1} s with tables and figures); wrote {}: {}",
+        outcome.rows.len(),
+        outcome.planned,
+        if failed > 0 {
+            format!(" ({failed} with a solver error)")
+        } else {
+            String::new()
+        },
+        outcome.elapsed.as_secs_f64(),
+        outcome.total.as_secs_f64(),
+        config.out.display(),
+        names.join(", ")
+    );
+    if outcome.interrupted {
+        eprintln!(
+            "interrupted: the tables and figures hold the {} finished runs",
+            outcome.rows.len()
+        );
+        return Ok(ExitCode::from(130));
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn main() -> ExitCode {

@@ -8,12 +8,14 @@ mod architectures;
 mod argmin_solvers;
 mod cli;
 mod cli_errors;
+mod cli_experiments;
 mod cli_lidar;
 mod cli_reconstruct;
 mod cli_support;
 mod convolution;
 mod end_to_end;
 mod errors;
+mod experiments;
 mod info;
 #[cfg(feature = "lapack")]
 mod lapack;

@@ -164,6 +164,12 @@ pub struct ReconstructOptions {
     pub progress: bool,
     /// Seed of the randomized parts (the power iteration behind FISTA's step).
     pub seed: u64,
+    /// Overrides the number of power iterations that estimate ‖A‖² for [`Method::Fista`]'s step
+    /// (by default up to 200, until the estimate changes by less than 10⁻⁶; at 100×100×40 these
+    /// cost more than 200 FISTA iterations' worth of applications). Fewer iterations
+    /// underestimate ‖A‖² a little (about 2% after 30 iterations at 100×100×40), so the step's
+    /// safety margin grows from 1.01 to 1.05 when this is set.
+    pub power_iterations: Option<usize>,
 }
 
 /// What [`reconstruct`] returns.
@@ -221,6 +227,9 @@ pub fn reconstruct<T: Real>(
     let start = Instant::now();
     if options.max_iter == Some(0) {
         return Err(Error::param("max_iter", "must be at least 1"));
+    }
+    if options.power_iterations == Some(0) {
+        return Err(Error::param("power_iterations", "must be at least 1"));
     }
     if y.len() != op.nrows() {
         return Err(Error::shape(
@@ -391,9 +400,16 @@ fn run<T: Real>(
                 step: StepRule::PowerIteration {
                     settings: PowerIteration {
                         seed: options.seed,
+                        max_iter: options
+                            .power_iterations
+                            .unwrap_or(PowerIteration::default().max_iter),
                         ..PowerIteration::default()
                     },
-                    margin: 1.01,
+                    margin: if options.power_iterations.is_some() {
+                        1.05
+                    } else {
+                        1.01
+                    },
                 },
                 restart: Restart::Function,
                 stopping: stopping(

@@ -213,7 +213,7 @@ where
             format!("must be in (0, 1], got {}", params.neighbour_floor),
         ));
     }
-    // The neighbourhood prior: message passing, then again with priors from the neighbours'
+    // The neighbourhood prior: message passing, then again with priors from the neighbours
     // posteriors, until a run explains the data or the rounds are used up.
     let mut start: Option<Report> = None;
     if let Some(amp) = params
@@ -225,7 +225,11 @@ where
         if x.iter().all(|v| *v == T::zero()) {
             let (mut rep, mut post) = reflector_amp_run(op, y, x, amp, None, None, &mut ())?;
             for _ in 0..params.neighbour_rounds {
-                if rep.termination == Termination::Residual {
+                // Done once a run explains the data or settles on a support.
+                if matches!(
+                    rep.termination,
+                    Termination::Residual | Termination::Converged
+                ) {
                     break;
                 }
                 let priors = neighbour_priors(

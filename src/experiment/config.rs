@@ -1,0 +1,1005 @@
+//! What an experiment runs: presets with validated defaults, a TOML file layered over them, and
+//! the limits that keep a run within one machine.
+
+use std::path::{Path, PathBuf};
+
+use serde::de::Error as _;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+use crate::error::{Error, Result};
+use crate::lidar::{Geometry, Method};
+
+/// Largest number of voxels M·N·K_s of an experiment's scene (2²⁶: 256 MB per f32 cube; a sweep
+/// holds a few cubes per solver).
+pub const MAX_VOXELS: usize = 1 << 26;
+
+/// Largest number of pixel rows or columns of an experiment's scene, so that depth figures with
+/// several panels side by side stay within the limits of [`crate::plot`].
+pub const MAX_SIDE: usize = 1024;
+
+/// Largest size of the bit-packed codes, M·N·K bits, of one problem (2 GiB).
+pub const MAX_CODE_BYTES: usize = 1 << 31;
+
+/// Floating-point precision of an experiment's computations.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+pub enum Precision {
+    /// Single precision (the default: the operators are about twice as fast).
+    #[default]
+    #[serde(rename = "f32")]
+    F32,
+    /// Double precision.
+    #[serde(rename = "f64")]
+    F64,
+}
+
+impl Precision {
+    /// `"f32"` or `"f64"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
+impl std::fmt::Display for Precision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The scene an experiment reconstructs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SceneKind {
+    /// The paper's scene ([`crate::lidar::paper_scene`]): a square, a disk and a slanted plane,
+    /// scaled to the grid; the same for every seed.
+    #[default]
+    Paper,
+    /// A random opaque scene ([`crate::lidar::random_opaque_scene`]) drawn from SEED+3 for each
+    /// seed, each pixel lit with probability `lit_fraction`.
+    Random,
+}
+
+impl SceneKind {
+    /// `"paper"` or `"random"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneKind::Paper => "paper",
+            SceneKind::Random => "random",
+        }
+    }
+}
+
+impl std::str::FromStr for SceneKind {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "paper" => Ok(SceneKind::Paper),
+            "random" => Ok(SceneKind::Random),
+            _ => Err(Error::param(
+                "scene",
+                format!("unknown scene {s:?}; expected paper or random"),
+            )),
+        }
+    }
+}
+
+/// Iteration limits per method, overriding the method's default limit
+/// ([`crate::lidar::ReconstructOptions::max_iter`]). Methods without an entry keep their default.
+///
+/// In a TOML file, a table from method names to limits: `max_iter = { fista = 20, cgls = 20 }`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Budgets([Option<usize>; Method::ALL.len()]);
+
+fn method_index(method: Method) -> usize {
+    Method::ALL
+        .iter()
+        .position(|&m| m == method)
+        .unwrap_or_default()
+}
+
+impl Budgets {
+    /// No override: every method keeps its default limit.
+    pub fn none() -> Self {
+        Budgets::default()
+    }
+
+    /// The limit of `method`, if overridden.
+    pub fn get(&self, method: Method) -> Option<usize> {
+        self.0[method_index(method)]
+    }
+
+    /// Sets (`Some`) or clears (`None`) the limit of `method`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`max_iter`) for a limit of 0.
+    pub fn set(&mut self, method: Method, limit: Option<usize>) -> Result<()> {
+        if limit == Some(0) {
+            return Err(Error::param(
+                "max_iter",
+                format!("{method}: the iteration limit must be at least 1"),
+            ));
+        }
+        self.0[method_index(method)] = limit;
+        Ok(())
+    }
+
+    /// With `method` limited to `limit` iterations.
+    ///
+    /// # Errors
+    /// As [`Budgets::set`].
+    pub fn with(mut self, method: Method, limit: usize) -> Result<Self> {
+        self.set(method, Some(limit))?;
+        Ok(self)
+    }
+
+    /// The overridden limits, in the order of [`Method::ALL`].
+    pub fn iter(&self) -> impl Iterator<Item = (Method, usize)> + '_ {
+        Method::ALL
+            .iter()
+            .zip(self.0)
+            .filter_map(|(&m, l)| l.map(|l| (m, l)))
+    }
+
+    /// The limits of `other` replace those of `self` where `other` has one.
+    pub fn merged(mut self, other: &Budgets) -> Self {
+        for (m, l) in other.iter() {
+            self.0[method_index(m)] = Some(l);
+        }
+        self
+    }
+
+    /// Parses `name=N,name=N` (e.g. `fista=20,cgls=30`).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`max_iter`) for an unknown method, a missing `=`, or a limit
+    /// that is not a positive integer.
+    pub fn parse(text: &str) -> Result<Self> {
+        let mut b = Budgets::none();
+        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let Some((name, n)) = item.split_once('=') else {
+                return Err(Error::param(
+                    "max_iter",
+                    format!("expected SOLVER=N (e.g. fista=20), got {item:?}"),
+                ));
+            };
+            let method = parse_method(name.trim(), "max_iter")?;
+            let n: usize = n.trim().parse().map_err(|_| {
+                Error::param(
+                    "max_iter",
+                    format!("{name}: expected a positive integer, got {:?}", n.trim()),
+                )
+            })?;
+            b.set(method, Some(n))?;
+        }
+        Ok(b)
+    }
+}
+
+impl std::fmt::Display for Budgets {
+    /// `name=N,…`, or `defaults` when nothing is overridden.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let items: Vec<String> = self.iter().map(|(m, l)| format!("{m}={l}")).collect();
+        if items.is_empty() {
+            f.write_str("defaults")
+        } else {
+            f.write_str(&items.join(","))
+        }
+    }
+}
+
+impl Serialize for Budgets {
+    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.collect_map(self.iter().map(|(m, l)| (m.name(), l)))
+    }
+}
+
+impl<'de> Deserialize<'de> for Budgets {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let map = std::collections::BTreeMap::<String, usize>::deserialize(d)?;
+        let mut b = Budgets::none();
+        for (name, limit) in map {
+            let method = parse_method(&name, "max_iter").map_err(D::Error::custom)?;
+            b.set(method, Some(limit)).map_err(D::Error::custom)?;
+        }
+        Ok(b)
+    }
+}
+
+/// A method by its command-line name, with the valid names in the error.
+fn parse_method(name: &str, key: &'static str) -> Result<Method> {
+    name.parse::<Method>().map_err(|_| {
+        Error::param(
+            key,
+            format!(
+                "unknown solver {name:?}; valid solvers: {}",
+                Method::NAMES.join(", ")
+            ),
+        )
+    })
+}
+
+/// Parses a comma-separated list of solver names (`all` for every method but IHT, as in the
+/// demo).
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`solvers`) for an unknown name or an empty list.
+pub fn parse_solvers(text: &str) -> Result<Vec<Method>> {
+    let names: Vec<&str> = text
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .collect();
+    if names == ["all"] {
+        return Ok(DEFAULT_SOLVERS.to_vec());
+    }
+    if names.is_empty() {
+        return Err(Error::param("solvers", "the list of solvers is empty"));
+    }
+    names.iter().map(|n| parse_method(n, "solvers")).collect()
+}
+
+/// A noise level: `None` is noise-free, `Some(s)` white Gaussian noise at s dB SNR.
+pub type NoiseLevel = Option<f64>;
+
+/// Parses one noise level: `none`, `inf` (noise-free) or a number of dB.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`snr_db`) for anything else, NaN or −∞.
+pub fn parse_noise_level(text: &str) -> Result<NoiseLevel> {
+    let t = text.trim();
+    if t.eq_ignore_ascii_case("none") {
+        return Ok(None);
+    }
+    let v: f64 = t.parse().map_err(|_| {
+        Error::param(
+            "snr_db",
+            format!("expected a number of dB, or none for noise-free, got {t:?}"),
+        )
+    })?;
+    noise_level(v).map_err(|e| Error::param("snr_db", e))
+}
+
+/// +∞ is noise-free; other values must be finite.
+fn noise_level(v: f64) -> std::result::Result<NoiseLevel, String> {
+    if v == f64::INFINITY {
+        Ok(None)
+    } else if v.is_finite() {
+        Ok(Some(v))
+    } else {
+        Err(format!(
+            "the SNR must be a finite number of dB (or none / inf for noise-free), got {v}"
+        ))
+    }
+}
+
+/// Parses a comma-separated list of noise levels (see [`parse_noise_level`]).
+///
+/// # Errors
+/// As [`parse_noise_level`], and for an empty list.
+pub fn parse_noise_levels(text: &str) -> Result<Vec<NoiseLevel>> {
+    let items: Vec<&str> = text
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .collect();
+    if items.is_empty() {
+        return Err(Error::param("snr_db", "the list of noise levels is empty"));
+    }
+    items.into_iter().map(parse_noise_level).collect()
+}
+
+/// Parses a comma-separated list of pulse lengths.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`pulse_lens`) for an entry that is not a positive integer, or an
+/// empty list.
+pub fn parse_pulse_lens(text: &str) -> Result<Vec<usize>> {
+    let items: Vec<&str> = text
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .collect();
+    if items.is_empty() {
+        return Err(Error::param(
+            "pulse_lens",
+            "the list of pulse lengths is empty",
+        ));
+    }
+    items
+        .into_iter()
+        .map(|t| match t.parse::<usize>() {
+            Ok(v) if v > 0 => Ok(v),
+            _ => Err(Error::param(
+                "pulse_lens",
+                format!("expected positive integers (e.g. 10000,20000), got {t:?}"),
+            )),
+        })
+        .collect()
+}
+
+/// The solvers of the demo: every method but IHT.
+pub const DEFAULT_SOLVERS: [Method; 9] = [
+    Method::Backprojection,
+    Method::BackprojectionDebiased,
+    Method::Cgls,
+    Method::Fista,
+    Method::Cosamp,
+    Method::Amp,
+    Method::ModelBased,
+    Method::Tv,
+    Method::Auto,
+];
+
+/// Seed of run `i` of a sweep with base seed `seed`: `seed + 10·i`, so that the derived seeds
+/// (pulse SEED, codes SEED+1, noise SEED+2, scene SEED+3) of different runs never coincide.
+pub fn run_seed(seed: u64, i: usize) -> u64 {
+    seed.wrapping_add(10u64.wrapping_mul(i as u64))
+}
+
+/// A complete, validated description of an experiment: the scene, the sweep (pulse lengths ×
+/// seeds × noise levels) and the solvers with their iteration budgets.
+///
+/// Build one from a preset ([`ExperimentConfig::demo`], [`ExperimentConfig::compare_quick`], …),
+/// layer [`ExperimentPatch`]es over it (a config file's section, then the command-line flags),
+/// and [`validate`](ExperimentConfig::validate) the result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExperimentConfig {
+    /// Output folder.
+    pub out: PathBuf,
+    /// The scene.
+    pub scene: SceneKind,
+    /// The grid M×N×K_s (in TOML, `"100x100x40"`).
+    #[serde(serialize_with = "geometry_text")]
+    pub size: Geometry,
+    /// Fraction of lit pixels of a [`SceneKind::Random`] scene, in [0, 1].
+    pub lit_fraction: f64,
+    /// Pulse lengths K_p, in the order they run.
+    pub pulse_lens: Vec<usize>,
+    /// Methods, in the order they run for each problem.
+    #[serde(serialize_with = "method_names")]
+    pub solvers: Vec<Method>,
+    /// Noise levels (in TOML, dB numbers or `"none"` / `inf` for noise-free).
+    #[serde(serialize_with = "noise_levels")]
+    pub snr_db: Vec<NoiseLevel>,
+    /// Number of seeds: run `i` uses [`run_seed`]`(seed, i)`.
+    pub seeds: usize,
+    /// Base seed.
+    pub seed: u64,
+    /// Precision of the computations.
+    pub precision: Precision,
+    /// Iteration budgets.
+    pub max_iter: Budgets,
+    /// Power iterations behind FISTA's step
+    /// ([`crate::lidar::ReconstructOptions::power_iterations`]; `None`: its default of up to
+    /// 200).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub power_iterations: Option<usize>,
+}
+
+fn geometry_text<S: Serializer>(g: &Geometry, s: S) -> std::result::Result<S::Ok, S::Error> {
+    s.serialize_str(&g.to_string())
+}
+
+fn method_names<S: Serializer>(m: &[Method], s: S) -> std::result::Result<S::Ok, S::Error> {
+    s.collect_seq(m.iter().map(|m| m.name()))
+}
+
+/// Noise-free levels are written as the string `"none"` (TOML has no null).
+fn noise_levels<S: Serializer>(v: &[NoiseLevel], s: S) -> std::result::Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    #[serde(untagged)]
+    enum Level {
+        Db(f64),
+        Text(&'static str),
+    }
+    s.collect_seq(v.iter().map(|l| match l {
+        Some(db) => Level::Db(*db),
+        None => Level::Text("none"),
+    }))
+}
+
+impl ExperimentConfig {
+    /// The main job (`rdlidar demo`): the paper's scene 100×100×40, K_p = 10000, 20000, 30000,
+    /// noise-free, one seed, the eight methods of [`DEFAULT_SOLVERS`] in f32 with the demo's
+    /// budgets ([`ExperimentConfig::demo_budgets`]) and FISTA's step from 30 power iterations,
+    /// written to `out/`.
+    pub fn demo() -> Self {
+        ExperimentConfig {
+            out: PathBuf::from("out"),
+            scene: SceneKind::Paper,
+            size: Geometry {
+                m: 100,
+                n: 100,
+                ks: 40,
+            },
+            lit_fraction: 0.5,
+            pulse_lens: vec![10_000, 20_000, 30_000],
+            solvers: DEFAULT_SOLVERS.to_vec(),
+            snr_db: vec![None],
+            seeds: 1,
+            seed: 0,
+            precision: Precision::F32,
+            max_iter: ExperimentConfig::demo_budgets(),
+            power_iterations: Some(30),
+        }
+    }
+
+    /// The demo's iteration budgets, chosen so that the whole demo runs in under three minutes
+    /// on the shared two-core machine: CGLS 15, FISTA 15 (and IHT 15, if added), CoSaMP 1 (each
+    /// of its iterations solves a least-squares problem with the full operator), model-based 6
+    /// and, for TV and auto, 4 (the limit of each of their model-based fits; with 3, auto's
+    /// model-based fit at K_p = 30000 is too rough to count as piecewise smooth and TV is
+    /// skipped). The
+    /// backprojections have no iterations. With [`ExperimentConfig::demo`]'s 30 power
+    /// iterations for FISTA's step.
+    pub fn demo_budgets() -> Budgets {
+        let mut b = Budgets::none();
+        for (m, l) in [
+            (Method::Cgls, 15),
+            (Method::Fista, 15),
+            (Method::Iht, 15),
+            (Method::Cosamp, 1),
+            (Method::ModelBased, 6),
+            (Method::Tv, 4),
+            (Method::Auto, 4),
+        ] {
+            b.0[method_index(m)] = Some(l);
+        }
+        b
+    }
+
+    /// The demo at a size a test runs in seconds: the paper scene 8×8×8 (critical K_p 505) with
+    /// K_p = 100, 300 and 1000 (compressive to redundant), written to `out-tiny/`.
+    pub fn demo_tiny() -> Self {
+        ExperimentConfig {
+            out: PathBuf::from("out-tiny"),
+            size: Geometry { m: 8, n: 8, ks: 8 },
+            pulse_lens: vec![100, 300, 1000],
+            ..ExperimentConfig::demo()
+        }
+    }
+
+    /// The full sweep (`rdlidar compare`): the paper scene 16×16×16 (critical K_p 4081), K_p
+    /// from 256 to 32768 (compressive, critical, redundant), 3 seeds, noise-free and 20 and
+    /// 10 dB SNR, the eight methods with their default iteration limits, in f64, written to
+    /// `out-compare/`.
+    pub fn compare() -> Self {
+        ExperimentConfig {
+            out: PathBuf::from("out-compare"),
+            scene: SceneKind::Paper,
+            size: Geometry {
+                m: 16,
+                n: 16,
+                ks: 16,
+            },
+            lit_fraction: 0.5,
+            pulse_lens: vec![256, 512, 1024, 2048, 3072, 4081, 6144, 8192, 16384, 32768],
+            solvers: DEFAULT_SOLVERS.to_vec(),
+            snr_db: vec![None, Some(20.0), Some(10.0)],
+            seeds: 3,
+            seed: 0,
+            precision: Precision::F64,
+            max_iter: Budgets::none(),
+            power_iterations: None,
+        }
+    }
+
+    /// `compare --quick`: the same scene and solvers, K_p = 512 … 16384 (6 lengths around the
+    /// critical 4081), 2 seeds, noise-free and 20 dB.
+    pub fn compare_quick() -> Self {
+        ExperimentConfig {
+            pulse_lens: vec![512, 1024, 2048, 4081, 8192, 16384],
+            snr_db: vec![None, Some(20.0)],
+            seeds: 2,
+            ..ExperimentConfig::compare()
+        }
+    }
+
+    /// `compare --tiny`, for tests: the paper scene 6×6×6 (critical K_p 211), K_p = 50, 211 and
+    /// 800, 2 seeds, noise-free and 20 dB, written to `out-compare-tiny/`.
+    pub fn compare_tiny() -> Self {
+        ExperimentConfig {
+            out: PathBuf::from("out-compare-tiny"),
+            size: Geometry { m: 6, n: 6, ks: 6 },
+            pulse_lens: vec![50, 211, 800],
+            ..ExperimentConfig::compare_quick()
+        }
+    }
+
+    /// This configuration with the fields `patch` sets replaced (budgets merged per method).
+    pub fn patched(mut self, patch: &ExperimentPatch) -> Self {
+        if let Some(v) = &patch.out {
+            self.out = v.clone();
+        }
+        if let Some(v) = patch.scene {
+            self.scene = v;
+        }
+        if let Some(v) = patch.size {
+            self.size = v;
+        }
+        if let Some(v) = patch.lit_fraction {
+            self.lit_fraction = v;
+        }
+        if let Some(v) = &patch.pulse_lens {
+            self.pulse_lens = v.clone();
+        }
+        if let Some(v) = &patch.solvers {
+            self.solvers = v.clone();
+        }
+        if let Some(v) = &patch.snr_db {
+            self.snr_db = v.clone();
+        }
+        if let Some(v) = patch.seeds {
+            self.seeds = v;
+        }
+        if let Some(v) = &patch.max_iter {
+            self.max_iter = self.max_iter.merged(v);
+        }
+        if let Some(v) = patch.power_iterations {
+            self.power_iterations = Some(v);
+        }
+        self
+    }
+
+    /// Number of problems simulated: pulse lengths × seeds × noise levels.
+    pub fn problems(&self) -> usize {
+        self.pulse_lens.len() * self.seeds * self.snr_db.len()
+    }
+
+    /// Number of reconstructions: problems × solvers.
+    pub fn runs(&self) -> usize {
+        self.problems() * self.solvers.len()
+    }
+
+    /// Checks every field, naming the first offending one (`pulse_lens`, `solvers`, `snr_db`,
+    /// `seeds`, `size`, `lit_fraction`, `out`).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the field: an empty or repeated list entry, a zero
+    /// count, a non-finite SNR, a lit fraction outside [0, 1], or a problem too large for the
+    /// experiment limits ([`MAX_VOXELS`], [`MAX_SIDE`], [`MAX_CODE_BYTES`]).
+    pub fn validate(&self) -> Result<()> {
+        if self.out.as_os_str().is_empty() {
+            return Err(Error::param("out", "the output folder name is empty"));
+        }
+        let g = self.size;
+        Geometry::new(g.m, g.n, g.ks)?;
+        if g.m > MAX_SIDE || g.n > MAX_SIDE {
+            return Err(Error::param(
+                "size",
+                format!(
+                    "{g}: experiments draw at most {MAX_SIDE} pixel rows and columns; use \
+                     `simulate` and `reconstruct` for larger arrays"
+                ),
+            ));
+        }
+        if g.voxels() > MAX_VOXELS {
+            return Err(Error::param(
+                "size",
+                format!(
+                    "{g}: {} voxels are more than the {MAX_VOXELS} an experiment holds",
+                    g.voxels()
+                ),
+            ));
+        }
+        if g.ks > i32::MAX as usize {
+            return Err(Error::param("size", format!("{g}: too many depth bins")));
+        }
+        if self.pulse_lens.is_empty() {
+            return Err(Error::param(
+                "pulse_lens",
+                "the list of pulse lengths is empty",
+            ));
+        }
+        for (i, &kp) in self.pulse_lens.iter().enumerate() {
+            if kp == 0 {
+                return Err(Error::param(
+                    "pulse_lens",
+                    "pulse lengths must be at least 1",
+                ));
+            }
+            if self.pulse_lens[..i].contains(&kp) {
+                return Err(Error::param(
+                    "pulse_lens",
+                    format!("K_p = {kp} is listed twice"),
+                ));
+            }
+            let bits = kp
+                .checked_add(g.ks - 1)
+                .and_then(|k| k.checked_mul(g.pixels()));
+            if bits.is_none_or(|b| b / 8 > MAX_CODE_BYTES) {
+                return Err(Error::param(
+                    "pulse_lens",
+                    format!(
+                        "K_p = {kp} at {g}: the codes of {} pixels would take more than {} GiB",
+                        g.pixels(),
+                        MAX_CODE_BYTES >> 30
+                    ),
+                ));
+            }
+        }
+        if self.solvers.is_empty() {
+            return Err(Error::param("solvers", "the list of solvers is empty"));
+        }
+        for (i, m) in self.solvers.iter().enumerate() {
+            if self.solvers[..i].contains(m) {
+                return Err(Error::param("solvers", format!("{m} is listed twice")));
+            }
+        }
+        if self.snr_db.is_empty() {
+            return Err(Error::param("snr_db", "the list of noise levels is empty"));
+        }
+        for (i, l) in self.snr_db.iter().enumerate() {
+            if let Some(v) = l {
+                if !v.is_finite() {
+                    return Err(Error::param(
+                        "snr_db",
+                        format!("the SNR must be a finite number of dB, got {v}"),
+                    ));
+                }
+            }
+            if self.snr_db[..i].contains(l) {
+                return Err(Error::param(
+                    "snr_db",
+                    format!("{} is listed twice", noise_text(*l)),
+                ));
+            }
+        }
+        if self.seeds == 0 {
+            return Err(Error::param("seeds", "at least one seed is needed"));
+        }
+        if !(0.0..=1.0).contains(&self.lit_fraction) {
+            return Err(Error::param(
+                "lit_fraction",
+                format!("must be in [0, 1], got {}", self.lit_fraction),
+            ));
+        }
+        if self.power_iterations == Some(0) {
+            return Err(Error::param("power_iterations", "must be at least 1"));
+        }
+        for (m, l) in self.max_iter.iter() {
+            if l == 0 {
+                return Err(Error::param(
+                    "max_iter",
+                    format!("{m}: the iteration limit must be at least 1"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The configuration as TOML (a `[demo]` or `[compare]` section under `section`, with the
+    /// seed and precision at the top), loadable again with `--config`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`config`) if the configuration cannot be written as TOML.
+    pub fn to_toml(&self, section: &str) -> Result<String> {
+        #[derive(Serialize)]
+        struct Section<'a> {
+            out: &'a Path,
+            scene: SceneKind,
+            #[serde(serialize_with = "geometry_text")]
+            size: &'a Geometry,
+            lit_fraction: f64,
+            pulse_lens: &'a [usize],
+            #[serde(serialize_with = "method_names")]
+            solvers: &'a [Method],
+            #[serde(serialize_with = "noise_levels")]
+            snr_db: &'a [NoiseLevel],
+            seeds: usize,
+            max_iter: &'a Budgets,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            power_iterations: Option<usize>,
+        }
+        let mut doc = toml::Table::new();
+        doc.insert("seed".into(), toml::Value::Integer(self.seed as i64));
+        doc.insert(
+            "precision".into(),
+            toml::Value::String(self.precision.name().into()),
+        );
+        let body = Section {
+            out: &self.out,
+            scene: self.scene,
+            size: &self.size,
+            lit_fraction: self.lit_fraction,
+            pulse_lens: &self.pulse_lens,
+            solvers: &self.solvers,
+            snr_db: &self.snr_db,
+            seeds: self.seeds,
+            max_iter: &self.max_iter,
+            power_iterations: self.power_iterations,
+        };
+        let value = toml::Value::try_from(body)
+            .map_err(|e| Error::param("config", format!("cannot write it as TOML: {e}")))?;
+        doc.insert(section.into(), value);
+        toml::to_string(&doc)
+            .map_err(|e| Error::param("config", format!("cannot write it as TOML: {e}")))
+    }
+}
+
+/// `noise-free` or `20 dB`.
+pub fn noise_text(level: NoiseLevel) -> String {
+    match level {
+        None => "noise-free".into(),
+        Some(db) => format!("{db} dB"),
+    }
+}
+
+/// Some fields of an [`ExperimentConfig`], to be layered over it with
+/// [`ExperimentConfig::patched`]: a `[demo]` or `[compare]` section of a config file, or the
+/// flags given on the command line.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentPatch {
+    /// Output folder.
+    pub out: Option<PathBuf>,
+    /// The scene.
+    pub scene: Option<SceneKind>,
+    /// The grid, `"MxNxKS"`.
+    #[serde(default, deserialize_with = "de_geometry")]
+    pub size: Option<Geometry>,
+    /// Lit fraction of a random scene.
+    pub lit_fraction: Option<f64>,
+    /// Pulse lengths.
+    pub pulse_lens: Option<Vec<usize>>,
+    /// Methods by name.
+    #[serde(default, deserialize_with = "de_methods")]
+    pub solvers: Option<Vec<Method>>,
+    /// Noise levels: one or a list, numbers of dB, `"none"` or `inf` for noise-free.
+    #[serde(default, deserialize_with = "de_noise_levels")]
+    pub snr_db: Option<Vec<NoiseLevel>>,
+    /// Number of seeds.
+    pub seeds: Option<usize>,
+    /// Iteration budgets, per method name.
+    pub max_iter: Option<Budgets>,
+    /// Power iterations behind FISTA's step.
+    pub power_iterations: Option<usize>,
+}
+
+fn de_geometry<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<Option<Geometry>, D::Error> {
+    let text = String::deserialize(d)?;
+    Geometry::parse(&text)
+        .map(Some)
+        .map_err(|e| D::Error::custom(e.to_string()))
+}
+
+fn de_methods<'de, D: Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<Vec<Method>>, D::Error> {
+    let names = Vec::<String>::deserialize(d)?;
+    if names.is_empty() {
+        return Err(D::Error::custom("the list of solvers is empty"));
+    }
+    names
+        .iter()
+        .map(|n| parse_method(n, "solvers").map_err(|e| D::Error::custom(e.to_string())))
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map(Some)
+}
+
+fn de_noise_levels<'de, D: Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<Vec<NoiseLevel>>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Level {
+        Db(f64),
+        Text(String),
+    }
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum OneOrMany {
+        One(Level),
+        Many(Vec<Level>),
+    }
+    let levels = match OneOrMany::deserialize(d)? {
+        OneOrMany::One(l) => vec![l],
+        OneOrMany::Many(v) => v,
+    };
+    levels
+        .into_iter()
+        .map(|l| match l {
+            Level::Db(v) => noise_level(v).map_err(D::Error::custom),
+            Level::Text(t) => parse_noise_level(&t).map_err(|e| D::Error::custom(e.to_string())),
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map(Some)
+}
+
+/// A TOML experiment file: settings shared by every experiment at the top, then a `[demo]` and
+/// a `[compare]` section.
+///
+/// ```toml
+/// seed = 3
+/// precision = "f64"
+///
+/// [demo]
+/// pulse_lens = [10000, 30000]
+/// solvers = ["backprojection-debiased", "model-based", "tv"]
+/// max_iter = { model-based = 12 }
+///
+/// [compare]
+/// size = "12x12x12"
+/// snr_db = ["none", 30, 10]
+/// seeds = 4
+/// ```
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConfigFile {
+    /// Base seed.
+    pub seed: Option<u64>,
+    /// Precision of the computations.
+    pub precision: Option<Precision>,
+    /// Worker threads.
+    pub threads: Option<usize>,
+    /// Hide progress bars.
+    pub quiet: Option<bool>,
+    /// The `[demo]` section.
+    pub demo: Option<ExperimentPatch>,
+    /// The `[compare]` section.
+    pub compare: Option<ExperimentPatch>,
+}
+
+impl ConfigFile {
+    /// Parses TOML text; errors carry the line and column.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`config`) with a one-line message `line L, column C: what`.
+    pub fn parse(text: &str) -> Result<Self> {
+        let file: ConfigFile = toml::from_str(text).map_err(|e| {
+            let what = e.message().trim().replace('\n', "; ");
+            let at = match e.span() {
+                Some(span) => {
+                    let before = &text[..span.start.min(text.len())];
+                    let line = before.matches('\n').count() + 1;
+                    let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+                    format!("line {line}, column {column}: ")
+                }
+                None => String::new(),
+            };
+            Error::param("config", format!("{at}{what}"))
+        })?;
+        if file.threads == Some(0) {
+            return Err(Error::param("config", "threads must be at least 1"));
+        }
+        Ok(file)
+    }
+
+    /// Reads and parses a file.
+    ///
+    /// # Errors
+    /// [`Error::File`] naming the file when it cannot be read or parsed (the reason says where).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let file_err = |reason: String| Error::File {
+            path: path.display().to_string(),
+            reason,
+        };
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| file_err(format!("cannot read the config file: {e}")))?;
+        ConfigFile::parse(&text).map_err(|e| match e {
+            Error::InvalidParameter { reason, .. } => file_err(reason),
+            other => other,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_are_valid() {
+        for c in [
+            ExperimentConfig::demo(),
+            ExperimentConfig::demo_tiny(),
+            ExperimentConfig::compare(),
+            ExperimentConfig::compare_quick(),
+            ExperimentConfig::compare_tiny(),
+        ] {
+            c.validate().unwrap();
+        }
+        assert_eq!(ExperimentConfig::demo().runs(), 27);
+        assert_eq!(
+            ExperimentConfig::compare_quick().size.critical_pulse_len(),
+            4081
+        );
+    }
+
+    #[test]
+    fn a_file_patches_a_preset_and_round_trips() {
+        let file = ConfigFile::parse(
+            "seed = 4\n[demo]\npulse_lens = [100, 200]\nsolvers = [\"cgls\", \"tv\"]\n\
+             snr_db = [\"none\", 20, inf]\nmax_iter = { cgls = 7 }\n",
+        );
+        // inf and "none" are the same level: listed twice.
+        let file = file.unwrap();
+        let c = ExperimentConfig::demo_tiny().patched(file.demo.as_ref().unwrap());
+        assert_eq!(c.pulse_lens, [100, 200]);
+        assert_eq!(c.solvers, [Method::Cgls, Method::Tv]);
+        assert_eq!(c.max_iter.get(Method::Cgls), Some(7));
+        assert_eq!(
+            c.max_iter.get(Method::Fista),
+            ExperimentConfig::demo_budgets().get(Method::Fista)
+        );
+        let e = c.validate().unwrap_err();
+        assert!(e.to_string().contains("listed twice"), "{e}");
+
+        let c = ExperimentConfig {
+            snr_db: vec![None, Some(20.0)],
+            seed: 4,
+            ..c
+        };
+        c.validate().unwrap();
+        let text = c.to_toml("demo").unwrap();
+        let back = ConfigFile::parse(&text).unwrap();
+        assert_eq!(back.seed, Some(4));
+        let again = ExperimentConfig::demo().patched(back.demo.as_ref().unwrap());
+        assert_eq!(ExperimentConfig { seed: 4, ..again }, c);
+    }
+
+    #[test]
+    fn bad_files_name_the_line_and_the_problem() {
+        let e = ConfigFile::parse("[demo]\nsolvers = [\"cgls\", \"nope\"]\n").unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("line 2") && msg.contains("unknown solver"),
+            "{msg}"
+        );
+        assert!(!msg.contains('\n'), "{msg}");
+        let e = ConfigFile::parse("[demo]\ncolour = 1\n").unwrap_err();
+        assert!(e.to_string().contains("colour"), "{e}");
+        let e = ConfigFile::parse("[demo]\nsize = \"0x4x4\"\n").unwrap_err();
+        assert!(e.to_string().contains("at least 1"), "{e}");
+    }
+
+    #[test]
+    fn flags_parse_with_their_own_messages() {
+        assert_eq!(
+            parse_solvers("cgls, fista").unwrap(),
+            [Method::Cgls, Method::Fista]
+        );
+        assert_eq!(parse_solvers("all").unwrap(), DEFAULT_SOLVERS);
+        assert!(parse_solvers("lasso")
+            .unwrap_err()
+            .to_string()
+            .contains("valid solvers"));
+        assert_eq!(
+            parse_noise_levels("none, 20,inf").unwrap(),
+            [None, Some(20.0), None]
+        );
+        assert!(parse_noise_levels("loud").is_err());
+        assert!(parse_pulse_lens("10,0").is_err());
+        let b = Budgets::parse("fista=3,model-based=2").unwrap();
+        assert_eq!(b.to_string(), "fista=3,model-based=2");
+        assert!(Budgets::parse("fista=0").is_err());
+        assert!(Budgets::parse("fista").is_err());
+    }
+
+    #[test]
+    fn impossible_sizes_are_refused() {
+        let mut c = ExperimentConfig::demo_tiny();
+        c.size = Geometry {
+            m: 2000,
+            n: 8,
+            ks: 8,
+        };
+        assert!(c.validate().unwrap_err().to_string().contains("size"));
+        c.size = Geometry {
+            m: 1000,
+            n: 1000,
+            ks: 100,
+        };
+        assert!(c.validate().unwrap_err().to_string().contains("voxels"));
+        c.size = Geometry {
+            m: 100,
+            n: 100,
+            ks: 4,
+        };
+        c.pulse_lens = vec![usize::MAX / 2];
+        assert!(c.validate().unwrap_err().to_string().contains("GiB"));
+    }
+}

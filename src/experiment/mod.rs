@@ -1,0 +1,803 @@
+//! Experiments: the paper's experiment extended to every solver ([`run_demo`]), and a sweep of
+//! the pulse length across the compressive, critical and redundant regimes ([`run_compare`]).
+//!
+//! An experiment is described by an [`ExperimentConfig`] (a preset, a TOML file and flags layered
+//! over it). It simulates one problem per pulse length, seed and noise level — the scene, a
+//! Bernoulli pulse from SEED, binary codes from SEED+1, Gaussian noise from SEED+2 (a random
+//! scene from SEED+3), exactly as `rdlidar simulate --seed SEED` does — and reconstructs each
+//! problem with every solver through [`crate::lidar::reconstruct`], with the iteration budgets of
+//! the configuration. Every run gives one [`Row`]: the solver, K_p and its regime, the lit
+//! pixels recovered at the exact depth, false detections, the depth RMSE, ‖X − X̂‖/‖X‖, the
+//! wall time, iterations and why the solver stopped.
+//!
+//! Rows are appended to `results.csv.partial` and `results.jsonl.partial` in the output folder
+//! as each run finishes (flushed, so that nothing finished is lost if the process is killed).
+//! When the sweep ends — or is stopped through the `stop` flag, which is checked between runs —
+//! the tables (`results.csv`, `results.json`, `results.md`), the resolved `config.toml` and the
+//! figures are written atomically, and the partial files removed.
+//!
+//! ```
+//! use std::sync::atomic::AtomicBool;
+//! use rdlidar::experiment::{run_demo, ExperimentConfig};
+//! use rdlidar::lidar::Method;
+//!
+//! # fn main() -> rdlidar::Result<()> {
+//! let dir = std::env::temp_dir().join(format!("rdlidar-doc-demo-{}", std::process::id()));
+//! let config = ExperimentConfig {
+//!     out: dir.clone(),
+//!     pulse_lens: vec![300],
+//!     solvers: vec![Method::BackprojectionDebiased, Method::ModelBased],
+//!     ..ExperimentConfig::demo_tiny()
+//! };
+//! let outcome = run_demo(&config, true, &mut (), &AtomicBool::new(false))?;
+//! assert_eq!(outcome.rows.len(), 2);
+//! assert!(dir.join("results.csv").is_file() && dir.join("depth_kp300.png").is_file());
+//! # std::fs::remove_dir_all(&dir).ok();
+//! # Ok(())
+//! # }
+//! ```
+
+mod config;
+mod console;
+mod figures;
+mod table;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use ndarray::Array2;
+use serde::Serialize;
+
+pub use config::{
+    noise_text, parse_noise_level, parse_noise_levels, parse_pulse_lens, parse_solvers, run_seed,
+    Budgets, ConfigFile, ExperimentConfig, ExperimentPatch, NoiseLevel, Precision, SceneKind,
+    DEFAULT_SOLVERS, MAX_CODE_BYTES, MAX_SIDE, MAX_VOXELS,
+};
+pub use console::Console;
+pub use figures::{depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR};
+pub use table::{
+    csv_header, csv_line, markdown_header, markdown_row, markdown_table, summary_markdown, Column,
+    PartialFiles, CSV_COLUMNS,
+};
+
+use crate::error::{Error, Result};
+use crate::lidar::{
+    compare, paper_scene, random_opaque_scene, reconstruct, Codes, Geometry, Method, NoiseModel,
+    NoiseStage, Pulse, RdOperator, ReconstructOptions, Scene,
+};
+use crate::real::Real;
+
+/// Sampling period the depth figures assume: τ = 200 ps, a depth bin of 3 cm.
+pub const TAU_S: f64 = 200e-12;
+
+/// One simulated problem of a sweep: a pulse length, a seed and a noise level.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Case {
+    /// Pulse length K_p.
+    pub pulse_len: usize,
+    /// Seed: pulse SEED, codes SEED+1, noise SEED+2, random scene SEED+3.
+    pub seed: u64,
+    /// Noise level (`None`: noise-free).
+    pub snr_db: NoiseLevel,
+}
+
+impl ExperimentConfig {
+    /// The problems of the sweep in the order they run: seeds, then noise levels, then pulse
+    /// lengths (so that a sweep stopped early has covered every pulse length for its first
+    /// seeds).
+    pub fn cases(&self) -> Vec<Case> {
+        let mut cases = Vec::with_capacity(self.problems());
+        for i in 0..self.seeds {
+            for &snr_db in &self.snr_db {
+                for &pulse_len in &self.pulse_lens {
+                    cases.push(Case {
+                        pulse_len,
+                        seed: run_seed(self.seed, i),
+                        snr_db,
+                    });
+                }
+            }
+        }
+        cases
+    }
+}
+
+/// The result of one reconstruction.
+///
+/// Quality fields are `None` when the solver failed (then `error` says why); `iterations`,
+/// `termination` and the apply counts are `None` for the backprojections, which do not iterate.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Row {
+    /// Scene kind.
+    pub scene: String,
+    /// Grid, `MxNxKS`.
+    pub size: String,
+    /// `f32` or `f64`.
+    pub precision: String,
+    /// The problem's seed.
+    pub seed: u64,
+    /// Noise level in dB (`None`: noise-free).
+    pub snr_db: Option<f64>,
+    /// Pulse length K_p.
+    pub pulse_len: usize,
+    /// Measurements K = K_p + K_s − 1.
+    pub samples: usize,
+    /// `compressive`, `critical` or `redundant`.
+    pub regime: String,
+    /// The critical pulse length (M·N − 1)·K_s + 1.
+    pub critical_pulse_len: usize,
+    /// The method asked for.
+    pub solver: String,
+    /// The method that produced the estimate (differs from `solver` for `auto`).
+    pub method_used: String,
+    /// The iteration budget given to the solver (`None`: its default limit).
+    pub max_iter: Option<usize>,
+    /// Lit pixels of the truth.
+    pub lit: usize,
+    /// Lit pixels recovered at the exact depth.
+    pub exact: Option<usize>,
+    /// `exact / lit` in percent.
+    pub exact_pct: Option<f64>,
+    /// Pixels lit in the estimate but empty in the truth.
+    pub false_detections: Option<usize>,
+    /// Pixels lit in the truth but empty in the estimate.
+    pub missed: Option<usize>,
+    /// Root-mean-square depth error over the detected lit pixels, in bins.
+    pub depth_rmse_bins: Option<f64>,
+    /// ‖X − X̂‖ / ‖X‖ over the whole cubes.
+    pub relative_error: Option<f64>,
+    /// Wall time of the reconstruction in seconds (peak extraction included, simulation not).
+    pub time_s: f64,
+    /// Iterations of the iterative solver.
+    pub iterations: Option<usize>,
+    /// Why the solver stopped (`max_iterations`, `converged`, `residual`, …).
+    pub termination: Option<String>,
+    /// Forward applications of the operator.
+    pub forward_applies: Option<usize>,
+    /// Adjoint applications of the operator.
+    pub adjoint_applies: Option<usize>,
+    /// The solver's error, if it failed.
+    pub error: Option<String>,
+}
+
+/// `MaxIterations` → `max_iterations`.
+fn snake_case(name: &str) -> String {
+    let mut s = String::with_capacity(name.len() + 4);
+    for (i, c) in name.chars().enumerate() {
+        if c.is_ascii_uppercase() {
+            if i > 0 {
+                s.push('_');
+            }
+            s.push(c.to_ascii_lowercase());
+        } else {
+            s.push(c);
+        }
+    }
+    s
+}
+
+/// What an experiment reports while it runs, to an [`ExperimentObserver`].
+#[derive(Debug)]
+pub enum Event<'a> {
+    /// The sweep is about to start: `runs` reconstructions of `problems` problems, with an
+    /// estimated total work (arbitrary units, for progress and ETA).
+    Planned {
+        /// Problems to simulate.
+        problems: usize,
+        /// Reconstructions.
+        runs: usize,
+        /// Estimated total work.
+        work: f64,
+        /// The columns of the table to print.
+        columns: &'a [Column],
+    },
+    /// A problem is being simulated.
+    Simulating {
+        /// The problem.
+        case: &'a Case,
+        /// The grid.
+        geometry: Geometry,
+    },
+    /// A reconstruction starts: run `index` (from 0) of `runs`.
+    RunStarted {
+        /// Index of the run.
+        index: usize,
+        /// Total runs.
+        runs: usize,
+        /// The method.
+        method: Method,
+        /// The problem.
+        case: &'a Case,
+    },
+    /// A reconstruction finished, with its estimated work.
+    RunFinished {
+        /// Index of the run.
+        index: usize,
+        /// Total runs.
+        runs: usize,
+        /// The result.
+        row: &'a Row,
+        /// Its estimated work (the units of [`Event::Planned`]).
+        work: f64,
+    },
+    /// The sweep stopped before its end (the stop flag was raised).
+    Interrupted {
+        /// Runs finished.
+        finished: usize,
+        /// Runs planned.
+        runs: usize,
+    },
+}
+
+/// Receives the [`Event`]s of an experiment (progress bars, logs). `()` ignores them.
+pub trait ExperimentObserver {
+    /// Called for each event, in order.
+    fn event(&mut self, event: &Event<'_>);
+}
+
+impl ExperimentObserver for () {
+    fn event(&mut self, _: &Event<'_>) {}
+}
+
+/// Estimated cost of one run, in operator applications at K_p = 1000, for the progress bar's
+/// ETA (rough, measured at 100×100×40; the bar's rate estimate corrects it as runs finish).
+pub fn estimated_work(method: Method, budget: Option<usize>, pulse_len: usize) -> f64 {
+    let it = |default: usize| budget.unwrap_or(default) as f64;
+    let applies = match method {
+        Method::Backprojection | Method::BackprojectionDebiased => 1.0,
+        Method::Cgls => 2.0 * it(300),
+        Method::Fista => 3.0 * it(200) + 20.0,
+        Method::Iht => 3.0 * it(100),
+        Method::Cosamp => 10.0 * it(100),
+        Method::Amp => 2.0 * it(60),
+        Method::ModelBased => 15.0 * it(30),
+        Method::Tv => 30.0 * it(30),
+        Method::Auto => 45.0 * it(30),
+    };
+    applies * pulse_len.max(1) as f64 / 1000.0
+}
+
+/// The truth, the operator and the measurements of one [`Case`].
+struct Problem<T: Real> {
+    truth: Scene<T>,
+    op: RdOperator<T>,
+    y: Vec<T>,
+}
+
+fn scene_of<T: Real>(config: &ExperimentConfig, seed: u64) -> Result<Scene<T>> {
+    match config.scene {
+        SceneKind::Paper => paper_scene(config.size),
+        SceneKind::Random => {
+            random_opaque_scene(config.size, config.lit_fraction, seed.wrapping_add(3))
+        }
+    }
+}
+
+/// Simulates `case` exactly as `rdlidar simulate` does with the same seed.
+fn simulate<T: Real>(truth: Scene<T>, case: &Case) -> Result<Problem<T>> {
+    let g = truth.geometry();
+    let k = g.samples(case.pulse_len);
+    let pulse = Pulse::<T>::bernoulli(case.pulse_len, case.seed)?;
+    let codes = Codes::random_binary(g.pixels(), k, case.seed.wrapping_add(1))?;
+    let op = RdOperator::new(g, pulse.into_inner(), Arc::new(codes))?;
+    let mut y = vec![T::zero(); k];
+    crate::LinearOperator::apply(&op, truth.as_slice(), &mut y);
+    if let Some(snr_db) = case.snr_db {
+        NoiseModel::none()
+            .then(NoiseStage::Gaussian { snr_db })
+            .apply(&mut y, case.seed.wrapping_add(2))?;
+    }
+    Ok(Problem { truth, op, y })
+}
+
+/// Runs one method on one problem; a solver's error becomes the row's `error`.
+fn run_one<T: Real>(
+    config: &ExperimentConfig,
+    case: &Case,
+    problem: &Problem<T>,
+    method: Method,
+) -> (Row, Option<Array2<i32>>) {
+    let g = config.size;
+    let lit = problem.truth.depth_map().lit();
+    let budget = match method {
+        Method::Backprojection | Method::BackprojectionDebiased => None,
+        m => config.max_iter.get(m),
+    };
+    let mut row = Row {
+        scene: config.scene.name().into(),
+        size: g.to_string(),
+        precision: T::NAME.into(),
+        seed: case.seed,
+        snr_db: case.snr_db,
+        pulse_len: case.pulse_len,
+        samples: g.samples(case.pulse_len),
+        regime: g.regime(case.pulse_len).to_string(),
+        critical_pulse_len: g.critical_pulse_len(),
+        solver: method.name().into(),
+        method_used: method.name().into(),
+        max_iter: budget,
+        lit,
+        exact: None,
+        exact_pct: None,
+        false_detections: None,
+        missed: None,
+        depth_rmse_bins: None,
+        relative_error: None,
+        time_s: 0.0,
+        iterations: None,
+        termination: None,
+        forward_applies: None,
+        adjoint_applies: None,
+        error: None,
+    };
+    let options = ReconstructOptions {
+        max_iter: budget,
+        progress: false,
+        seed: case.seed,
+        power_iterations: config.power_iterations,
+    };
+    let start = Instant::now();
+    let result = reconstruct(&problem.op, &problem.y, method, &options)
+        .and_then(|r| compare(&problem.truth, &r.scene, TAU_S).map(|m| (r, m)));
+    row.time_s = start.elapsed().as_secs_f64();
+    match result {
+        Ok((r, m)) => {
+            row.time_s = r.elapsed.as_secs_f64();
+            row.method_used = r.method_used.name().into();
+            row.exact = Some(m.exact);
+            row.exact_pct = Some(100.0 * m.exact_fraction);
+            row.false_detections = Some(m.false_detections);
+            row.missed = Some(m.missed);
+            row.depth_rmse_bins = Some(m.depth_rmse_bins);
+            row.relative_error = Some(m.relative_error);
+            if let Some(rep) = &r.report {
+                row.iterations = Some(rep.iterations);
+                row.termination = Some(snake_case(&format!("{:?}", rep.termination)));
+                row.forward_applies = Some(rep.forward_applies);
+                row.adjoint_applies = Some(rep.adjoint_applies);
+            }
+            (row, Some(r.depth.depth))
+        }
+        Err(e) => {
+            row.error = Some(e.to_string());
+            (row, None)
+        }
+    }
+}
+
+/// The depth maps of one problem: the truth and each finished solver's estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaseDepths {
+    /// The problem.
+    pub case: Case,
+    /// The true depth map (bins, −1 for no return).
+    pub truth: Array2<i32>,
+    /// Each method's estimate, in the order they ran (failed runs are left out).
+    pub estimates: Vec<(Method, Array2<i32>)>,
+}
+
+/// What a sweep produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sweep {
+    /// One row per finished run, in the order they ran.
+    pub rows: Vec<Row>,
+    /// The depth maps per problem (only when asked for).
+    pub depths: Vec<CaseDepths>,
+    /// Whether the stop flag ended the sweep early.
+    pub interrupted: bool,
+    /// Runs planned.
+    pub planned: usize,
+    /// Wall time of the whole sweep, simulations included.
+    pub elapsed: Duration,
+}
+
+fn sweep_in<T: Real>(
+    config: &ExperimentConfig,
+    columns: &[Column],
+    keep_depths: bool,
+    observer: &mut dyn ExperimentObserver,
+    stop: &AtomicBool,
+    on_row: &mut dyn FnMut(&Row) -> Result<()>,
+) -> Result<Sweep> {
+    let start = Instant::now();
+    let cases = config.cases();
+    let runs = config.runs();
+    let work_of = |m: Method, kp: usize| {
+        let budget = config.max_iter.get(m);
+        estimated_work(m, budget, kp)
+    };
+    let work: f64 = cases
+        .iter()
+        .flat_map(|c| config.solvers.iter().map(move |&m| (m, c.pulse_len)))
+        .map(|(m, kp)| work_of(m, kp))
+        .sum();
+    observer.event(&Event::Planned {
+        problems: cases.len(),
+        runs,
+        work,
+        columns,
+    });
+    let mut sweep = Sweep {
+        rows: Vec::with_capacity(runs),
+        depths: Vec::new(),
+        interrupted: false,
+        planned: runs,
+        elapsed: Duration::ZERO,
+    };
+    let mut paper: Option<Scene<T>> = None;
+    'cases: for case in &cases {
+        if stop.load(Ordering::SeqCst) {
+            sweep.interrupted = true;
+            break;
+        }
+        observer.event(&Event::Simulating {
+            case,
+            geometry: config.size,
+        });
+        let truth = match (config.scene, &paper) {
+            (SceneKind::Paper, Some(s)) => s.clone(),
+            _ => {
+                let s = scene_of::<T>(config, case.seed)?;
+                if config.scene == SceneKind::Paper {
+                    paper = Some(s.clone());
+                }
+                s
+            }
+        };
+        let problem = simulate(truth, case)?;
+        let mut depths = CaseDepths {
+            case: *case,
+            truth: problem.truth.depth_map().depth,
+            estimates: Vec::new(),
+        };
+        for &method in &config.solvers {
+            if stop.load(Ordering::SeqCst) {
+                sweep.interrupted = true;
+                if keep_depths {
+                    sweep.depths.push(depths);
+                }
+                break 'cases;
+            }
+            let index = sweep.rows.len();
+            observer.event(&Event::RunStarted {
+                index,
+                runs,
+                method,
+                case,
+            });
+            let (row, depth) = run_one(config, case, &problem, method);
+            on_row(&row)?;
+            observer.event(&Event::RunFinished {
+                index,
+                runs,
+                row: &row,
+                work: work_of(method, case.pulse_len),
+            });
+            if let (true, Some(d)) = (keep_depths, depth) {
+                depths.estimates.push((method, d));
+            }
+            sweep.rows.push(row);
+        }
+        if keep_depths {
+            sweep.depths.push(depths);
+        }
+    }
+    if sweep.interrupted {
+        observer.event(&Event::Interrupted {
+            finished: sweep.rows.len(),
+            runs,
+        });
+    }
+    sweep.elapsed = start.elapsed();
+    Ok(sweep)
+}
+
+/// Runs the sweep of `config` (validated first) in its precision, calling `on_row` with each
+/// row as it finishes; stops between runs once `stop` is set.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] for an invalid configuration; errors of the simulation and of
+/// `on_row`. A solver's own failure is recorded in its row instead.
+pub fn sweep(
+    config: &ExperimentConfig,
+    columns: &[Column],
+    keep_depths: bool,
+    observer: &mut dyn ExperimentObserver,
+    stop: &AtomicBool,
+    on_row: &mut dyn FnMut(&Row) -> Result<()>,
+) -> Result<Sweep> {
+    config.validate()?;
+    match config.precision {
+        Precision::F32 => sweep_in::<f32>(config, columns, keep_depths, observer, stop, on_row),
+        Precision::F64 => sweep_in::<f64>(config, columns, keep_depths, observer, stop, on_row),
+    }
+}
+
+/// Creates the output folder `dir` (its parent must exist), or checks that an existing one may be
+/// written to: an existing folder that is not empty is refused unless `force`.
+///
+/// # Errors
+/// [`Error::File`] naming the folder: it exists and is not empty (without `force`), it is not a
+/// folder, its parent does not exist, or it cannot be created or read.
+pub fn prepare_output_dir(dir: &Path, force: bool) -> Result<()> {
+    let err = |reason: String| Error::File {
+        path: dir.display().to_string(),
+        reason,
+    };
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(err("exists and is not a folder".into()));
+        }
+        let mut entries =
+            std::fs::read_dir(dir).map_err(|e| err(format!("cannot read the folder: {e}")))?;
+        if entries.next().is_some() && !force {
+            return Err(err(
+                "the output folder exists and is not empty; use --force to overwrite the \
+                 results in it, or --out to choose another folder"
+                    .into(),
+            ));
+        }
+        return Ok(());
+    }
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !parent.is_dir() {
+        return Err(err(format!(
+            "the parent folder {} does not exist",
+            parent.display()
+        )));
+    }
+    std::fs::create_dir(dir).map_err(|e| err(format!("cannot create the folder: {e}")))
+}
+
+/// What [`run_demo`] and [`run_compare`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// One row per finished run.
+    pub rows: Vec<Row>,
+    /// Whether the sweep was stopped before its end.
+    pub interrupted: bool,
+    /// Runs planned.
+    pub planned: usize,
+    /// The files written, in order.
+    pub files: Vec<PathBuf>,
+    /// Wall time of the sweep (simulations and reconstructions).
+    pub elapsed: Duration,
+    /// Wall time of the whole experiment, tables and figures included.
+    pub total: Duration,
+}
+
+/// The JSON document of `results.json`.
+#[derive(Serialize)]
+struct ResultsJson<'a> {
+    experiment: &'a str,
+    crate_version: &'a str,
+    interrupted: bool,
+    planned_runs: usize,
+    finished_runs: usize,
+    sweep_seconds: f64,
+    config: &'a ExperimentConfig,
+    rows: &'a [Row],
+}
+
+/// The tables common to both experiments: results.csv, results.json, results.md, config.toml.
+fn write_tables(
+    experiment: &str,
+    config: &ExperimentConfig,
+    sweep: &Sweep,
+    columns: &[Column],
+    files: &mut Vec<PathBuf>,
+) -> Result<()> {
+    let dir = &config.out;
+    let mut csv = csv_header();
+    for r in &sweep.rows {
+        csv.push_str(&csv_line(r));
+    }
+    let json = serde_json::to_string_pretty(&ResultsJson {
+        experiment,
+        crate_version: env!("CARGO_PKG_VERSION"),
+        interrupted: sweep.interrupted,
+        planned_runs: sweep.planned,
+        finished_runs: sweep.rows.len(),
+        sweep_seconds: sweep.elapsed.as_secs_f64(),
+        config,
+        rows: &sweep.rows,
+    })
+    .map_err(|e| Error::param("results", format!("cannot write JSON: {e}")))?
+        + "\n";
+    let md = markdown_table(&sweep.rows, columns);
+    let toml = config.to_toml(experiment)?;
+    for (name, text) in [
+        ("results.csv", csv),
+        ("results.json", json),
+        ("results.md", md),
+        ("config.toml", toml),
+    ] {
+        let path = dir.join(name);
+        crate::io::write_bytes_atomic(&path, text.as_bytes())?;
+        files.push(path);
+    }
+    Ok(())
+}
+
+/// The columns of the demo's table.
+pub const DEMO_COLUMNS: [Column; 11] = [
+    Column::Solver,
+    Column::PulseLen,
+    Column::Regime,
+    Column::Exact,
+    Column::FalseDetections,
+    Column::Rmse,
+    Column::RelativeError,
+    Column::Time,
+    Column::Iterations,
+    Column::Budget,
+    Column::Termination,
+];
+
+/// The columns of the compare sweep's table.
+pub const COMPARE_COLUMNS: [Column; 13] = [
+    Column::Seed,
+    Column::Snr,
+    Column::Solver,
+    Column::PulseLen,
+    Column::Regime,
+    Column::Exact,
+    Column::FalseDetections,
+    Column::Rmse,
+    Column::RelativeError,
+    Column::Time,
+    Column::Iterations,
+    Column::Budget,
+    Column::Termination,
+];
+
+/// The main job: `config` swept (by default the paper scene at K_p = 10000, 20000, 30000, every
+/// solver), then, in `config.out`: `results.csv`, `results.json`, `results.md`, `config.toml`,
+/// one `depth_kp{K_p}.png` per problem (the true depth map and every solver's, side by side,
+/// with a colour bar in metres and a key for pixels without a return; problems of further seeds
+/// or noise levels add `_seed{S}` / `_snr{X}db` to the name) and `error_vs_time.png`.
+///
+/// The folder is created if needed; an existing non-empty folder is refused unless `force`.
+/// Rows are streamed to partial files while the sweep runs (see the module documentation).
+///
+/// # Errors
+/// An invalid configuration, an output folder that cannot be used, or a file that cannot be
+/// written; errors of the simulation. A solver's failure is recorded in its row.
+pub fn run_demo(
+    config: &ExperimentConfig,
+    force: bool,
+    observer: &mut dyn ExperimentObserver,
+    stop: &AtomicBool,
+) -> Result<Outcome> {
+    let start = Instant::now();
+    config.validate()?;
+    prepare_output_dir(&config.out, force)?;
+    let mut partial = PartialFiles::create(&config.out)?;
+    let sweep = sweep(config, &DEMO_COLUMNS, true, observer, stop, &mut |r| {
+        partial.append(r)
+    })?;
+    let mut files = Vec::new();
+    write_tables("demo", config, &sweep, &DEMO_COLUMNS, &mut files)?;
+    let several = config.seeds > 1 || config.snr_db.len() > 1;
+    for d in &sweep.depths {
+        let mut name = format!("depth_kp{}", d.case.pulse_len);
+        if several {
+            name += &format!("_seed{}", d.case.seed);
+            if let Some(s) = d.case.snr_db {
+                name += &format!("_snr{s}db");
+            }
+        }
+        let path = config.out.join(name + ".png");
+        let rows: Vec<&Row> = sweep
+            .rows
+            .iter()
+            .filter(|r| r.pulse_len == d.case.pulse_len && r.seed == d.case.seed)
+            .filter(|r| r.snr_db == d.case.snr_db)
+            .collect();
+        depth_figure(config, d, &rows)?.save_png(&path)?;
+        files.push(path);
+    }
+    if !sweep.rows.is_empty() {
+        let path = config.out.join("error_vs_time.png");
+        error_vs_time(config, &sweep.rows)?.save_png(&path)?;
+        files.push(path);
+    }
+    partial.remove();
+    Ok(Outcome {
+        rows: sweep.rows,
+        interrupted: sweep.interrupted,
+        planned: sweep.planned,
+        files,
+        elapsed: sweep.elapsed,
+        total: start.elapsed(),
+    })
+}
+
+/// The sweep across regimes: `config` swept (by default the paper scene 16×16×16 from K_p = 256
+/// to 32768, several seeds and noise levels, every solver), then, in `config.out`:
+/// `results.csv`, `results.json`, `results.md` (one row per run), `summary.md` (per noise
+/// level, the median over seeds of ‖X − X̂‖/‖X‖ and of the exact-depth fraction, solver × K_p),
+/// `config.toml`, `pareto.png` (run time against error, every run, with the Pareto front) and
+/// one `phase_{noise}.png` per noise level (median error against K_p on a log axis, one line
+/// per solver, the critical K_p marked; `{noise}` is `noise-free` or e.g. `20db`).
+///
+/// # Errors
+/// As [`run_demo`].
+pub fn run_compare(
+    config: &ExperimentConfig,
+    force: bool,
+    observer: &mut dyn ExperimentObserver,
+    stop: &AtomicBool,
+) -> Result<Outcome> {
+    let start = Instant::now();
+    config.validate()?;
+    prepare_output_dir(&config.out, force)?;
+    let mut partial = PartialFiles::create(&config.out)?;
+    let sweep = sweep(config, &COMPARE_COLUMNS, false, observer, stop, &mut |r| {
+        partial.append(r)
+    })?;
+    let mut files = Vec::new();
+    write_tables("compare", config, &sweep, &COMPARE_COLUMNS, &mut files)?;
+    let path = config.out.join("summary.md");
+    crate::io::write_bytes_atomic(&path, summary_markdown(config, &sweep.rows).as_bytes())?;
+    files.push(path);
+    if !sweep.rows.is_empty() {
+        let path = config.out.join("pareto.png");
+        pareto_chart(config, &sweep.rows)?.save_png(&path)?;
+        files.push(path);
+        for &level in &config.snr_db {
+            let rows: Vec<Row> = sweep
+                .rows
+                .iter()
+                .filter(|r| r.snr_db == level)
+                .cloned()
+                .collect();
+            if rows.is_empty() {
+                continue;
+            }
+            let name = match level {
+                None => "phase_noise-free.png".to_string(),
+                Some(s) => format!("phase_{s}db.png"),
+            };
+            let path = config.out.join(name);
+            phase_chart(config, level, &rows)?.save_png(&path)?;
+            files.push(path);
+        }
+    }
+    partial.remove();
+    Ok(Outcome {
+        rows: sweep.rows,
+        interrupted: sweep.interrupted,
+        planned: sweep.planned,
+        files,
+        elapsed: sweep.elapsed,
+        total: start.elapsed(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn termination_names_are_snake_case() {
+        assert_eq!(snake_case("MaxIterations"), "max_iterations");
+        assert_eq!(snake_case("Converged"), "converged");
+    }
+
+    #[test]
+    fn cases_run_seeds_then_noise_then_pulse_lengths() {
+        let c = ExperimentConfig::compare_tiny();
+        let cases = c.cases();
+        assert_eq!(cases.len(), 3 * 2 * 2);
+        assert_eq!(cases[0].pulse_len, 50);
+        assert_eq!(cases[1].pulse_len, 211);
+        assert_eq!(cases[3].snr_db, Some(20.0));
+        assert_eq!(cases[6].seed, 10);
+    }
+}

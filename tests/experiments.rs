@@ -1,0 +1,141 @@
+//! The experiment runner as a library: events, the stop flag, the partial files and the
+//! outputs of a stopped sweep.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use rdlidar::experiment::{
+    run_compare, run_demo, Event, ExperimentConfig, ExperimentObserver, Row,
+};
+use rdlidar::lidar::Method;
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let p = std::env::temp_dir().join(format!("rdlidar-exp-{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&p);
+    p
+}
+
+/// Records the events, checks the partial CSV as rows finish, and raises the stop flag after
+/// `stop_after` rows.
+struct Recorder<'a> {
+    stop: &'a AtomicBool,
+    stop_after: usize,
+    partial: PathBuf,
+    planned: Option<usize>,
+    started: usize,
+    rows: Vec<Row>,
+}
+
+impl ExperimentObserver for Recorder<'_> {
+    fn event(&mut self, event: &Event<'_>) {
+        match event {
+            Event::Planned { runs, work, .. } => {
+                assert!(*work > 0.0);
+                self.planned = Some(*runs);
+            }
+            Event::RunStarted { index, .. } => {
+                assert_eq!(*index, self.started);
+                self.started += 1;
+            }
+            Event::RunFinished { row, .. } => {
+                self.rows.push((*row).clone());
+                // The row is already in the partial file, flushed.
+                let text = std::fs::read_to_string(&self.partial).unwrap();
+                assert_eq!(text.lines().count(), self.rows.len() + 1);
+                if self.rows.len() == self.stop_after {
+                    self.stop.store(true, Ordering::SeqCst);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+#[test]
+fn a_stopped_sweep_writes_the_finished_rows_and_reports_it() {
+    let dir = temp_dir("stop");
+    let config = ExperimentConfig {
+        out: dir.clone(),
+        solvers: vec![Method::Backprojection, Method::Cgls, Method::ModelBased],
+        ..ExperimentConfig::compare_tiny()
+    };
+    let stop = AtomicBool::new(false);
+    let mut rec = Recorder {
+        stop: &stop,
+        stop_after: 5,
+        partial: dir.join("results.csv.partial"),
+        planned: None,
+        started: 0,
+        rows: Vec::new(),
+    };
+    let outcome = run_compare(&config, false, &mut rec, &stop).unwrap();
+    assert_eq!(rec.planned, Some(36));
+    assert_eq!(outcome.planned, 36);
+    assert!(outcome.interrupted);
+    assert_eq!(outcome.rows.len(), 5);
+    assert_eq!(outcome.rows, rec.rows);
+    assert_eq!(rec.started, 5);
+    let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 6);
+    assert!(dir.join("pareto.png").is_file() && dir.join("phase_noise-free.png").is_file());
+    // Only the first noise level had finished runs.
+    assert!(!dir.join("phase_20db.png").exists());
+    assert!(!dir.join("results.csv.partial").exists());
+    for f in &outcome.files {
+        assert!(f.is_file(), "{}", f.display());
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn runs_are_reproducible_and_follow_the_configured_order() {
+    let dir = temp_dir("order");
+    let config = ExperimentConfig {
+        out: dir.clone(),
+        pulse_lens: vec![300, 100],
+        solvers: vec![Method::ModelBased, Method::BackprojectionDebiased],
+        ..ExperimentConfig::demo_tiny()
+    };
+    let never = AtomicBool::new(false);
+    let a = run_demo(&config, false, &mut (), &never).unwrap();
+    let order: Vec<(usize, &str)> = a
+        .rows
+        .iter()
+        .map(|r| (r.pulse_len, r.solver.as_str()))
+        .collect();
+    assert_eq!(
+        order,
+        [
+            (300, "model-based"),
+            (300, "backprojection-debiased"),
+            (100, "model-based"),
+            (100, "backprojection-debiased")
+        ]
+    );
+    // Without force an existing folder is refused; with it the same rows come back.
+    assert!(run_demo(&config, false, &mut (), &never).is_err());
+    let b = run_demo(&config, true, &mut (), &never).unwrap();
+    let strip = |rows: &[Row]| -> Vec<Row> {
+        rows.iter()
+            .map(|r| Row {
+                time_s: 0.0,
+                ..r.clone()
+            })
+            .collect()
+    };
+    assert_eq!(strip(&a.rows), strip(&b.rows));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn an_invalid_configuration_is_refused_before_the_folder_is_made() {
+    let dir = temp_dir("invalid");
+    let config = ExperimentConfig {
+        out: dir.clone(),
+        solvers: vec![],
+        ..ExperimentConfig::demo_tiny()
+    };
+    let e = run_demo(&config, false, &mut (), &AtomicBool::new(false)).unwrap_err();
+    assert!(e.to_string().contains("solvers"), "{e}");
+    assert!(!dir.exists());
+}
