@@ -1,7 +1,7 @@
 //! The fused random-demodulation operator A = Σ·S·P, and the same operator composed from the
 //! generic algebra (the reference).
 
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use rayon::prelude::*;
 
@@ -127,6 +127,8 @@ pub struct RdOperator<T: Real> {
     path: ForwardPath,
     isa: Isa,
     pool: Pool<T>,
+    /// The pulse's plain autocorrelation at lags 0..K_s, computed on first use.
+    lags: OnceLock<Vec<f64>>,
 }
 
 impl<T: Real> std::fmt::Debug for RdOperator<T> {
@@ -201,6 +203,7 @@ impl<T: Real> RdOperator<T> {
             path: ForwardPath::Auto,
             isa: Isa::detect(),
             pool: Pool(Mutex::new(Vec::new())),
+            lags: OnceLock::new(),
         })
     }
 
@@ -255,6 +258,20 @@ impl<T: Real> RdOperator<T> {
     /// The pulse.
     pub fn pulse(&self) -> &[T] {
         &self.pulse
+    }
+
+    /// Σ_t p[t]·p[t + l] for the lags l = 0 … K_s − 1, in f64, computed once per operator.
+    pub(crate) fn pulse_lags(&self) -> &[f64] {
+        self.lags.get_or_init(|| {
+            let p: Vec<f64> = self.pulse.iter().map(|v| v.as_f64()).collect();
+            (0..self.geom.ks)
+                .map(|l| {
+                    (0..p.len().saturating_sub(l))
+                        .map(|t| p[t] * p[t + l])
+                        .sum()
+                })
+                .collect()
+        })
     }
 
     /// The codes.

@@ -212,11 +212,7 @@ impl<T: Real> VoxelOperator<T> for RdOperator<T> {
     /// nonzero (a coded aperture) and the expected block for randomly placed zeros.
     fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
         let ks = self.geometry().ks;
-        let p64: Vec<f64> = self.pulse().iter().map(|v| v.as_f64()).collect();
-        let kp = p64.len();
-        let lags: Vec<f64> = (0..ks)
-            .map(|l| (0..kp.saturating_sub(l)).map(|t| p64[t] * p64[t + l]).sum())
-            .collect();
+        let lags = self.pulse_lags();
         let codes = self.codes();
         let scale = match codes.minus_plane() {
             None => 1.0,

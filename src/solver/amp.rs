@@ -16,7 +16,7 @@ use crate::linalg::dot;
 use crate::operator::Counted;
 use crate::real::Real;
 
-use super::model_based::VoxelOperator;
+use super::model_based::{check_pixels, VoxelOperator};
 use super::{check_problem, Monitor, Observer, Report, Stopping, Termination};
 
 /// Parameters of [`reflector_amp`].
@@ -94,7 +94,12 @@ impl Grams {
         if op.uniform_pixel_gram() {
             Grams::Shared(op.pixel_gram(0))
         } else {
-            Grams::PerPixel((0..pixels).flat_map(|p| op.pixel_gram(p)).collect())
+            Grams::PerPixel(
+                (0..pixels)
+                    .into_par_iter()
+                    .flat_map_iter(|p| op.pixel_gram(p))
+                    .collect(),
+            )
         }
     }
 
@@ -322,28 +327,7 @@ where
     let (m, n) = (op.nrows(), op.ncols());
     check_problem(NAME, m, n, y, x)?;
     let ks = op.column_len();
-    if ks == 0 || n % ks != 0 {
-        return Err(Error::param(
-            "column_len",
-            format!("must be ≥ 1 and divide the {n} columns, got {ks}"),
-        ));
-    }
-    let pixels = n / ks;
-    if let Some(w) = windows {
-        if w.len() != pixels {
-            return Err(Error::shape(
-                "reflector-amp: depth windows vs pixels",
-                pixels,
-                w.len(),
-            ));
-        }
-        if let Some(p) = w.iter().position(|&(lo, hi)| lo > hi || hi >= ks) {
-            return Err(Error::param(
-                "windows",
-                format!("pixel {p}: window {:?} is not within 0..{ks}", w[p]),
-            ));
-        }
-    }
+    let pixels = check_pixels(NAME, n, ks, windows)?;
     if let Some(pr) = priors {
         if pr.lit.len() != pixels || pr.depth.len() != n {
             return Err(Error::shape(

@@ -345,6 +345,39 @@ fn retain_rows<U: Copy>(v: &mut Vec<U>, keep: &[bool], width: usize) {
         .collect();
 }
 
+/// Checks that `ks` columns make a pixel of an operator with `n` columns and that the depth
+/// windows, if any, give one valid window `lo..=hi` per pixel; returns the number of pixels.
+pub(crate) fn check_pixels(
+    solver: &'static str,
+    n: usize,
+    ks: usize,
+    windows: Option<&[(usize, usize)]>,
+) -> Result<usize> {
+    if ks == 0 || n % ks != 0 {
+        return Err(Error::param(
+            "column_len",
+            format!("must be ≥ 1 and divide the {n} columns, got {ks}"),
+        ));
+    }
+    let pixels = n / ks;
+    if let Some(w) = windows {
+        if w.len() != pixels {
+            return Err(Error::shape(
+                format!("{solver}: depth windows vs pixels"),
+                pixels,
+                w.len(),
+            ));
+        }
+        if let Some(p) = w.iter().position(|&(lo, hi)| lo > hi || hi >= ks) {
+            return Err(Error::param(
+                "windows",
+                format!("pixel {p}: window {:?} is not within 0..{ks}", w[p]),
+            ));
+        }
+    }
+    Ok(pixels)
+}
+
 /// Recovers a scene with at most one nonzero per pixel (a pixel is `column_len` consecutive
 /// unknowns: one reflector per lidar pixel, empty pixels allowed) from y ≈ Ax, starting from `x`.
 ///
@@ -412,12 +445,7 @@ where
     let (m, n) = (op.nrows(), op.ncols());
     check_problem(NAME, m, n, y, x)?;
     let ks = op.column_len();
-    if ks == 0 || n % ks != 0 {
-        return Err(Error::param(
-            "column_len",
-            format!("must be ≥ 1 and divide the {n} columns, got {ks}"),
-        ));
-    }
+    check_pixels(NAME, n, ks, windows)?;
     let counted = Counted::new(op);
     let mut applies = Applies::default();
     let mut monitor = Monitor::new(NAME, params.stopping, observer);
@@ -425,21 +453,6 @@ where
     if ynorm == 0.0 {
         x.fill(T::zero());
         return Ok(monitor.finish(0, Termination::ZeroResidual, &counted));
-    }
-    if let Some(w) = windows {
-        if w.len() != n / ks {
-            return Err(Error::shape(
-                "model-based: depth windows vs pixels",
-                n / ks,
-                w.len(),
-            ));
-        }
-        if let Some(p) = w.iter().position(|&(lo, hi)| lo > hi || hi >= ks) {
-            return Err(Error::param(
-                "windows",
-                format!("pixel {p}: window {:?} is not within 0..{ks}", w[p]),
-            ));
-        }
     }
     let budget = ((params.max_support_fraction * m as f64) as usize).max(1);
     let score = |v: f64| if params.nonnegative { v } else { v.abs() };
