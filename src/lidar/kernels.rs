@@ -2,8 +2,13 @@
 //! time.
 //!
 //! The kernels work on a *slab* of `8·NCH` consecutive depth bins (NCH ≤ 8, so at most 64 bins
-//! at a time) and on a *block* of 8-pixel groups whose tables fit in the L2 cache. Values are held
-//! as `[T; 8]` chunks so that the compiler keeps them in vector registers.
+//! at a time) and on a *block* of 8-pixel groups whose tables (forward) or buckets (adjoint) fit
+//! in the L2 cache. Values are held as `[T; 8]` chunks so that the compiler keeps them in vector
+//! registers.
+//!
+//! The adjoint ([`adjoint_slab`]) is bound by the read-modify-write of one random bucket row per
+//! group and sample; the rest (the row y[k]·p[k − j], the reduction of the buckets to per-pixel
+//! sums every [`FLUSH`] samples) is shared by the groups of a block or done once per window.
 
 use crate::real::Real;
 
@@ -167,12 +172,25 @@ fn fwd_block<T: Real, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>
     }
 }
 
-/// Everything an adjoint block needs.
-pub(crate) struct AdjBlock<'a, T> {
-    /// The +1 code bytes of each group of the block.
-    pub plus: &'a [&'a [u8]],
-    /// The −1 code bytes (ternary codes only).
-    pub minus: Option<&'a [&'a [u8]]>,
+/// One adjoint bucket: a slab's `NCH` lanes, aligned to 32 bytes so that no 256-bit half of a
+/// lane straddles two cache lines (the allocator alone guarantees only the element's alignment,
+/// and a split access costs about twice as much in this update-bound loop).
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+struct Row<T, const NCH: usize>([Lane<T>; NCH]);
+
+/// Bytes of one adjoint bucket of `nch` chunks of `T` (see [`adjoint_slab`]).
+pub(crate) fn adj_row_bytes<T>(nch: usize) -> usize {
+    (8 * nch * std::mem::size_of::<T>()).next_multiple_of(32)
+}
+
+/// Everything the adjoint needs for one block of groups and one depth slab.
+pub(crate) struct AdjSlab<'a, T> {
+    /// The code bytes, K per stream: the +1 bytes of each group (binary codes), or the +1 and the
+    /// −1 bytes of each group in turn (ternary codes).
+    pub streams: &'a [&'a [u8]],
+    /// Whether the streams come in (+1, −1) pairs.
+    pub ternary: bool,
     /// Measurements.
     pub y: &'a [T],
     /// As in [`FwdBlock`].
@@ -181,44 +199,122 @@ pub(crate) struct AdjBlock<'a, T> {
     pub base0: usize,
 }
 
-/// Samples accumulated in the working precision before the buckets are flushed to `f64`.
+/// Samples accumulated in the working precision before the buckets are reduced and added to
+/// `f64` sums: about 64 additions per bucket.
 pub(crate) const FLUSH: usize = 16384;
 
-/// For k in `k0..k1`: bucket[g][code_g(k)] += y[k]·p[k−j] (and the −1 buckets for ternary codes,
-/// stored after the +1 buckets of all groups).
+/// For k in `k0..k1`: bucket[s][code_s(k)] += y[k]·p[k−j] for every stream s.
 #[inline(always)]
-fn adj_block<T: Real, const NCH: usize>(
-    a: &AdjBlock<'_, T>,
+fn adj_accumulate<T: Real, const NCH: usize>(
+    a: &AdjSlab<'_, T>,
     k0: usize,
     k1: usize,
-    buckets: &mut [Lane<T>],
+    buckets: &mut [Row<T, NCH>],
 ) {
-    let ngroups = a.plus.len();
-    for k in k0..k1 {
-        let yk = a.y[k];
+    // Fixed-size tables: a code byte indexes them without a bounds check.
+    let mut tabs: Vec<(&[u8], &mut [Row<T, NCH>; 256])> = a
+        .streams
+        .iter()
+        .zip(buckets.chunks_exact_mut(256))
+        .map(|(s, b)| (&s[k0..k1], b.try_into().expect("256 buckets")))
+        .collect();
+    for (i, &yk) in a.y[k0..k1].iter().enumerate() {
         if yk == T::zero() {
             continue;
         }
-        let w0 = a.base0 - k;
-        let mut w = [[T::zero(); 8]; NCH];
-        for (c, wc) in w.iter_mut().enumerate() {
-            *wc = scale8(yk, lane_at(a.prev, w0 + 8 * c));
-        }
-        for (g, codes) in a.plus.iter().enumerate() {
-            let r = (g * 256 + codes[k] as usize) * NCH;
-            let row: &mut [Lane<T>; NCH] =
-                (&mut buckets[r..r + NCH]).try_into().expect("NCH lanes");
+        let w0 = a.base0 - (k0 + i);
+        let w: [Lane<T>; NCH] = std::array::from_fn(|c| scale8(yk, lane_at(a.prev, w0 + 8 * c)));
+        for (codes, tab) in tabs.iter_mut() {
+            let row = &mut tab[codes[i] as usize].0;
             for c in 0..NCH {
                 row[c] = add8(row[c], w[c]);
             }
         }
-        if let Some(minus) = a.minus {
-            for (g, codes) in minus.iter().enumerate() {
-                let r = ((ngroups + g) * 256 + codes[k] as usize) * NCH;
-                let row: &mut [Lane<T>; NCH] =
-                    (&mut buckets[r..r + NCH]).try_into().expect("NCH lanes");
-                for c in 0..NCH {
-                    row[c] = add8(row[c], w[c]);
+    }
+}
+
+/// Per-bit marginals of one stream's 256 buckets U[b]: adds S_i = Σ_{b: bit i set} U[b] to
+/// `sums[i]` (i < 8) and Σ_b U[b] to `sums[8]`, in `f64`, then clears the buckets.
+///
+/// Successive halving: the upper half of the rows (bit 7 set) is summed into S_7 and folded onto
+/// the lower half, which leaves the 128 buckets of the remaining seven bits; and so on down to
+/// bit 0. That is 2·255 row additions instead of 256·(1 + popcount) for the direct sums, and each
+/// result is a sum over a balanced tree of buckets.
+#[inline(always)]
+fn adj_marginals<T: Real, const NCH: usize>(
+    rows: &mut [Row<T, NCH>],
+    sums: &mut [[Lane<f64>; NCH]; 9],
+) {
+    let zero = [T::zero(); 8];
+    let mut n = rows.len();
+    for bit in (0..8).rev() {
+        let half = n / 2;
+        let (lo, hi) = rows[..n].split_at_mut(half);
+        // Four interleaved partial sums, for instruction-level parallelism and a shorter chain.
+        let mut acc = [[zero; NCH]; 4];
+        for (lc, hc) in lo.chunks_mut(4).zip(hi.chunks(4)) {
+            for ((l, h), a) in lc.iter_mut().zip(hc).zip(acc.iter_mut()) {
+                for ((lv, hv), av) in l.0.iter_mut().zip(&h.0).zip(a.iter_mut()) {
+                    *av = add8(*av, *hv);
+                    *lv = add8(*lv, *hv);
+                }
+            }
+        }
+        let s: [Lane<T>; NCH] =
+            std::array::from_fn(|c| add8(add8(acc[0][c], acc[1][c]), add8(acc[2][c], acc[3][c])));
+        widen_add(&mut sums[bit], &s);
+        n = half;
+    }
+    widen_add(&mut sums[8], &rows[0].0);
+    rows.fill(Row([zero; NCH]));
+}
+
+/// dst += src, widened to `f64`.
+#[inline(always)]
+fn widen_add<T: Real, const NCH: usize>(dst: &mut [Lane<f64>; NCH], src: &[Lane<T>; NCH]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        for (dv, sv) in d.iter_mut().zip(s) {
+            *dv += sv.as_f64();
+        }
+    }
+}
+
+/// The adjoint of one block of groups on a slab of `8·NCH` bins: `out[(g·8 + i)·NCH + c]` is the
+/// backprojection of pixel i of group g on chunk c, in `f64`.
+///
+/// For every sample, the row w = y[k]·p[k − j] is added to one of 256 buckets per stream,
+/// selected by the stream's code byte. Every [`FLUSH`] samples the buckets are reduced to their
+/// per-bit marginals S_i and total U in `T` (see [`adj_marginals`]) and these are added up in
+/// `f64`. Pixel i of a group then gets 2·S_i − U (binary codes: +1 where its bit is set, −1
+/// elsewhere) or S_i⁺ − S_i⁻ (ternary codes).
+#[inline(always)]
+fn adj_slab<T: Real, const NCH: usize>(a: &AdjSlab<'_, T>, out: &mut [Lane<f64>]) {
+    let ns = a.streams.len();
+    let mut buckets = vec![Row([[T::zero(); 8]; NCH]); ns * 256];
+    let mut sums = vec![[[[0.0f64; 8]; NCH]; 9]; ns];
+    let k = a.y.len();
+    let mut k0 = 0;
+    while k0 < k {
+        let k1 = (k0 + FLUSH).min(k);
+        adj_accumulate::<T, NCH>(a, k0, k1, &mut buckets);
+        for (rows, s) in buckets.chunks_exact_mut(256).zip(sums.iter_mut()) {
+            adj_marginals(rows, s);
+        }
+        k0 = k1;
+    }
+    let per_group = if a.ternary { 2 } else { 1 };
+    for (sg, og) in sums
+        .chunks_exact(per_group)
+        .zip(out.chunks_exact_mut(8 * NCH))
+    {
+        for (i, oi) in og.chunks_exact_mut(NCH).enumerate() {
+            for (c, o) in oi.iter_mut().enumerate() {
+                for l in 0..8 {
+                    o[l] = if a.ternary {
+                        sg[0][i][c][l] - sg[1][i][c][l]
+                    } else {
+                        2.0 * sg[0][i][c][l] - sg[0][8][c][l]
+                    };
                 }
             }
         }
@@ -303,17 +399,6 @@ fn lane_dot<T: Real>(a: &[T], b: &[T], out: &mut f64) {
     *out = acc;
 }
 
-/// dst += src (widened to f64), then src = 0: moves the working-precision buckets to f64.
-#[inline(always)]
-fn flush<T: Real>(src: &mut [Lane<T>], dst: &mut [Lane<f64>]) {
-    for (d, s) in dst.iter_mut().zip(src.iter_mut()) {
-        for l in 0..8 {
-            d[l] += s[l].as_f64();
-        }
-        *s = [T::zero(); 8];
-    }
-}
-
 macro_rules! multiversion {
     ($vis:vis fn $name:ident < $t:ident $(, const $c:ident : usize)? > ( $($arg:ident : $ty:ty),* ) => $inner:ident) => {
         $vis fn $name<$t: Real $(, const $c: usize)?>(isa: Isa, $($arg: $ty),*) {
@@ -342,8 +427,7 @@ macro_rules! multiversion {
 }
 
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
-multiversion!(fn adj_block_isa<T, const NCH: usize>(a: &AdjBlock<'_, T>, k0: usize, k1: usize, buckets: &mut [Lane<T>]) => adj_block);
-multiversion!(pub(crate) fn flush_isa<T>(src: &mut [Lane<T>], dst: &mut [Lane<f64>]) => flush);
+multiversion!(fn adj_slab_isa<T, const NCH: usize>(a: &AdjSlab<'_, T>, out: &mut [Lane<f64>]) => adj_slab);
 multiversion!(pub(crate) fn sparse_entry_isa<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
 multiversion!(pub(crate) fn signed_copy_isa<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
 multiversion!(pub(crate) fn lane_dot_isa<T>(a: &[T], b: &[T], out: &mut f64) => lane_dot);
@@ -368,24 +452,23 @@ pub(crate) fn forward_block<T: Real>(
     }
 }
 
-/// Runs the adjoint block kernel for samples `k0..k1` and a slab of `8·nch` bins.
-pub(crate) fn adjoint_block<T: Real>(
+/// Runs the adjoint kernel ([`adj_slab`]) for a block of groups and a slab of `8·nch` bins:
+/// `out` receives `8·nch` lanes per group.
+pub(crate) fn adjoint_slab<T: Real>(
     isa: Isa,
     nch: usize,
-    a: &AdjBlock<'_, T>,
-    k0: usize,
-    k1: usize,
-    buckets: &mut [Lane<T>],
+    a: &AdjSlab<'_, T>,
+    out: &mut [Lane<f64>],
 ) {
     match nch {
-        1 => adj_block_isa::<T, 1>(isa, a, k0, k1, buckets),
-        2 => adj_block_isa::<T, 2>(isa, a, k0, k1, buckets),
-        3 => adj_block_isa::<T, 3>(isa, a, k0, k1, buckets),
-        4 => adj_block_isa::<T, 4>(isa, a, k0, k1, buckets),
-        5 => adj_block_isa::<T, 5>(isa, a, k0, k1, buckets),
-        6 => adj_block_isa::<T, 6>(isa, a, k0, k1, buckets),
-        7 => adj_block_isa::<T, 7>(isa, a, k0, k1, buckets),
-        8 => adj_block_isa::<T, 8>(isa, a, k0, k1, buckets),
+        1 => adj_slab_isa::<T, 1>(isa, a, out),
+        2 => adj_slab_isa::<T, 2>(isa, a, out),
+        3 => adj_slab_isa::<T, 3>(isa, a, out),
+        4 => adj_slab_isa::<T, 4>(isa, a, out),
+        5 => adj_slab_isa::<T, 5>(isa, a, out),
+        6 => adj_slab_isa::<T, 6>(isa, a, out),
+        7 => adj_slab_isa::<T, 7>(isa, a, out),
+        8 => adj_slab_isa::<T, 8>(isa, a, out),
         _ => unreachable!("slabs have 1 to 8 chunks"),
     }
 }

@@ -15,15 +15,17 @@ use crate::real::Real;
 use super::codes::Codes;
 use super::geometry::Geometry;
 use super::kernels::{
-    adjoint_block, flush_isa, forward_block, sparse_entry_isa, AdjBlock, FwdBlock, Isa, Lane, FLUSH,
+    adj_row_bytes, adjoint_slab, forward_block, sparse_entry_isa, AdjSlab, FwdBlock, Isa, Lane,
 };
 
 /// Largest slab of depth bins a kernel handles at once (8 lanes × 8 chunks).
 const SLAB: usize = 64;
 /// Cache budget (bytes) for the tables or buckets of one block of groups.
 const BLOCK_BYTES: usize = 512 * 1024;
-/// The same for the adjoint's buckets (updated in place, so a smaller working set pays).
-const ADJ_BLOCK_BYTES: usize = 256 * 1024;
+/// The same for the adjoint's buckets. They are updated in place, row by row at random, so a
+/// smaller working set than the forward's pays; below about four groups (f32, 40 bins) the work
+/// per sample is shared by too few groups.
+const ADJ_BLOCK_BYTES: usize = 160 * 1024;
 /// Blocks whose lane partial sums are accumulated in `T` before a flush to `f64`.
 const FLUSH_BLOCKS: usize = 8;
 
@@ -37,6 +39,12 @@ fn depth_slabs(ks: usize) -> Vec<(usize, usize)> {
         j0 += width;
     }
     slabs
+}
+
+/// Groups of eight pixels per adjoint block: as many as have their buckets (`planes` × 256 rows
+/// of `max_nch` chunks) within `budget` bytes, between 1 and 64.
+fn adjoint_groups_per_block<T: Real>(budget: usize, max_nch: usize, planes: usize) -> usize {
+    (budget / (planes * 256 * adj_row_bytes::<T>(max_nch))).clamp(1, 64)
 }
 
 /// Groups of eight pixels whose 256-row tables of `max_nch` chunks fit in `budget` bytes
@@ -63,7 +71,6 @@ struct Work<T> {
     y64: Vec<f64>,
     part: Vec<Lane<T>>,
     lanes: Vec<Lane<T>>,
-    lanes64: Vec<Lane<f64>>,
 }
 
 struct Pool<T>(Mutex<Vec<Work<T>>>);
@@ -108,9 +115,11 @@ fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
 /// (see [`ForwardPath`]).
 ///
 /// **Adjoint.** The transpose of the same scheme: for every sample the row `y[k]·p[k − j]` is added
-/// into one of 256 buckets per group, selected by the group's code byte; the buckets are flushed to
-/// `f64` every 16 384 samples, and each pixel's backprojection is a signed sum of its group's
-/// buckets.
+/// into one of 256 buckets per group, selected by the group's code byte. Every 16 384 samples the
+/// buckets are reduced to their per-bit sums by successive halving (510 row additions per group)
+/// and these are added up in `f64`; each pixel's backprojection is then 2·S_i − Σ_b U[b] (its
+/// bit's sum against the total; S_i⁺ − S_i⁻ for ternary codes). The buckets of a block of groups
+/// (160 kB) stay in the L2 cache, rows aligned to the lanes.
 ///
 /// Blocks are processed in parallel with rayon; the kernels are compiled for AVX-512, AVX2+FMA and
 /// generic x86-64 and chosen at run time.
@@ -190,7 +199,8 @@ impl<T: Real> RdOperator<T> {
         }
         let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
         let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
-        let adj_block_groups = groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch);
+        let planes = if codes.minus_plane().is_some() { 2 } else { 1 };
+        let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch, planes);
         Ok(RdOperator {
             geom,
             codes,
@@ -301,8 +311,9 @@ impl<T: Real> RdOperator<T> {
     /// The bytes [`memory_bytes`](Self::memory_bytes) would report for an operator on `geom`
     /// with a pulse of `pulse_len` samples, codes of `alphabet` and `threads` worker threads,
     /// computed without building it: the packed codes (⌈M·N/8⌉·K bytes per bit plane), the
-    /// pulse twice (as given and reversed, padded), and per thread an `f64` accumulator of K
-    /// samples and one block of lookup tables.
+    /// pulse twice (as given and reversed, padded), and per thread the forward's `f64`
+    /// accumulator and lane partial sums of K samples, one block of its lookup tables, and one
+    /// block of the adjoint's buckets.
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] if `pulse_len` or `threads` is zero, or if the count does not
@@ -346,10 +357,14 @@ impl<T: Real> RdOperator<T> {
             .and_then(|v| v.checked_add(geom.ks + ks_pad))
             .and_then(|v| v.checked_mul(size))
             .ok_or_else(overflow)?;
-        let tables = block_groups * 256 * max_nch * planes * (8 * size + 64);
+        let tables = block_groups * 256 * max_nch * 8 * size;
+        let buckets = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch, planes)
+            * planes
+            * 256
+            * adj_row_bytes::<T>(max_nch);
         let per_task = k
-            .checked_mul(8)
-            .and_then(|v| v.checked_add(tables))
+            .checked_mul(8 + 8 * size)
+            .and_then(|v| v.checked_add(tables + buckets))
             .ok_or_else(overflow)?;
         threads
             .checked_mul(per_task)
@@ -598,83 +613,36 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
 
     fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
         let (ks, npix) = (self.geom.ks, self.geom.pixels());
-        let k = self.codes.len();
         let ternary = self.codes.minus_plane().is_some();
-        let planes = if ternary { 2 } else { 1 };
         let bg = self.adj_block_groups;
-        let block_pix = bg * 8 * ks;
-        x.par_chunks_mut(block_pix).enumerate().for_each_init(
-            || PoolGuard(&self.pool, Some(self.pool.take())),
-            |guard, (b, xb)| {
-                let w = guard.1.as_mut().expect("present until dropped");
+        x.par_chunks_mut(bg * 8 * ks)
+            .enumerate()
+            .for_each(|(b, xb)| {
                 let groups = b * bg..((b + 1) * bg).min(self.codes.groups());
-                let ng = groups.len();
                 let (plus, minus) = self.group_codes(groups.clone());
+                let streams: Vec<&[u8]> = match &minus {
+                    None => plus,
+                    Some(minus) => plus.iter().zip(minus).flat_map(|(&p, &m)| [p, m]).collect(),
+                };
+                let mut out = Vec::new();
                 for &(j0, nch) in &self.slabs {
-                    let n_lanes = planes * ng * 256 * nch;
-                    resize(&mut w.lanes, n_lanes, [T::zero(); 8]);
-                    resize(&mut w.lanes64, n_lanes, [0.0; 8]);
-                    let blk = AdjBlock {
-                        plus: &plus,
-                        minus: minus.as_deref(),
+                    let slab = AdjSlab {
+                        streams: &streams,
+                        ternary,
                         y,
                         prev: &self.prev,
                         base0: self.pad + self.pulse.len() - 1 + j0,
                     };
-                    let mut k0 = 0;
-                    while k0 < k {
-                        let k1 = (k0 + FLUSH).min(k);
-                        adjoint_block(self.isa, nch, &blk, k0, k1, &mut w.lanes);
-                        flush_isa(self.isa, &mut w.lanes, &mut w.lanes64);
-                        k0 = k1;
-                    }
-                    // Each pixel i of group g: Σ_b ±U[b] (binary: + where bit i is set, − elsewhere;
-                    // ternary: +1 buckets minus −1 buckets, each over the bytes with bit i set).
-                    for gi in 0..ng {
-                        let mut sums = [[[0.0f64; 8]; 8]; 8]; // [pixel][chunk][lane]
-                        let mut total = [[0.0f64; 8]; 8];
-                        for plane in 0..planes {
-                            let sign = if plane == 0 { 1.0 } else { -1.0 };
-                            let u = &w.lanes64
-                                [(plane * ng + gi) * 256 * nch..(plane * ng + gi + 1) * 256 * nch];
-                            for bb in 0..256usize {
-                                let row = &u[bb * nch..(bb + 1) * nch];
-                                for c in 0..nch {
-                                    for l in 0..8 {
-                                        total[c][l] += row[c][l];
-                                    }
-                                }
-                                let mut bits = bb;
-                                while bits != 0 {
-                                    let i = bits.trailing_zeros() as usize;
-                                    bits &= bits - 1;
-                                    for c in 0..nch {
-                                        for l in 0..8 {
-                                            sums[i][c][l] += sign * row[c][l];
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                        for (i, s) in sums.iter().enumerate() {
-                            let p = 8 * (groups.start + gi) + i;
-                            if p >= npix {
-                                break;
-                            }
-                            let local = (p - 8 * groups.start) * ks;
-                            for jj in 0..(8 * nch).min(ks - j0) {
-                                let v = if ternary {
-                                    s[jj / 8][jj % 8]
-                                } else {
-                                    2.0 * s[jj / 8][jj % 8] - total[jj / 8][jj % 8]
-                                };
-                                xb[local + j0 + jj] = T::of_f64(v);
-                            }
+                    resize(&mut out, groups.len() * 8 * nch, [0.0; 8]);
+                    adjoint_slab(self.isa, nch, &slab, &mut out);
+                    let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
+                    for (i, o) in out.chunks_exact(nch).take(pixels).enumerate() {
+                        for jj in 0..(8 * nch).min(ks - j0) {
+                            xb[i * ks + j0 + jj] = T::of_f64(o[jj / 8][jj % 8]);
                         }
                     }
                 }
-            },
-        );
+            });
     }
 
     fn describe(&self) -> String {
@@ -684,17 +652,6 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
             self.pulse.len(),
             self.codes.alphabet()
         )
-    }
-}
-
-/// Returns its workspace to the pool when rayon drops the per-split state.
-struct PoolGuard<'a, T>(&'a Pool<T>, Option<Work<T>>);
-
-impl<T> Drop for PoolGuard<'_, T> {
-    fn drop(&mut self) {
-        if let Some(w) = self.1.take() {
-            self.0.give(w);
-        }
     }
 }
 
