@@ -117,7 +117,7 @@ fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
 /// **Adjoint.** The transpose of the same scheme: for every sample the row `y[k]·p[k − j]` is added
 /// into one of 256 buckets per group, selected by the group's code byte. Every 16 384 samples the
 /// buckets are reduced to their per-bit sums by successive halving (510 row additions per group)
-/// and these are added up in `f64`; each pixel's backprojection is then 2·S_i − Σ_b U[b] (its
+/// and these are added up in `f64`; each pixel's backprojection is then 2·S_i − Σ_b U(b) (its
 /// bit's sum against the total; S_i⁺ − S_i⁻ for ternary codes). The buckets of a block of groups
 /// (160 kB) stay in the L2 cache, rows aligned to the lanes.
 ///
