@@ -256,3 +256,57 @@ fn descriptions_name_the_expression() {
         "Scaled(2, Difference(Diagonal(5), Diagonal(5)))"
     );
 }
+
+/// The columns `cols` of `a` (repeats allowed), as a matrix.
+fn columns_of(a: &Array2<f64>, cols: &[usize]) -> Array2<f64> {
+    Array2::from_shape_fn((a.nrows(), cols.len()), |(i, j)| a[[i, cols[j]]])
+}
+
+proptest! {
+    #![proptest_config(crate::common::config(64))]
+
+    /// The default restriction of any expression is the matrix's selected columns, passes the dot
+    /// test, and restricting it again selects the composed columns.
+    #[test]
+    fn restricted_columns_of_any_expression(
+        spec in crate::common::any_expr(2),
+        picks in prop::collection::vec(any::<prop::sample::Index>(), 1..=40),
+        again in prop::collection::vec(any::<prop::sample::Index>(), 1..=20),
+        seed in any::<u64>(),
+    ) {
+        let op = crate::common::build::<f64>(&spec);
+        let full = crate::common::reference(&spec);
+        let cols: Vec<usize> = picks.iter().map(|i| i.index(op.ncols())).collect();
+        let r = op.restrict_columns(cols.clone()).unwrap();
+        prop_assert_eq!((r.nrows(), r.ncols()), (op.nrows(), cols.len()));
+        let expected = columns_of(&full, &cols);
+        prop_assert!(crate::common::rel_max_diff(&r.to_dense(), &expected) < 1e-12);
+        prop_assert!(dot_test(&r, seed).unwrap().gap < 1e-12);
+        let sub: Vec<usize> = again.iter().map(|i| i.index(cols.len())).collect();
+        let rr = r.restrict_columns(sub.clone()).unwrap();
+        let composed: Vec<usize> = sub.iter().map(|&c| cols[c]).collect();
+        prop_assert!(crate::common::rel_max_diff(&rr.to_dense(), &columns_of(&full, &composed)) < 1e-12);
+        prop_assert!(r.restrict_columns(vec![cols.len()]).is_err());
+        prop_assert!(op.restrict_columns(vec![op.ncols()]).is_err());
+    }
+}
+
+#[test]
+fn counted_operators_count_the_applications_of_their_restrictions() {
+    use rdlidar::operator::Counted;
+    let a = DenseMatrix::new(Array2::from_shape_fn((3, 5), |(i, j)| (i * 5 + j) as f64)).unwrap();
+    let counted = Counted::new(&a);
+    let r = counted.restrict_columns(vec![4, 0, 4]).unwrap();
+    let mut y = vec![0.0; 3];
+    r.apply(&[1.0, 2.0, 3.0], &mut y);
+    // Columns 4 (twice, 1 + 3) and 0 (twice): 4·a₄ + 2·a₀.
+    assert_eq!(y, vec![16.0, 46.0, 76.0]);
+    let mut x = vec![0.0; 3];
+    r.apply_adjoint(&[1.0, 0.0, 0.0], &mut x);
+    assert_eq!(x, vec![4.0, 0.0, 4.0]);
+    let rr = r.restrict_columns(vec![1]).unwrap();
+    rr.apply(&[1.0], &mut y);
+    assert_eq!(y, vec![0.0, 5.0, 10.0]);
+    assert_eq!((counted.forward_count(), counted.adjoint_count()), (2, 1));
+    assert!(r.describe().contains("Counted"));
+}

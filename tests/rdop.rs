@@ -220,3 +220,58 @@ proptest! {
         prop_assert!(SupportOperator::new(&op, vec![g.voxels()]).is_err());
     }
 }
+
+proptest! {
+    #![proptest_config(crate::common::config(32))]
+
+    /// The operator's own restriction (the support operator) equals the generic A·Rᵀ, passes the
+    /// dot test, and restricting it again gives the support operator of the composed voxels.
+    #[test]
+    fn restrict_columns_gives_the_support_operator(
+        g in geometry(),
+        kp in 1..=300usize,
+        ternary in any::<bool>(),
+        picks in prop::collection::vec(any::<prop::sample::Index>(), 1..=40),
+        again in prop::collection::vec(any::<prop::sample::Index>(), 1..=20),
+        seed in any::<u64>(),
+    ) {
+        use rdlidar::operator::{OperatorExt, Restriction};
+        let pulse = Pulse::<f64>::bernoulli(kp, seed).unwrap().into_inner();
+        let k = g.samples(kp);
+        let codes = if ternary {
+            Codes::random_ternary(g.pixels(), k, 0.3, seed ^ 3).unwrap()
+        } else {
+            Codes::random_binary(g.pixels(), k, seed ^ 3).unwrap()
+        };
+        let op = RdOperator::new(g, pulse, Arc::new(codes)).unwrap();
+        let voxels: Vec<usize> = picks.iter().map(|i| i.index(g.voxels())).collect();
+        let r = op.restrict_columns(voxels.clone()).unwrap();
+        prop_assert!(r.describe().starts_with("SupportOperator"));
+        let generic = |cols: Vec<usize>| {
+            (&op).compose(Restriction::<f64>::new(g.voxels(), cols).unwrap().adjoint()).unwrap()
+        };
+        let reference = generic(voxels.clone());
+        let a = random_vec(voxels.len(), seed ^ 5);
+        let (mut y1, mut y2) = (vec![0.0; k], vec![0.0; k]);
+        r.apply(&a, &mut y1);
+        reference.apply(&a, &mut y2);
+        prop_assert!(rel(&y1, &y2) <= 1e-12 || y2.iter().all(|v| *v == 0.0));
+        let y = random_vec(k, seed ^ 6);
+        let (mut x1, mut x2) = (vec![0.0; voxels.len()], vec![0.0; voxels.len()]);
+        r.apply_adjoint(&y, &mut x1);
+        reference.apply_adjoint(&y, &mut x2);
+        prop_assert!(rel(&x1, &x2) <= 1e-12);
+        prop_assert!(DotTest::new().seed(seed).measure(&r).passed());
+        let sub: Vec<usize> = again.iter().map(|i| i.index(voxels.len())).collect();
+        let composed: Vec<usize> = sub.iter().map(|&c| voxels[c]).collect();
+        let rr = r.restrict_columns(sub.clone()).unwrap();
+        prop_assert!(rr.describe().starts_with("SupportOperator"));
+        let mut x3 = vec![0.0; sub.len()];
+        let mut x4 = vec![0.0; sub.len()];
+        rr.apply_adjoint(&y, &mut x3);
+        generic(composed).apply_adjoint(&y, &mut x4);
+        prop_assert!(rel(&x3, &x4) <= 1e-12);
+        prop_assert!(r.restrict_columns(vec![voxels.len()]).is_err());
+        prop_assert!(op.restrict_columns(vec![g.voxels()]).is_err());
+    }
+}

@@ -740,3 +740,81 @@ fn invalid_parameters_and_shapes_are_typed_errors() {
         );
     }
 }
+
+/// An operator that hides `inner`'s own restriction, so that solvers restrict it with the generic
+/// A·Rᵀ of the operator algebra.
+struct Generic<'a, A>(&'a A);
+
+impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for Generic<'_, A> {
+    fn nrows(&self) -> usize {
+        self.0.nrows()
+    }
+    fn ncols(&self) -> usize {
+        self.0.ncols()
+    }
+    fn scratch_len(&self) -> usize {
+        self.0.scratch_len()
+    }
+    fn forward_kernel(&self, x: &[T], y: &mut [T], scratch: &mut [T]) {
+        self.0.forward_kernel(x, y, scratch)
+    }
+    fn adjoint_kernel(&self, y: &[T], x: &mut [T], scratch: &mut [T]) {
+        self.0.adjoint_kernel(y, x, scratch)
+    }
+}
+
+/// CoSaMP's iterates, with its inner least squares cut short so that they depend on every inner
+/// step.
+fn cosamp_iterates<A: LinearOperator<f64> + ?Sized>(op: &A, y: &[f64], s: usize) -> Vec<Vec<f64>> {
+    let mut params = CosampParams::new(s);
+    params.inner.stopping.max_iter = 4;
+    params.stopping.max_iter = 8;
+    let mut xs = Vec::new();
+    let mut x = vec![0.0; op.ncols()];
+    let counted = Counted::new(op);
+    let report = cosamp(&counted, y, &mut x, &params, &mut |info: &IterationInfo<
+        '_,
+        f64,
+    >| {
+        xs.push(info.x.to_vec());
+        Control::Continue
+    })
+    .unwrap();
+    assert_counts(&report, &counted);
+    assert_eq!(xs.len(), report.iterations);
+    xs
+}
+
+#[test]
+fn cosamp_through_the_lidar_restriction_repeats_the_generic_iterates() {
+    let g = Geometry::new(6, 6, 12).unwrap();
+    let scene = random_opaque_scene::<f64>(g, 0.6, 41).unwrap();
+    let truth = scene.as_slice().to_vec();
+    let s = support(&truth).len();
+    for ternary in [false, true] {
+        let kp = 120;
+        let pulse = Pulse::<f64>::bernoulli(kp, 42).unwrap().into_inner();
+        let codes = if ternary {
+            Codes::random_ternary(g.pixels(), g.samples(kp), 0.3, 43).unwrap()
+        } else {
+            Codes::random_binary(g.pixels(), g.samples(kp), 43).unwrap()
+        };
+        let op = RdOperator::new(g, pulse, Arc::new(codes)).unwrap();
+        let mut y = vec![0.0; op.nrows()];
+        op.apply(&truth, &mut y);
+        let fast = cosamp_iterates(&op, &y, s);
+        let generic = cosamp_iterates(&Generic(&op), &y, s);
+        assert_eq!(fast.len(), generic.len());
+        assert!(fast.len() > 1, "{} iterations", fast.len());
+        for (k, (a, b)) in fast.iter().zip(&generic).enumerate() {
+            assert_eq!(
+                support(a),
+                support(b),
+                "ternary {ternary}, iteration {}",
+                k + 1
+            );
+            let e = rel_err(a, b);
+            assert!(e < 1e-9, "ternary {ternary}, iteration {}: {e:e}", k + 1);
+        }
+    }
+}

@@ -645,6 +645,12 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
             });
     }
 
+    /// A [`SupportOperator`](super::SupportOperator): both directions cost O(|columns|·K_p),
+    /// the adjoint only for the listed voxels.
+    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        Ok(Box::new(super::SupportOperator::new(self, columns)?))
+    }
+
     fn describe(&self) -> String {
         format!(
             "RdOperator({}, K_p {}, {:?} codes)",

@@ -139,6 +139,20 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
         }
     }
 
+    /// The support operator of the selected voxels.
+    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        let n = self.voxels.len();
+        if let Some(&bad) = columns.iter().find(|&&c| c >= n) {
+            return Err(Error::IndexOutOfBounds {
+                context: "support columns",
+                index: bad,
+                len: n,
+            });
+        }
+        let voxels = columns.iter().map(|&c| self.voxels[c]).collect();
+        Ok(Box::new(SupportOperator::new(self.op, voxels)?))
+    }
+
     fn describe(&self) -> String {
         format!(
             "SupportOperator({} voxels of {})",

@@ -179,3 +179,66 @@ impl<T: Real> LinearOperator<T> for Restriction<T> {
         format!("Restriction({} of {})", self.idx.len(), self.n)
     }
 }
+
+/// `A·Rᵀ` for the [`Restriction`] R to some columns of A: the default
+/// [`restrict_columns`](LinearOperator::restrict_columns). Forward: the input is scattered into a
+/// full-length vector (repeats add up) and A applied; adjoint: A's adjoint, then the listed entries.
+/// Restricting it again restricts A to the composed column list, so restrictions do not nest.
+pub(super) struct ColumnRestriction<'a, A: ?Sized, T> {
+    op: &'a A,
+    r: Restriction<T>,
+}
+
+impl<'a, A: LinearOperator<T> + ?Sized, T: Real> ColumnRestriction<'a, A, T> {
+    /// The restriction of `op` to `columns`.
+    ///
+    /// # Errors
+    /// [`Error::IndexOutOfBounds`] for a column not below `op.ncols()`.
+    pub(super) fn new(op: &'a A, columns: Vec<usize>) -> Result<Self> {
+        Ok(ColumnRestriction {
+            op,
+            r: Restriction::new(op.ncols(), columns)?,
+        })
+    }
+}
+
+impl<A: LinearOperator<T> + ?Sized, T: Real> LinearOperator<T> for ColumnRestriction<'_, A, T> {
+    fn nrows(&self) -> usize {
+        self.op.nrows()
+    }
+    fn ncols(&self) -> usize {
+        self.r.idx.len()
+    }
+    fn scratch_len(&self) -> usize {
+        self.r.n + self.op.scratch_len()
+    }
+    fn forward_kernel(&self, x: &[T], y: &mut [T], scratch: &mut [T]) {
+        let (full, rest) = scratch.split_at_mut(self.r.n);
+        self.r.adjoint_kernel(x, full, &mut []);
+        self.op.forward_kernel(full, y, rest);
+    }
+    fn adjoint_kernel(&self, y: &[T], x: &mut [T], scratch: &mut [T]) {
+        let (full, rest) = scratch.split_at_mut(self.r.n);
+        self.op.adjoint_kernel(y, full, rest);
+        self.r.forward_kernel(full, x, &mut []);
+    }
+    fn describe(&self) -> String {
+        format!(
+            "Compose({}, Adjoint({}))",
+            self.op.describe(),
+            self.r.describe()
+        )
+    }
+    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        let n = self.ncols();
+        if let Some(&bad) = columns.iter().find(|&&c| c >= n) {
+            return Err(Error::IndexOutOfBounds {
+                context: "restriction indices",
+                index: bad,
+                len: n,
+            });
+        }
+        let composed = columns.iter().map(|&c| self.r.idx[c]).collect();
+        self.op.restrict_columns(composed)
+    }
+}

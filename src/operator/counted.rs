@@ -2,6 +2,7 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use crate::error::Result;
 use crate::real::Real;
 
 use super::LinearOperator;
@@ -74,5 +75,50 @@ impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for Counted<A> {
     }
     fn describe(&self) -> String {
         format!("Counted({})", self.inner.describe())
+    }
+    /// The inner operator's restriction, whose applications count as applications of this one.
+    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        Ok(Box::new(CountedPart {
+            inner: self.inner.restrict_columns(columns)?,
+            forward: &self.forward,
+            adjoint: &self.adjoint,
+        }))
+    }
+}
+
+/// A restriction of a [`Counted`] operator, counting into its counters.
+struct CountedPart<'a, T> {
+    inner: Box<dyn LinearOperator<T> + 'a>,
+    forward: &'a AtomicUsize,
+    adjoint: &'a AtomicUsize,
+}
+
+impl<T: Real> LinearOperator<T> for CountedPart<'_, T> {
+    fn nrows(&self) -> usize {
+        self.inner.nrows()
+    }
+    fn ncols(&self) -> usize {
+        self.inner.ncols()
+    }
+    fn scratch_len(&self) -> usize {
+        self.inner.scratch_len()
+    }
+    fn forward_kernel(&self, x: &[T], y: &mut [T], scratch: &mut [T]) {
+        self.forward.fetch_add(1, Ordering::Relaxed);
+        self.inner.forward_kernel(x, y, scratch)
+    }
+    fn adjoint_kernel(&self, y: &[T], x: &mut [T], scratch: &mut [T]) {
+        self.adjoint.fetch_add(1, Ordering::Relaxed);
+        self.inner.adjoint_kernel(y, x, scratch)
+    }
+    fn describe(&self) -> String {
+        format!("Counted({})", self.inner.describe())
+    }
+    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        Ok(Box::new(CountedPart {
+            inner: self.inner.restrict_columns(columns)?,
+            forward: self.forward,
+            adjoint: self.adjoint,
+        }))
     }
 }

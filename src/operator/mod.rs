@@ -111,6 +111,21 @@ pub trait LinearOperator<T: Real>: Send + Sync {
         format!("Operator({}x{})", self.nrows(), self.ncols())
     }
 
+    /// The operator restricted to `columns`: A·Rᵀ, whose input holds one value per listed column
+    /// (in the given order, repeats allowed) and whose output is A's. Solvers that work on a
+    /// support (least squares on a few columns) apply this instead of A.
+    ///
+    /// By default the composition of A with the adjoint of a [`Restriction`], which applies the
+    /// whole of A in both directions. Operators whose columns are cheaper to apply a few at a time
+    /// override it; the result must equal the default up to round-off.
+    ///
+    /// # Errors
+    /// [`Error::IndexOutOfBounds`](crate::Error::IndexOutOfBounds) for a column not below
+    /// [`ncols`](Self::ncols).
+    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        Ok(Box::new(basic::ColumnRestriction::new(self, columns)?))
+    }
+
     /// y = A·x, overwriting `y`. Allocates the scratch buffer when one is needed.
     ///
     /// # Panics
@@ -250,6 +265,12 @@ macro_rules! forward_impl {
             }
             fn describe(&self) -> String {
                 (**self).describe()
+            }
+            fn restrict_columns(
+                &self,
+                columns: Vec<usize>,
+            ) -> Result<Box<dyn LinearOperator<T> + '_>> {
+                (**self).restrict_columns(columns)
             }
         }
     )*};

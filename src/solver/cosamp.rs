@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::linalg::{dot, norm2};
-use crate::operator::{LinearOperator, OperatorExt, Restriction};
+use crate::operator::LinearOperator;
 use crate::real::Real;
 
 use super::iteration::{fit_scratch, solve, Iteration, Progress, StoppingRecord};
@@ -20,8 +20,10 @@ use super::{
 pub struct CosampParams {
     /// The number s of nonzeros kept (1 ≤ s ≤ number of unknowns).
     pub sparsity: usize,
-    /// The inner least-squares solve on the merged support (at most 3s unknowns): its damping and
-    /// its stopping rules (iteration limit, tolerance on the normal-equation residual).
+    /// The inner least-squares solve on the merged support (at most 3s unknowns, warm-started from
+    /// the current x): its damping and its stopping rules (iteration limit, tolerance on the
+    /// normal-equation residual). A few iterations often suffice: the next outer iteration
+    /// continues from where they stopped.
     pub inner: CglsParams,
     /// The run ends with [`Termination::Converged`] when an iteration leaves the support unchanged
     /// and changes x by at most this, relative: ‖x_k − x_{k−1}‖ ≤ tol · ‖x_k‖ (finite, ≥ 0).
@@ -156,10 +158,10 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
         it: usize,
     ) -> Result<Progress> {
         fit_scratch(&mut self.scratch, op);
-        let (s, n) = (self.sparsity, x.len());
+        let s = self.sparsity;
         let merged = union(&largest_indices(&self.u, 2 * s), &self.supp);
         let mut b: Vec<T> = merged.iter().map(|&i| x[i]).collect();
-        let restricted = op.compose(Restriction::new(n, merged.clone())?.adjoint())?;
+        let restricted = op.restrict_columns(merged.clone())?;
         let inner = CglsParams {
             damp: self.inner_damp,
             stopping: self.inner_stopping.into(),
@@ -210,9 +212,12 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
 ///
 /// 1. forms the proxy u = Aᵀr of the residual r = y − Ax (one adjoint application),
 /// 2. merges the indices of the 2s largest |uᵢ| with the support of x into T,
-/// 3. solves min_b ‖A R_Tᵀ b − y‖² by [`cgls`] (warm-started from x on T), where R_T is the
-///    [`Restriction`] to T: the operator A·R_Tᵀ is built with the operator algebra, so A is
-///    only ever applied, never stored as a submatrix,
+/// 3. solves min_b ‖A R_Tᵀ b − y‖² by [`cgls`] (warm-started from x on T), where A·R_Tᵀ is
+///    A restricted to the columns T by [`LinearOperator::restrict_columns`]: by default A
+///    composed with the adjoint of the [`Restriction`](crate::operator::Restriction) to T (A is
+///    only ever applied, never stored as a submatrix); operators with a cheaper restriction
+///    provide it (the lidar operator's costs O(|T|·K_p) per application instead of a full
+///    adjoint),
 /// 4. keeps the s largest entries of b as the new x and recomputes r (one forward application).
 ///
 /// The run ends with [`Termination::Converged`] when an iteration keeps the support and changes x
