@@ -335,13 +335,64 @@ fn the_neighbourhood_prior_recovers_most_depths_where_the_per_pixel_prior_stalls
         "coupled {coupled}\nuncoupled {uncoupled}"
     );
     assert!(coupled.depth_rmse_bins < 2.0, "{coupled}");
-    let bad = TvDepthParams {
-        neighbour_floor: 0.0,
-        ..TvDepthParams::default()
-    };
-    let mut x = vec![0.0; g.voxels()];
-    assert!(matches!(
-        tv_depth(&op, (g.m, g.n), &y, &mut x, &bad, &mut ()),
-        Err(Error::InvalidParameter { .. })
-    ));
+    let d = TvDepthParams::default();
+    for bad in [
+        TvDepthParams {
+            neighbour_floor: 0.0,
+            ..d
+        },
+        TvDepthParams {
+            neighbour_gate: 1.0,
+            ..d
+        },
+        TvDepthParams {
+            neighbour_change: f64::NAN,
+            ..d
+        },
+        TvDepthParams {
+            neighbour_change: -0.1,
+            ..d
+        },
+    ] {
+        let mut x = vec![0.0; g.voxels()];
+        assert!(matches!(
+            tv_depth(&op, (g.m, g.n), &y, &mut x, &bad, &mut ()),
+            Err(Error::InvalidParameter { .. })
+        ));
+    }
+}
+
+#[test]
+fn the_neighbourhood_prior_is_exact_with_few_measurements_per_return() {
+    use rdlidar::solver::{reflector_amp, tv_depth, ReflectorAmpParams, TvDepthParams};
+    // 32×32×40 noise-free with K = 2.6 times the number of lit pixels. (On the 100×100 paper
+    // scene 1.8 suffices, K_p = 10000; the threshold rises on smaller images: 1.8–2.2 at 64×64,
+    // 2.2–2.6 at 32×32.)
+    let g = Geometry::new(32, 32, 40).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    let lit = truth.depth_map().depth.iter().filter(|d| **d >= 0).count();
+    let kp = (2.6 * lit as f64) as usize - g.ks + 1;
+    for seed in [0, 7] {
+        let op = lidar_problem(g, kp, false, seed);
+        let mut y = vec![0.0; op.nrows()];
+        op.apply(truth.as_slice(), &mut y);
+        let mut x = vec![0.0; g.voxels()];
+        let report = tv_depth(
+            &op,
+            (g.m, g.n),
+            &y,
+            &mut x,
+            &TvDepthParams::default(),
+            &mut (),
+        )
+        .unwrap();
+        assert!(one_per_pixel(&x, g.ks));
+        let coupled = compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap();
+        assert!(coupled.exact_fraction >= 0.99, "{coupled} ({report:?})");
+        assert!(coupled.false_detections <= g.pixels() / 200, "{coupled}");
+        let mut x = vec![0.0; g.voxels()];
+        reflector_amp(&op, &y, &mut x, &ReflectorAmpParams::default(), &mut ()).unwrap();
+        let alone = compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap();
+        assert!(alone.exact_fraction < 0.6, "message passing alone: {alone}");
+    }
 }

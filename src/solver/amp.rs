@@ -132,12 +132,18 @@ struct PixelPosterior {
     best: Option<(usize, f64)>,
 }
 
-/// Per-pixel priors that replace the uniform one: the probability of a return and a depth
-/// distribution (K_s weights per pixel, renormalized over the admissible depths).
+/// Per-pixel priors that replace the global one: the probability of a return, a depth
+/// distribution (K_s weights per pixel, renormalized over the admissible depths) and optionally
+/// the amplitude's mean and variance.
 pub(crate) struct PixelPriors {
     pub(crate) lit: Vec<f64>,
     pub(crate) depth: Vec<f64>,
+    pub(crate) amplitude: Option<Vec<(f64, f64)>>,
 }
+
+/// One pixel's prior as [`denoise`] takes it: P(return), the depth weights and the amplitude's
+/// mean and variance when they replace the global ones.
+type PixelPrior<'a> = (f64, &'a [f64], Option<(f64, f64)>);
 
 /// What a run leaves besides the estimate: the posterior of its best iterate.
 pub(crate) struct Posteriors {
@@ -145,12 +151,41 @@ pub(crate) struct Posteriors {
     pub(crate) depth: Vec<f64>,
     /// P(return), one per pixel.
     pub(crate) lit: Vec<f64>,
+    /// E[a | return] and E[a² | return], one pair per pixel ((0, 0) where P(return) = 0).
+    pub(crate) amplitude: Vec<(f64, f64)>,
+}
+
+impl Posteriors {
+    fn zeros(pixels: usize, ks: usize) -> Self {
+        Posteriors {
+            depth: vec![0.0; pixels * ks],
+            lit: vec![0.0; pixels],
+            amplitude: vec![(0.0, 0.0); pixels],
+        }
+    }
+
+    /// The amplitude's mean and variance over the pixels, each weighted by its probability of a
+    /// return (the global prior's EM estimate at this posterior).
+    pub(crate) fn amplitude_moments(&self) -> (f64, f64) {
+        let (w, m1, m2) = self
+            .lit
+            .iter()
+            .zip(&self.amplitude)
+            .fold((0.0, 0.0, 0.0), |s, (l, a)| {
+                (s.0 + l, s.1 + l * a.0, s.2 + l * a.1)
+            });
+        if w <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let mean = m1 / w;
+        (mean, (m2 / w - mean * mean).max(0.0))
+    }
 }
 
 /// The posterior of one pixel given its correlations `g` (Gram block `gram`, noise τ²),
 /// writing the posterior mean into `mean` and the depth probabilities into `post`. Depths
 /// outside `lo..=hi` or with a zero column are not admissible. `pixel_prior` replaces the
-/// uniform depth prior and λ when given.
+/// uniform depth prior and λ (and μ, σ² when it has them) when given.
 #[allow(clippy::too_many_arguments)]
 fn denoise(
     g: &[f64],
@@ -158,7 +193,7 @@ fn denoise(
     (lo, hi): (usize, usize),
     tau2: f64,
     prior: Prior,
-    pixel_prior: Option<(f64, &[f64])>,
+    pixel_prior: Option<PixelPrior<'_>>,
     mean: &mut [f64],
     post: &mut [f64],
 ) -> PixelPosterior {
@@ -177,6 +212,10 @@ fn denoise(
         };
     }
     let lit_prior = pixel_prior.map_or(prior.lit, |p| p.0);
+    let prior = match pixel_prior.and_then(|p| p.2) {
+        Some((mean, var)) => Prior { mean, var, ..prior },
+        None => prior,
+    };
     let depth_mass: f64 = pixel_prior.map_or(count as f64, |p| {
         (lo..=hi).filter(|&d| admissible(d)).map(|d| p.1[d]).sum()
     });
@@ -184,7 +223,7 @@ fn denoise(
     let log_empty = (1.0 - lit_prior).ln();
     let log_depth = lit_prior.ln() - prior.mean * prior.mean / (2.0 * prior.var);
     let log_q = |d: usize| match pixel_prior {
-        Some((_, q)) if depth_mass > 0.0 => (q[d] / depth_mass).ln(),
+        Some((_, q, _)) if depth_mass > 0.0 => (q[d] / depth_mass).ln(),
         _ => -(count as f64).ln(),
     };
     let mut logw = [f64::NEG_INFINITY; 256];
@@ -329,7 +368,10 @@ where
     let ks = op.column_len();
     let pixels = check_pixels(NAME, n, ks, windows)?;
     if let Some(pr) = priors {
-        if pr.lit.len() != pixels || pr.depth.len() != n {
+        if pr.lit.len() != pixels
+            || pr.depth.len() != n
+            || pr.amplitude.as_ref().is_some_and(|a| a.len() != pixels)
+        {
             return Err(Error::shape(
                 "reflector-amp: priors vs pixels",
                 pixels,
@@ -339,14 +381,8 @@ where
     }
     let counted = Counted::new(op);
     let mut monitor = Monitor::new(NAME, params.stopping, observer);
-    let mut posteriors = Posteriors {
-        depth: vec![0.0; n],
-        lit: vec![0.0; pixels],
-    };
-    let mut best_post = Posteriors {
-        depth: vec![0.0; n],
-        lit: vec![0.0; pixels],
-    };
+    let mut posteriors = Posteriors::zeros(pixels, ks);
+    let mut best_post = Posteriors::zeros(pixels, ks);
     let y64: Vec<f64> = y.iter().map(|v| v.as_f64()).collect();
     let yy = dot(y, y);
     x.fill(T::zero());
@@ -435,7 +471,13 @@ where
                     *gd = up[d].as_f64() + dot_f64(&gram[d * ks..(d + 1) * ks], mp);
                 }
                 let window = windows.map_or((0, ks - 1), |w| w[p]);
-                let pixel_prior = priors.map(|pr| (pr.lit[p], &pr.depth[p * ks..(p + 1) * ks]));
+                let pixel_prior = priors.map(|pr| {
+                    (
+                        pr.lit[p],
+                        &pr.depth[p * ks..(p + 1) * ks],
+                        pr.amplitude.as_ref().map(|a| a[p]),
+                    )
+                });
                 denoise(g, gram, window, tau2, prior, pixel_prior, mp, wp)
             })
             .collect();
@@ -445,6 +487,11 @@ where
         let (mut lit, mut amp1, mut amp2, mut div) = (0.0, 0.0, 0.0, 0.0);
         for (p, post) in posts.iter().enumerate() {
             posteriors.lit[p] = post.lit;
+            posteriors.amplitude[p] = if post.lit > 0.0 {
+                (post.amp1 / post.lit, post.amp2 / post.lit)
+            } else {
+                (0.0, 0.0)
+            };
             lit += post.lit;
             amp1 += post.amp1;
             amp2 += post.amp2;
@@ -486,6 +533,7 @@ where
             best_x.copy_from_slice(x);
             best_post.depth.copy_from_slice(&posteriors.depth);
             best_post.lit.copy_from_slice(&posteriors.lit);
+            best_post.amplitude.copy_from_slice(&posteriors.amplitude);
             since_best = 0;
         } else {
             since_best += 1;
