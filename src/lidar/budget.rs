@@ -210,11 +210,12 @@ const CALIBRATION_CAP: (usize, usize, usize) = (64, 64, 16_384);
 
 impl Throughput {
     /// The rates measured on the reference machine (2 cores of an AMD EPYC with AVX-512, 2
-    /// threads) at 100×100×40, K_p = 30 000, with the paper scene for the sparse forward, as
-    /// documented in docs/lidar.md: f32 forward 0.092 s and adjoint 0.105 s, sparse forward of
-    /// 5 547 voxels 12 ms (the middle of the ranges measured there), f64 forward 0.162 s,
-    /// adjoint 0.181 s and sparse forward 24 ms, per application. That machine's speed varied by
-    /// about 30% between runs; a loaded or different machine can be several times slower, which
+    /// threads) at 100×100×40, K_p = 30 000, with the paper scene for the sparse forward, in one
+    /// `cargo bench` run documented in docs/lidar.md: f32 forward 72.5 ms, adjoint 66.7 ms and
+    /// sparse forward of 5 547 voxels 9.7 ms, f64 forward 122.8 ms, adjoint 120.0 ms and sparse
+    /// forward 16.9 ms, per application (criterion medians). The machine is shared and its speed
+    /// varies between runs (a second run the same hour gave an f32 forward of 78.0 ms and sparse
+    /// forward of 12.3 ms); a loaded or different machine can be several times slower, which
     /// [`Throughput::calibrate`] measures.
     pub fn documented() -> Self {
         let flops = 2.0 * 10_000.0 * 30_039.0 * 40.0;
@@ -230,8 +231,8 @@ impl Throughput {
                               2 threads (docs/lidar.md)",
             },
             rates: PerPrecision {
-                f32: rates(0.092, 0.105, 0.012),
-                f64: rates(0.162, 0.181, 0.024),
+                f32: rates(0.0725, 0.0667, 0.0097),
+                f64: rates(0.1228, 0.1200, 0.0169),
             },
         }
     }
