@@ -346,6 +346,10 @@ fn the_neighbourhood_prior_recovers_most_depths_where_the_per_pixel_prior_stalls
             ..d
         },
         TvDepthParams {
+            neighbour_iterations: 0,
+            ..d
+        },
+        TvDepthParams {
             neighbour_change: f64::NAN,
             ..d
         },

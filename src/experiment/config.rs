@@ -429,10 +429,9 @@ impl ExperimentConfig {
 
     /// The demo's iteration budgets, chosen so that the whole demo runs in under three minutes
     /// on the shared two-core machine: CGLS 15, FISTA 15 (and IHT 15, if added), CoSaMP 1 (each
-    /// of its iterations solves a least-squares problem with the full operator), model-based 6
-    /// and, for TV and auto, 4 (the limit of each of their model-based fits; with 3, auto's
-    /// model-based fit at K_p = 30000 is too rough to count as piecewise smooth and TV is
-    /// skipped). The
+    /// of its iterations solves a least-squares problem on the merged support), model-based 6
+    /// and, for TV and auto, 4 (the limit of each of their model-based fits; TV's neighbourhood
+    /// rounds of message passing have their own limits). The
     /// backprojections have no iterations. With [`ExperimentConfig::demo`]'s 30 power
     /// iterations for FISTA's step.
     pub fn demo_budgets() -> Budgets {

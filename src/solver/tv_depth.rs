@@ -10,7 +10,10 @@ use rayon::prelude::*;
 
 use super::amp::{reflector_amp_run, PixelPriors, Posteriors};
 use super::model_based::model_based_in;
-use super::{tv_denoise, ModelBasedParams, Observer, Report, Termination, TvParams, VoxelOperator};
+use super::{
+    tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping, Termination,
+    TvParams, VoxelOperator,
+};
 
 /// Parameters of [`tv_depth`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -29,6 +32,10 @@ pub struct TvDepthParams {
     /// ([`ModelBasedParams::amp`]): each round runs message passing again with every pixel's prior
     /// built from its neighbours' posteriors (at most this many, default 16; 0 disables it).
     pub neighbour_rounds: usize,
+    /// Message-passing iterations per round at most (default 20; the rounds run the remaining
+    /// stopping rules of [`ModelBasedParams::amp`]). A round only needs to move the posteriors
+    /// on: the next round continues from them.
+    pub neighbour_iterations: usize,
     /// The rounds stop when a round changes the estimate (which pixels have a return, at which
     /// depth) in at most this fraction of the pixels (in [0, 1), default 0.002).
     pub neighbour_change: f64,
@@ -54,6 +61,7 @@ impl Default for TvDepthParams {
             window: 2,
             rounds: 2,
             neighbour_rounds: 16,
+            neighbour_iterations: 20,
             neighbour_change: 0.002,
             neighbour_radius: 2,
             neighbour_floor: 0.1,
@@ -189,6 +197,16 @@ fn changed_fraction<T: Real>(a: &[T], b: &[T], ks: usize) -> f64 {
     changed as f64 / pixels.max(1) as f64
 }
 
+/// ‖y − Ax‖², accumulated in `f64`.
+fn misfit<T: Real, A: VoxelOperator<T> + ?Sized>(op: &A, y: &[T], x: &[T]) -> f64 {
+    let mut ax = vec![T::zero(); y.len()];
+    op.apply(x, &mut ax);
+    y.iter()
+        .zip(&ax)
+        .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
+        .sum()
+}
+
 /// Adds the counts and histories of `more` to `report`.
 fn absorb(report: &mut Report, more: Report) {
     report.iterations += more.iterations;
@@ -247,7 +265,8 @@ fn peaks<T: Real>(x: &[T], ks: usize) -> Vec<Option<(usize, f64)>> {
 ///    into their windows and the greedy fit continues from them.
 ///
 /// Steps 2–3 repeat [`rounds`](TvDepthParams::rounds) times; none run when the first fit already
-/// explains the data (it stopped on its residual tolerance). Isolated wrong depths, which cross-
+/// explains the data (it stopped on its residual tolerance), and a round whose fit leaves more than
+/// twice the squared residual of the one before is undone and ends them. Isolated wrong depths, which cross-
 /// talk and noise cause and which the per-pixel model cannot tell from true ones, are pulled
 /// towards their neighbours' depths, where the data then confirm or move them.
 ///
@@ -296,6 +315,9 @@ where
             format!("must be in (0, 1], got {}", params.neighbour_floor),
         ));
     }
+    if params.neighbour_iterations == 0 {
+        return Err(Error::param("neighbour_iterations", "must be at least 1"));
+    }
     for (name, v) in [
         ("neighbour_change", params.neighbour_change),
         ("neighbour_gate", params.neighbour_gate),
@@ -323,13 +345,20 @@ where
                 gate: params.neighbour_gate,
             };
             let mut last = x.to_vec();
+            let capped = ReflectorAmpParams {
+                stopping: Stopping {
+                    max_iter: amp.stopping.max_iter.min(params.neighbour_iterations),
+                    ..amp.stopping
+                },
+                ..*amp
+            };
             for _ in 0..params.neighbour_rounds {
                 // Done once a run explains the data.
                 if rep.termination == Termination::Residual || mean <= 0.0 {
                     break;
                 }
                 let priors = neighbour_priors(&post, grid, ks, &hood);
-                let (more, p) = reflector_amp_run(op, y, x, amp, None, Some(&priors), &mut ())?;
+                let (more, p) = reflector_amp_run(op, y, x, &capped, None, Some(&priors), &mut ())?;
                 absorb(&mut rep, more);
                 post = p;
                 if changed_fraction(x, &last, ks) <= params.neighbour_change {
@@ -354,6 +383,9 @@ where
         explore_iterations: 0,
         ..params.model
     };
+    let mut before = x.to_vec();
+    let mut fit_before = misfit(op, y, x);
+    report.forward_applies += 1;
     for _ in 0..params.rounds {
         let found = peaks(x, ks);
         let amax = found.iter().flatten().map(|p| p.1).fold(0.0, f64::max);
@@ -400,6 +432,17 @@ where
         }
         let r = model_based_in(op, y, x, &windowed, Some(&windows), observer)?;
         absorb(&mut report, r);
+        // The windows are a heuristic: a windowed fit that lost what the previous one had found
+        // (more than doubling the squared residual) is undone. Smaller increases are expected
+        // in noise, where dropping false detections leaves more of the noise unexplained.
+        let fit = misfit(op, y, x);
+        report.forward_applies += 1;
+        if fit > 2.0 * fit_before {
+            x.copy_from_slice(&before);
+            break;
+        }
+        before.copy_from_slice(x);
+        fit_before = fit;
     }
     report.solver = "tv-depth";
     Ok(report)
