@@ -288,8 +288,8 @@ enum Command {
     /// lasso), iht and cosamp (sparsity estimated from the debiased backprojection), model-based
     /// (one reflector per pixel), tv (TV on the depth map) and auto: debiased backprojection in
     /// the redundant regime, cgls in the critical one, model-based in the compressive one,
-    /// refined by tv when its depth map is piecewise smooth (60% of the lit pixels with a lit
-    /// 4-neighbour within one bin).
+    /// followed by tv (from scratch) when the model-based fit does not explain the data, keeping
+    /// tv's scene when it fits about as well.
     ///
     /// With --truth SCENE.npy the estimate is compared with the true scene (exact depths,
     /// RMSE, misses, false detections, relative error; τ = 200 ps per bin).

@@ -142,3 +142,24 @@ fn bad_inputs_are_errors() {
         assert_eq!(r.depth.lit(), 0, "{method}");
     }
 }
+
+#[test]
+fn auto_turns_to_tv_where_the_model_based_fit_does_not_explain_the_data() {
+    // The 32×32×40 paper scene with K = 2.6 times the number of lit pixels: compressive, and
+    // short enough that the model-based fit stalls.
+    let g = Geometry::new(32, 32, 40).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    let lit = truth.depth_map().lit();
+    let kp = (2.6 * lit as f64) as usize - g.ks + 1;
+    let op = problem::<f64>(g, kp, 4);
+    let y = measure(&op, &truth);
+    let options = ReconstructOptions::default();
+    let mb = reconstruct(&op, &y, Method::ModelBased, &options).unwrap();
+    let auto = reconstruct(&op, &y, Method::Auto, &options).unwrap();
+    let plain = compare(&truth, &mb.scene, 200e-12).unwrap();
+    let chosen = compare(&truth, &auto.scene, 200e-12).unwrap();
+    assert!(plain.exact_fraction < 0.9, "model-based alone: {plain}");
+    assert_eq!(auto.method_used, Method::Tv, "{chosen}");
+    assert!(chosen.exact_fraction >= 0.99, "{chosen}");
+    assert!(chosen.false_detections <= g.pixels() / 200, "{chosen}");
+}
