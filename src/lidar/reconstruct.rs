@@ -311,13 +311,7 @@ pub fn reconstruct<T: Real>(
 
 /// ‖Ax − y‖ in `f64`.
 fn residual_norm<T: Real>(op: &RdOperator<T>, y: &[T], x: &[T]) -> f64 {
-    let mut r = vec![T::zero(); y.len()];
-    op.apply(x, &mut r);
-    r.iter()
-        .zip(y)
-        .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
-        .sum::<f64>()
-        .sqrt()
+    crate::solver::misfit(op, y, x).sqrt()
 }
 
 /// Whether at least [`SMOOTH_FRACTION`] of the lit pixels of `depth` have a lit 4-neighbour

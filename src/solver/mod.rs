@@ -348,6 +348,20 @@ pub(crate) fn check_problem<T: Real>(
     Ok(())
 }
 
+/// ‖y − Ax‖², accumulated in `f64` (one forward application).
+pub(crate) fn misfit<T: Real, A: crate::operator::LinearOperator<T> + ?Sized>(
+    op: &A,
+    y: &[T],
+    x: &[T],
+) -> f64 {
+    let mut ax = vec![T::zero(); y.len()];
+    op.apply(x, &mut ax);
+    y.iter()
+        .zip(&ax)
+        .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
+        .sum()
+}
+
 /// ‖x − prev‖ / ‖x‖ accumulated in `f64`: 0 when the two are equal, +∞ when only `x` is zero.
 pub(crate) fn relative_change<T: Real>(x: &[T], prev: &[T]) -> f64 {
     let d: f64 = x

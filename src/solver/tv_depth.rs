@@ -11,8 +11,8 @@ use rayon::prelude::*;
 use super::amp::{reflector_amp_run, PixelPriors, Posteriors};
 use super::model_based::model_based_in;
 use super::{
-    tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping, Termination,
-    TvParams, VoxelOperator,
+    misfit, tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping,
+    Termination, TvParams, VoxelOperator,
 };
 
 /// Parameters of [`tv_depth`].
@@ -195,16 +195,6 @@ fn changed_fraction<T: Real>(a: &[T], b: &[T], ks: usize) -> f64 {
         .filter(|(p, q)| state(p) != state(q))
         .count();
     changed as f64 / pixels.max(1) as f64
-}
-
-/// ‖y − Ax‖², accumulated in `f64`.
-fn misfit<T: Real, A: VoxelOperator<T> + ?Sized>(op: &A, y: &[T], x: &[T]) -> f64 {
-    let mut ax = vec![T::zero(); y.len()];
-    op.apply(x, &mut ax);
-    y.iter()
-        .zip(&ax)
-        .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
-        .sum()
 }
 
 /// Adds the counts and histories of `more` to `report`.
