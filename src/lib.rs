@@ -27,10 +27,24 @@
 //! # }
 //! ```
 //!
+//! ## Layers
+//! [`operator`] (the generic algebra) ← [`solver`] (generic solvers and the pixelwise family) ←
+//! [`recon`] (lidar pipelines: methods, `auto`, peaks, metrics) → [`lidar`] (physics: geometry,
+//! scenes, pulse, codes, the fused operator, architectures, noise, simulation) → [`operator`].
+//! [`io`] reads and writes the interchange files; `report` (experiments, figures, cost model)
+//! sits on top. See `docs/architecture.md`.
+//!
 //! ## Features
+//! - `cli` (default): the `rdlidar` binary (clap, Ctrl-C handling); implies `report`.
+//! - `report`: experiments, tables, figures (plotters) and the cost model; implies `images` and
+//!   `progress`.
+//! - `progress`: terminal progress bars for the solvers (indicatif).
+//! - `images`: scenes from PNG depth maps ([`io::scene_from_pngs`]).
 //! - `lapack`: dense LAPACK routines through `ndarray-linalg` and the system OpenBLAS
-//!   (Debian: `libopenblas-dev`), used for least-squares references. Off by default: the default
-//!   build is pure Rust.
+//!   (Debian: `libopenblas-dev`), used for least-squares references.
+//!
+//! `cargo build --no-default-features` builds the library alone: operators, solvers, the lidar
+//! model, reconstruction and `.npy` files, with none of the command line's dependencies.
 //!
 //! ## Random numbers
 //! Every random quantity is drawn from a ChaCha8 generator (`rand_chacha`) seeded explicitly, so
@@ -39,15 +53,18 @@
 #![warn(missing_docs)]
 
 pub mod error;
-pub mod experiment;
 pub mod io;
 #[cfg(feature = "lapack")]
 pub mod lapack;
 pub mod lidar;
 pub mod linalg;
 pub mod operator;
+#[cfg(feature = "report")]
 pub mod plot;
 pub mod real;
+pub mod recon;
+#[cfg(feature = "report")]
+pub mod report;
 pub mod solver;
 
 pub use error::{Error, Result};

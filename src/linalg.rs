@@ -88,3 +88,73 @@ pub fn scale<T: Real>(alpha: T, x: &mut [T]) {
 pub fn all_finite<T: Real>(a: &[T]) -> bool {
     a.iter().all(|v| v.is_finite())
 }
+
+/// ‖a − b‖² accumulated in `f64`.
+///
+/// # Panics
+/// If the slices have different lengths.
+#[inline]
+pub fn dist2_sq<T: Real>(a: &[T], b: &[T]) -> f64 {
+    assert_eq!(
+        a.len(),
+        b.len(),
+        "dist2_sq: lengths {} and {} differ",
+        a.len(),
+        b.len()
+    );
+    let mut acc = [0.0f64; 4];
+    let mut ca = a.chunks_exact(4);
+    let mut cb = b.chunks_exact(4);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for l in 0..4 {
+            let d = x[l].as_f64() - y[l].as_f64();
+            acc[l] += d * d;
+        }
+    }
+    let mut tail = 0.0;
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        let d = x.as_f64() - y.as_f64();
+        tail += d * d;
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// The median of `v` (the mean of the two middle values for an even length; NaN for an empty
+/// slice), reordering `v` in linear time. Values compare by [`f64::total_cmp`].
+pub fn median(v: &mut [f64]) -> f64 {
+    let n = v.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let (lower, upper, _) = v.select_nth_unstable_by(n / 2, f64::total_cmp);
+    let upper = *upper;
+    if n % 2 == 1 {
+        upper
+    } else {
+        // The largest value below the upper middle one is the lower middle one.
+        let below = lower.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (below + upper)
+    }
+}
+
+/// The median of an ascending slice (the mean of the two middle values for an even length;
+/// NaN for an empty slice).
+pub fn median_sorted(v: &[f64]) -> f64 {
+    let n = v.len();
+    match n {
+        0 => f64::NAN,
+        _ if n % 2 == 1 => v[n / 2],
+        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+/// A robust standard deviation about `center`: 1.4826 · median |vᵢ − center| (the median
+/// absolute deviation scaled to σ for Gaussian data; 0 for an empty slice). Overwrites `v` with
+/// the absolute deviations.
+pub fn robust_sigma(v: &mut [f64], center: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.iter_mut().for_each(|x| *x = (*x - center).abs());
+    1.4826 * median(v)
+}

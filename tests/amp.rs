@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
-use rdlidar::lidar::{compare, paper_scene, Codes, Geometry, Pulse, RdOperator, Scene};
-use rdlidar::operator::{LinearOperator, Zero};
+use rdlidar::lidar::{paper_scene, Codes, Geometry, Pulse, RdOperator, Scene};
+use rdlidar::operator::{LinearOperator, PixelColumns, VoxelOperator, Zero};
+use rdlidar::recon::compare;
 use rdlidar::solver::{
-    model_based, reflector_amp, ModelBasedParams, PixelColumns, ReflectorAmpParams, Termination,
-    VoxelOperator,
+    model_based, reflector_amp, ModelBasedParams, ReflectorAmpParams, Termination,
 };
 use rdlidar::{Error, Real};
 

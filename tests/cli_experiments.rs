@@ -82,7 +82,7 @@ fn check_tables(dir: &Path, runs: usize) -> (Vec<String>, Vec<Vec<String>>) {
     let (header, rows) = read_csv(&dir.join("results.csv"));
     assert_eq!(
         header.join(","),
-        rdlidar::experiment::CSV_COLUMNS.join(","),
+        rdlidar::report::experiment::CSV_COLUMNS.join(","),
         "CSV header"
     );
     assert_eq!(rows.len(), runs, "CSV rows");

@@ -4,10 +4,10 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use rdlidar::experiment::{
+use rdlidar::recon::Method;
+use rdlidar::report::experiment::{
     run_compare, run_demo, Event, ExperimentConfig, ExperimentObserver, Row,
 };
-use rdlidar::lidar::Method;
 
 fn temp_dir(tag: &str) -> PathBuf {
     let p = std::env::temp_dir().join(format!("rdlidar-exp-{}-{tag}", std::process::id()));

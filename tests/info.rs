@@ -1,12 +1,13 @@
-//! The budget of a configuration (`rdlidar::lidar::Budget`) and `rdlidar info`: regime, physical
+//! The budget of a configuration (`rdlidar::lidar::Cost`) and `rdlidar info`: regime, physical
 //! scales, memory against the operator's own count, the time model, and invalid inputs.
 
 use std::sync::Arc;
 
 use rdlidar::lidar::{
-    parse_tau, Budget, CodeAlphabet, Codes, Geometry, Pulse, RdOperator, Regime, Throughput,
-    ThroughputSource, DEFAULT_TAU_S, SPEED_OF_LIGHT,
+    parse_tau, CodeAlphabet, Codes, Geometry, Pulse, RdOperator, Regime, DEFAULT_TAU_S,
+    SPEED_OF_LIGHT,
 };
+use rdlidar::report::cost::{Cost, Throughput, ThroughputSource};
 use rdlidar::Error;
 
 use crate::cli_support::{assert_one_line_error, assert_usage_error, rdlidar, stderr, stdout};
@@ -15,8 +16,8 @@ fn geometry(text: &str) -> Geometry {
     Geometry::parse(text).unwrap()
 }
 
-fn budget(size: &str, kp: usize) -> Budget {
-    Budget::new(
+fn budget(size: &str, kp: usize) -> Cost {
+    Cost::new(
         geometry(size),
         kp,
         DEFAULT_TAU_S,
@@ -116,11 +117,11 @@ fn the_regime_changes_at_the_critical_pulse_length() {
         (crit, Regime::Critical),
         (crit + 1, Regime::Redundant),
     ] {
-        let b = Budget::new(g, kp, DEFAULT_TAU_S, 1, Throughput::documented()).unwrap();
+        let b = Cost::new(g, kp, DEFAULT_TAU_S, 1, Throughput::documented()).unwrap();
         assert_eq!(b.regime, regime, "K_p = {kp}");
         assert_eq!(b.samples >= b.unknowns, kp >= crit);
     }
-    let at = Budget::new(g, crit, DEFAULT_TAU_S, 1, Throughput::documented()).unwrap();
+    let at = Cost::new(g, crit, DEFAULT_TAU_S, 1, Throughput::documented()).unwrap();
     assert_eq!(at.samples, at.unknowns);
     assert_eq!(at.measurements_per_unknown, 1.0);
 }
@@ -128,7 +129,7 @@ fn the_regime_changes_at_the_critical_pulse_length() {
 #[test]
 fn the_physical_scales_follow_tau() {
     let g = geometry("10x10x16");
-    let at = |tau: f64| Budget::new(g, 1000, tau, 1, Throughput::documented()).unwrap();
+    let at = |tau: f64| Cost::new(g, 1000, tau, 1, Throughput::documented()).unwrap();
     let (b1, b2) = (at(200e-12), at(1e-9));
     assert!(close(
         b2.physical.depth_resolution_m,
@@ -174,7 +175,7 @@ fn the_operator_memory_estimate_is_what_a_built_operator_reports() {
             assert_eq!(op64.memory_bytes(), e64, "{size} {alphabet:?} f64");
             assert!(e32 >= codes.memory_bytes());
         }
-        let b = Budget::new(g, kp, DEFAULT_TAU_S, threads, Throughput::documented()).unwrap();
+        let b = Cost::new(g, kp, DEFAULT_TAU_S, threads, Throughput::documented()).unwrap();
         assert_eq!(
             b.memory.operator_bytes.f32,
             RdOperator::<f32>::estimated_memory_bytes(g, kp, CodeAlphabet::Binary, threads).unwrap()
@@ -270,7 +271,7 @@ fn a_calibration_measures_positive_rates_on_a_capped_problem() {
             assert!(v.is_finite() && v > 0.0, "{r:?}");
         }
     }
-    let b = Budget::new(geometry("8x9x10"), 200, DEFAULT_TAU_S, 1, t).unwrap();
+    let b = Cost::new(geometry("8x9x10"), 200, DEFAULT_TAU_S, 1, t).unwrap();
     assert!(b.time.forward_s.f32 > 0.0 && b.time.forward_s.f32.is_finite());
     assert!(b
         .to_string()
@@ -289,7 +290,7 @@ fn a_calibration_measures_positive_rates_on_a_capped_problem() {
 fn invalid_inputs_are_typed_errors() {
     let g = geometry("10x10x10");
     let new = |kp: usize, tau: f64, threads: usize| {
-        Budget::new(g, kp, tau, threads, Throughput::documented())
+        Cost::new(g, kp, tau, threads, Throughput::documented())
     };
     assert_eq!(param_name(new(0, 2e-10, 1)), "pulse_len");
     assert_eq!(param_name(new(10, 2e-10, 0)), "threads");
@@ -303,13 +304,13 @@ fn invalid_inputs_are_typed_errors() {
     assert_eq!(param_name(new(usize::MAX, 2e-10, 1)), "pulse_len");
     // The codes' byte count overflows 64 bits.
     let big = geometry("100000x100000x1");
-    let r = Budget::new(big, 1 << 40, 2e-10, 1, Throughput::documented());
+    let r = Cost::new(big, 1 << 40, 2e-10, 1, Throughput::documented());
     assert_eq!(param_name(r), "pulse_len");
     // Rates that are zero, negative or NaN.
     for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         let mut t = Throughput::documented();
         t.rates.f64.adjoint_flops_per_s = bad;
-        let r = Budget::new(g, 10, 2e-10, 1, t);
+        let r = Cost::new(g, 10, 2e-10, 1, t);
         assert_eq!(param_name(r), "throughput", "rate {bad}");
     }
     // Zero and overflowing sizes never reach a budget.

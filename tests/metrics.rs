@@ -1,10 +1,8 @@
 //! Reconstruction metrics on hand-built scenes and depth maps with known answers.
 
 use ndarray::{Array2, Array3};
-use rdlidar::lidar::{
-    compare, compare_depth, depth_bin_m, relative_error, DepthMap, Metrics, Scene, NO_RETURN,
-    SPEED_OF_LIGHT,
-};
+use rdlidar::lidar::{depth_bin_m, DepthMap, Scene, NO_RETURN, SPEED_OF_LIGHT};
+use rdlidar::recon::{compare, compare_depth, relative_error, Metrics};
 use rdlidar::Error;
 
 use crate::common::random_vec;

@@ -7,13 +7,10 @@ use std::sync::Arc;
 use ndarray::Array2;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
-use rdlidar::lidar::{
-    compare, paper_scene, random_opaque_scene, Codes, Geometry, Pulse, RdOperator, Scene,
-};
-use rdlidar::operator::{DenseMatrix, LinearOperator, Zero};
-use rdlidar::solver::{
-    model_based, ModelBasedParams, PixelColumns, Stopping, Termination, VoxelOperator,
-};
+use rdlidar::lidar::{paper_scene, random_opaque_scene, Codes, Geometry, Pulse, RdOperator, Scene};
+use rdlidar::operator::{DenseMatrix, LinearOperator, PixelColumns, VoxelOperator, Zero};
+use rdlidar::recon::compare;
+use rdlidar::solver::{model_based, ModelBasedParams, Stopping, Termination};
 use rdlidar::Error;
 
 fn lidar_problem(g: Geometry, kp: usize, ternary: bool, seed: u64) -> RdOperator<f64> {
@@ -133,7 +130,7 @@ fn self_correlations_and_column_norms_match_their_definitions() {
             }
         }
         // The restriction is the operator on the chosen columns.
-        let r = op.restrict(voxels.clone()).unwrap();
+        let r = op.restrict_columns(voxels.clone()).unwrap();
         let b = [0.5, -1.0, 2.0, 0.25];
         let mut x = vec![0.0; g.voxels()];
         for (&v, &c) in voxels.iter().zip(&b) {

@@ -4,10 +4,8 @@
 use std::sync::Arc;
 
 use ndarray::{array, Array3};
-use rdlidar::lidar::{
-    compare, is_piecewise_smooth, paper_scene, reconstruct, Codes, Geometry, Method, Pulse,
-    RdOperator, ReconstructOptions, Regime, Scene, NO_RETURN,
-};
+use rdlidar::lidar::{paper_scene, Codes, Geometry, Pulse, RdOperator, Regime, Scene, NO_RETURN};
+use rdlidar::recon::{compare, is_piecewise_smooth, reconstruct, Method, ReconstructOptions};
 use rdlidar::{Error, LinearOperator, Real};
 
 fn problem<T: Real>(g: Geometry, kp: usize, seed: u64) -> RdOperator<T> {

@@ -5,9 +5,10 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use ndarray::Array2;
+use rdlidar::io::scene_from_pngs;
 use rdlidar::lidar::{
     attenuate, composite_nearest, paper_scene, paper_surfaces, random_opaque_scene,
-    scene_from_pngs, semi_transparent_scene, DepthMap, Geometry, Scene, NO_RETURN,
+    semi_transparent_scene, DepthMap, Geometry, Scene, NO_RETURN,
 };
 use rdlidar::{Error, Real};
 

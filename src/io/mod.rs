@@ -18,7 +18,10 @@
 //! # }
 //! ```
 
+pub mod meta;
 pub mod npy;
+#[cfg(feature = "images")]
+mod png;
 
 use std::fs::{File, OpenOptions};
 use std::io::{BufWriter, Write};
@@ -33,6 +36,8 @@ pub use npy::{
     stage_masked_codes, write_array, write_code_sets, write_codes, write_depth, write_masked_codes,
     write_measurements, write_pulse, write_scene, NpyDtype, NpyHeader, ShapeExpectation,
 };
+#[cfg(feature = "images")]
+pub use png::scene_from_pngs;
 
 /// An [`Error::File`] for `path`.
 pub(crate) fn file_error(path: &Path, reason: impl Into<String>) -> Error {

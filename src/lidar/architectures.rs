@@ -138,3 +138,141 @@ pub fn tiles(geom: Geometry, tile_m: usize, tile_n: usize) -> Result<Vec<Vec<usi
     }
     Ok(out)
 }
+
+/// A tile of A×B pixels (`"AxB"`): A rows and B columns, both at least 1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TileSize {
+    /// Pixel rows of a tile.
+    pub m: usize,
+    /// Pixel columns of a tile.
+    pub n: usize,
+}
+
+impl TileSize {
+    /// Parses `"AxB"` (e.g. `"10x20"`).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`tile`) unless the text is two positive integers separated
+    /// by `x`.
+    pub fn parse(text: &str) -> Result<Self> {
+        let bad = || {
+            Error::param(
+                "tile",
+                format!("expected AxB (tile rows x tile columns), got {text:?}"),
+            )
+        };
+        let dims: Vec<usize> = text
+            .trim()
+            .split(['x', 'X'])
+            .map(|p| p.trim().parse::<usize>().map_err(|_| bad()))
+            .collect::<Result<_>>()?;
+        match dims[..] {
+            [m, n] if m > 0 && n > 0 => Ok(TileSize { m, n }),
+            [m, n] => Err(Error::param(
+                "tile",
+                format!("tile dimensions must be positive, got {m}x{n}"),
+            )),
+            _ => Err(bad()),
+        }
+    }
+
+    /// The number of tiles (edge tiles clipped) of an `m`×`n` array.
+    pub fn count(&self, m: usize, n: usize) -> usize {
+        m.div_ceil(self.m) * n.div_ceil(self.n)
+    }
+}
+
+impl std::fmt::Display for TileSize {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}x{}", self.m, self.n)
+    }
+}
+
+/// How the pixels reach the ADCs (the paper's §3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Architecture {
+    /// One ADC summing every pixel (one code set).
+    Single,
+    /// G ADCs, each with its own code set for every pixel.
+    MultiAdc(usize),
+    /// One code set, one ADC per tile of pixels.
+    Tiles(TileSize),
+    /// One ADC summing a random fraction (in (0, 1]) of the pixels; the others are blocked.
+    Aperture(f64),
+}
+
+impl Architecture {
+    /// The name of `meta.json`'s `architecture.kind`: "single", "multi_adc", "tiles" or
+    /// "aperture".
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Architecture::Single => "single",
+            Architecture::MultiAdc(_) => "multi_adc",
+            Architecture::Tiles(_) => "tiles",
+            Architecture::Aperture(_) => "aperture",
+        }
+    }
+
+    /// Number of code sets: G for [`Architecture::MultiAdc`], 1 otherwise.
+    pub fn code_sets(&self) -> usize {
+        match self {
+            Architecture::MultiAdc(g) => *g,
+            _ => 1,
+        }
+    }
+
+    /// Rows of the measurements of an `m`×`n` array: `None` for the (K,) vector of one ADC,
+    /// `Some(R)` for the (R, K) array of R ADCs.
+    pub fn rows(&self, m: usize, n: usize) -> Option<usize> {
+        match self {
+            Architecture::MultiAdc(g) => Some(*g),
+            Architecture::Tiles(t) => Some(t.count(m, n)),
+            Architecture::Single | Architecture::Aperture(_) => None,
+        }
+    }
+}
+
+/// An integer in [0, n), n ≥ 1, uniformly (rejection of the incomplete last block).
+fn below(rng: &mut rand_chacha::ChaCha8Rng, n: u64) -> u64 {
+    use rand::Rng;
+    // 2^64 mod n: the values at or above 2^64 − r would favour the first r results.
+    let r = (u64::MAX % n + 1) % n;
+    loop {
+        let v = rng.next_u64();
+        if r == 0 || v <= u64::MAX - r {
+            return v % n;
+        }
+    }
+}
+
+/// The active pixels of a coded aperture: ⌈fraction·pixels⌉ distinct pixels (at least one; a
+/// product within 1e-9 of an integer counts as that integer), drawn by a partial Fisher–Yates
+/// shuffle of 0 … pixels−1 on a ChaCha8 stream seeded with `seed`, in increasing order.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`aperture`) unless `fraction` is in (0, 1] and `pixels` ≥ 1.
+pub fn aperture_pixels(pixels: usize, fraction: f64, seed: u64) -> Result<Vec<usize>> {
+    use rand::SeedableRng;
+    if !(fraction > 0.0 && fraction <= 1.0) || pixels == 0 {
+        return Err(Error::param(
+            "aperture",
+            format!("the fraction must be in (0, 1] of at least one pixel, got {fraction}"),
+        ));
+    }
+    let x = fraction * pixels as f64;
+    let count = if (x - x.round()).abs() <= 1e-9 * x.max(1.0) {
+        x.round()
+    } else {
+        x.ceil()
+    };
+    let count = (count as usize).clamp(1, pixels);
+    let mut order: Vec<usize> = (0..pixels).collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    for i in 0..count {
+        let j = i + below(&mut rng, (pixels - i) as u64) as usize;
+        order.swap(i, j);
+    }
+    order.truncate(count);
+    order.sort_unstable();
+    Ok(order)
+}

@@ -5,41 +5,37 @@
 //! samples the sum: `y[k] = Σ_{m,n} s[m,n,k]·(x[m,n,:] ⊛ p)[k]`, k < K = K_p + K_s − 1.
 
 mod architectures;
-mod budget;
 mod codes;
 mod geometry;
 mod kernels;
-mod metrics;
 mod noise;
 mod pulse;
 mod rdop;
-mod reconstruct;
+pub(crate) mod sampling;
 mod scene;
 mod scenes;
+mod simulate;
 mod support;
 
-pub use architectures::{coded_aperture, multi_adc, pixel_groups, tiles};
-pub use budget::{
-    parse_tau, Budget, MemoryBudget, OperatorRates, PerPrecision, PhysicalScales, Throughput,
-    ThroughputSource, TimeBudget, DEFAULT_TAU_S,
+pub use architectures::{
+    aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles, Architecture, TileSize,
 };
 pub use codes::{CodeAlphabet, Codes};
 pub use geometry::{Geometry, Regime};
-pub use metrics::{compare, compare_depth, depth_bin_m, relative_error, Metrics, SPEED_OF_LIGHT};
 pub use noise::{
     add_gaussian, add_gaussian_snr, add_photon_noise, mean_power, quantize, sigma_for_snr,
     unmodulated_light, FullScale, NoiseModel, NoiseReport, NoiseStage, QuantizationReport,
     StageReport,
 };
-pub use pulse::Pulse;
+pub use pulse::{zero_mean, Pulse};
 pub use rdop::{composed_operator, ForwardPath, RdOperator};
-pub use reconstruct::{
-    is_piecewise_smooth, reconstruct, Method, ReconstructOptions, Reconstruction, SMOOTH_BINS,
-    SMOOTH_FRACTION, TV_RESIDUAL_MARGIN,
-};
+pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};
 pub use scene::{DepthMap, Scene, NO_RETURN};
 pub use scenes::{
     attenuate, composite_nearest, paper_scene, paper_surfaces, random_opaque_scene,
-    scene_from_pngs, semi_transparent_scene,
+    semi_transparent_scene,
 };
+#[cfg(feature = "images")]
+pub(crate) use scenes::{bin_of_fraction, checked};
+pub use simulate::{simulate, SceneSpec, Seeds, Simulation, SimulationSpec};
 pub use support::SupportOperator;

@@ -521,6 +521,14 @@ pub struct NoiseReport {
 }
 
 impl NoiseReport {
+    /// The standard deviation of the first Gaussian stage, if there is one.
+    pub fn gaussian_sigma(&self) -> Option<f64> {
+        self.stages.iter().find_map(|s| match s {
+            StageReport::Gaussian { sigma } => Some(*sigma),
+            _ => None,
+        })
+    }
+
     /// The achieved signal-to-noise ratio 10·log₁₀(signal_power / noise_power) in dB:
     /// +∞ when nothing changed, −∞ for a zero signal with nonzero noise.
     pub fn snr_db(&self) -> f64 {

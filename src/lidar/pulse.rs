@@ -86,18 +86,30 @@ impl<T: Real> Pulse<T> {
 
     /// The mean value over the pulse's K_p samples.
     pub fn mean(&self) -> f64 {
-        self.p.iter().map(|v| v.as_f64()).sum::<f64>() / self.p.len() as f64
+        mean(&self.p)
     }
 
     /// p − mean(p) on the pulse's support: the zero-mean pulse of the debiased matched filter
     /// (DESIGN.md §4). Not a physical pulse, so returned as a plain vector.
     pub fn zero_mean(&self) -> Vec<T> {
-        let m = self.mean();
-        self.p.iter().map(|v| T::of_f64(v.as_f64() - m)).collect()
+        zero_mean(&self.p)
     }
 
     /// Unwraps the samples.
     pub fn into_inner(self) -> Vec<T> {
         self.p
     }
+}
+
+/// The mean of `p` in `f64`, as Σ pₖ/K_p so that it cannot overflow for finite samples.
+fn mean<T: Real>(p: &[T]) -> f64 {
+    let n = p.len().max(1) as f64;
+    p.iter().map(|v| v.as_f64() / n).sum()
+}
+
+/// p − mean(p): the zero-mean pulse of the debiased matched filter (DESIGN.md §4), for any
+/// pulse samples (an empty slice gives an empty vector). Finite for finite samples of one sign.
+pub fn zero_mean<T: Real>(p: &[T]) -> Vec<T> {
+    let m = mean(p);
+    p.iter().map(|v| T::of_f64(v.as_f64() - m)).collect()
 }

@@ -138,6 +138,8 @@ pub struct RdOperator<T: Real> {
     pool: Pool<T>,
     /// The pulse's plain autocorrelation at lags 0..K_s, computed on first use.
     lags: OnceLock<Vec<f64>>,
+    /// The zero-mean twin ([`RdOperator::zero_mean`]), built on first use.
+    twin: OnceLock<Box<RdOperator<T>>>,
 }
 
 impl<T: Real> std::fmt::Debug for RdOperator<T> {
@@ -214,6 +216,7 @@ impl<T: Real> RdOperator<T> {
             isa: Isa::detect(),
             pool: Pool(Mutex::new(Vec::new())),
             lags: OnceLock::new(),
+            twin: OnceLock::new(),
         })
     }
 
@@ -234,16 +237,18 @@ impl<T: Real> RdOperator<T> {
         Ok(op)
     }
 
-    /// The operator with the zero-mean pulse p − mean(p): its adjoint is the debiased
-    /// backprojection (DESIGN.md §4), whose per-pixel Gram block tends to (K_p/4)·I.
-    pub fn zero_mean(&self) -> Self {
-        let mean = self.pulse.iter().map(|v| v.as_f64()).sum::<f64>() / self.pulse.len() as f64;
-        let p = self
-            .pulse
-            .iter()
-            .map(|v| T::of_f64(v.as_f64() - mean))
-            .collect();
-        self.with_pulse(p).expect("same length, finite values")
+    /// The operator with the zero-mean pulse p − mean(p) ([`zero_mean`](super::zero_mean)),
+    /// sharing the codes: its adjoint is the debiased backprojection (DESIGN.md §4), whose
+    /// per-pixel Gram block tends to (K_p/4)·I. Built on the first call and kept.
+    pub fn zero_mean(&self) -> &RdOperator<T> {
+        self.twin.get_or_init(|| {
+            let p = super::zero_mean(&self.pulse);
+            // Same length, and finite: |p_k − mean| ≤ max |p| for a finite pulse.
+            Box::new(
+                self.with_pulse(p)
+                    .expect("the zero-mean pulse of a valid pulse is valid"),
+            )
+        })
     }
 
     /// x̃ = Ã*y with the zero-mean pulse: the debiased backprojection.

@@ -4,10 +4,7 @@
 //! Every generator returns a [`Scene`] (reflectivity cube `x[m, n, j]`); the random ones draw from a
 //! ChaCha8 generator seeded with the given seed, so equal seeds give equal scenes.
 
-use std::fs::File;
-use std::io::BufReader;
 use std::ops::RangeInclusive;
-use std::path::Path;
 
 use ndarray::{Array2, Array3};
 use rand::{RngExt, SeedableRng};
@@ -21,7 +18,7 @@ use super::scene::{DepthMap, Scene, NO_RETURN};
 
 /// Validates a geometry whose fields may have been set directly, and checks that every depth bin
 /// fits the `i32` of a [`DepthMap`].
-fn checked(g: Geometry) -> Result<Geometry> {
+pub(crate) fn checked(g: Geometry) -> Result<Geometry> {
     let g = Geometry::new(g.m, g.n, g.ks)?;
     if i32::try_from(g.ks).is_err() {
         return Err(Error::param(
@@ -37,7 +34,7 @@ fn checked(g: Geometry) -> Result<Geometry> {
 }
 
 /// The depth bin of a fraction `f` of the depth range: `round(f·(K_s − 1))`, clamped to `[0, K_s)`.
-fn bin_of_fraction(f: f64, ks: usize) -> i32 {
+pub(crate) fn bin_of_fraction(f: f64, ks: usize) -> i32 {
     let top = (ks - 1) as f64;
     (f * top).round().clamp(0.0, top) as i32
 }
@@ -263,146 +260,6 @@ pub fn semi_transparent_scene<T: Real>(
         }
     }
     Scene::new(x)
-}
-
-/// The error for an unusable PNG file, naming it.
-fn png_error(path: &Path, what: impl std::fmt::Display) -> Error {
-    Error::param("png", format!("{}: {}", path.display(), what))
-}
-
-/// A decoded single-channel image: `values[y·width + x]` in `[0, max]`.
-struct GrayImage {
-    width: usize,
-    height: usize,
-    values: Vec<u16>,
-    max: u16,
-}
-
-/// Reads a PNG as one channel: grayscale as is, grayscale+alpha and RGB(A) by their first
-/// channel (gray, resp. red), palette images through their palette's red channel; alpha is
-/// ignored. Bit depths below 8 are expanded to 8 bits (scaled to full range); 16-bit stays 16-bit.
-fn read_png(path: &Path) -> Result<GrayImage> {
-    let file = File::open(path).map_err(|e| png_error(path, format!("cannot open: {e}")))?;
-    let mut decoder = png::Decoder::new(BufReader::new(file));
-    decoder.set_transformations(png::Transformations::EXPAND);
-    let mut reader = decoder
-        .read_info()
-        .map_err(|e| png_error(path, format!("not a readable PNG: {e}")))?;
-    let len = reader
-        .output_buffer_size()
-        .ok_or_else(|| png_error(path, "image too large"))?;
-    let mut buf = vec![0u8; len];
-    let frame = reader
-        .next_frame(&mut buf)
-        .map_err(|e| png_error(path, format!("cannot decode image data: {e}")))?;
-    let channels = frame.color_type.samples();
-    let (bytes, max) = match frame.bit_depth {
-        png::BitDepth::Eight => (1, u8::MAX as u16),
-        png::BitDepth::Sixteen => (2, u16::MAX),
-        other => {
-            return Err(png_error(
-                path,
-                format!("unsupported bit depth {other:?} after expansion"),
-            ))
-        }
-    };
-    let (width, height) = (frame.width as usize, frame.height as usize);
-    let stride = frame.line_size;
-    if stride < width * channels * bytes || buf.len() < stride * height {
-        return Err(png_error(path, "decoded rows are shorter than the image"));
-    }
-    let mut values = Vec::with_capacity(width * height);
-    for y in 0..height {
-        let row = &buf[y * stride..];
-        for x in 0..width {
-            let at = x * channels * bytes;
-            values.push(if bytes == 1 {
-                row[at] as u16
-            } else {
-                u16::from_be_bytes([row[at], row[at + 1]])
-            });
-        }
-    }
-    Ok(GrayImage {
-        width,
-        height,
-        values,
-        max,
-    })
-}
-
-/// An opaque scene from a PNG depth map and an optional PNG reflectivity map.
-///
-/// Image row y, column x becomes scene pixel (m, n) = (y, x), so the scene is height × width × `ks`.
-///
-/// - Depth: a value v > 0 gives depth bin `round(v / max · (ks − 1))`, where max is the full scale
-///   of the bit depth (255 for 8-bit, 65 535 for 16-bit; 1-, 2- and 4-bit grayscale is first
-///   expanded to 8 bits). **v = 0 means no return.**
-/// - Reflectivity: amplitude `v / max` from `reflectivity_png` (same size as the depth map), or 1.0
-///   for every lit pixel if it is `None`. A lit pixel with reflectivity 0 gives an all-zero column.
-/// - Colour: grayscale is read as is; for grayscale+alpha, RGB and RGBA images the FIRST channel
-///   (gray, resp. red) is used, not the luminance; palette images use their palette's red channel;
-///   alpha is ignored.
-///
-/// # Errors
-/// [`Error::InvalidParameter`] with name `"png"` and a reason starting with the file's path if a
-/// file cannot be opened or is not a decodable PNG; [`Error::ShapeMismatch`] naming both files if
-/// the reflectivity map's width or height differs from the depth map's;
-/// [`Error::InvalidParameter`] if `ks` is zero or exceeds `i32::MAX`.
-pub fn scene_from_pngs<T: Real>(
-    depth_png: &Path,
-    reflectivity_png: Option<&Path>,
-    ks: usize,
-) -> Result<Scene<T>> {
-    let depth = read_png(depth_png)?;
-    let g = checked(Geometry {
-        m: depth.height,
-        n: depth.width,
-        ks,
-    })?;
-    let reflectivity = match reflectivity_png {
-        None => None,
-        Some(path) => {
-            let r = read_png(path)?;
-            for (what, expected, found) in [
-                ("width", depth.width, r.width),
-                ("height", depth.height, r.height),
-            ] {
-                if expected != found {
-                    return Err(Error::shape(
-                        format!(
-                            "{}: reflectivity PNG {what} vs depth PNG {}",
-                            path.display(),
-                            depth_png.display()
-                        ),
-                        expected,
-                        found,
-                    ));
-                }
-            }
-            Some(r)
-        }
-    };
-    let dmax = depth.max as f64;
-    let depth_bins = Array2::from_shape_fn((g.m, g.n), |(i, j)| match depth.values[i * g.n + j] {
-        0 => NO_RETURN,
-        v => bin_of_fraction(v as f64 / dmax, g.ks),
-    });
-    let amplitude = Array2::from_shape_fn((g.m, g.n), |(i, j)| {
-        if depth_bins[[i, j]] == NO_RETURN {
-            T::zero()
-        } else {
-            match &reflectivity {
-                None => T::one(),
-                Some(r) => T::of_f64(r.values[i * g.n + j] as f64 / r.max as f64),
-            }
-        }
-    });
-    DepthMap {
-        depth: depth_bins,
-        amplitude,
-    }
-    .to_scene(g.ks)
 }
 
 /// Inverse-square range attenuation: the voxel at depth bin j is scaled by `(near / d_j)²` with

@@ -5,8 +5,8 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::operator::LinearOperator;
+use crate::operator::VoxelOperator;
 use crate::real::Real;
-use crate::solver::VoxelOperator;
 
 use super::kernels::{lane_dot_isa, signed_copy_isa};
 use super::rdop::RdOperator;
@@ -165,10 +165,6 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
 impl<T: Real> VoxelOperator<T> for RdOperator<T> {
     fn column_len(&self) -> usize {
         self.geometry().ks
-    }
-
-    fn restrict(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
-        Ok(Box::new(SupportOperator::new(self, columns)?))
     }
 
     /// The debiased correlation: the adjoint with the zero-mean pulse (DESIGN.md §4).

@@ -41,12 +41,14 @@
 
 mod algebra;
 mod basic;
-mod check;
 mod convolve;
 mod counted;
 mod gradient;
 mod matrix;
+mod norm;
+mod pixel;
 mod stack;
+mod testing;
 
 use std::sync::Arc;
 
@@ -54,14 +56,14 @@ use ndarray::Array2;
 
 pub use algebra::{Adjoint, Compose, Normal, Scaled, Sum};
 pub use basic::{Diagonal, Identity, Restriction, Zero};
-pub use check::{
-    dot_test, operator_norm, DotTest, DotTestReport, NormEstimate, NormStop, PowerIteration,
-};
 pub use convolve::{ConvMethod, ConvMode, Convolve1D};
 pub use counted::Counted;
 pub use gradient::Gradient2D;
 pub use matrix::{DenseMatrix, NalgebraMatrix, SparseMatrix};
+pub use norm::{operator_norm, NormEstimate, NormStop, PowerIteration};
+pub use pixel::{check_pixels, PixelColumns, VoxelOperator};
 pub use stack::{BlockDiag, HStack, VStack};
+pub use testing::{catalogue, dot_test, dot_test_sweep, DotTest, DotTestReport, SweepRow};
 
 use crate::error::Result;
 use crate::real::Real;

@@ -1,6 +1,7 @@
 //! Backprojection and per-column peak thresholding: the paper's reconstruction.
 
 use crate::error::{Error, Result};
+use crate::linalg::{median, robust_sigma};
 use crate::operator::LinearOperator;
 use crate::real::Real;
 
@@ -47,12 +48,6 @@ pub struct BackprojectionResult<T> {
     pub backprojection: Vec<T>,
     /// The threshold value applied (0 for [`Threshold::None`]).
     pub threshold: f64,
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    let mid = v.len() / 2;
-    let (_, m, _) = v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-    *m
 }
 
 /// x̃ = A*y / normalization, then the largest entry of each column, kept if it passes the
@@ -132,9 +127,7 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
         Threshold::Auto { k } => {
             let mut all: Vec<f64> = bp.iter().map(|v| v.as_f64()).collect();
             let med = median(&mut all);
-            all.iter_mut().for_each(|v| *v = (*v - med).abs());
-            let mad = median(&mut all);
-            med + k * 1.4826 * mad
+            med + k * robust_sigma(&mut all, med)
         }
     };
     let mut x = vec![T::zero(); n];

@@ -13,7 +13,6 @@
 //! Reaching the iteration limit is a termination reason, not an error; invalid parameters,
 //! mismatched shapes, non-finite data and numerical breakdowns are [`Error`]s.
 
-mod amp;
 mod argmin_cgls;
 mod argmin_sparse;
 mod backprojection;
@@ -22,14 +21,13 @@ mod cosamp;
 mod fista;
 mod iht;
 mod iteration;
-mod model_based;
+mod pixelwise;
+#[cfg(feature = "progress")]
 mod progress;
 mod tv;
-mod tv_depth;
 
 use std::time::{Duration, Instant};
 
-pub use amp::{reflector_amp, ReflectorAmpParams};
 pub use argmin_cgls::{ArgminCgls, CglsState, LinearLeastSquares};
 pub use argmin_sparse::{ArgminCosamp, ArgminFista, ArgminIht, SparseState};
 pub use backprojection::{backprojection, Backprojection, BackprojectionResult, Threshold};
@@ -37,10 +35,12 @@ pub use cgls::{cgls, CglsParams};
 pub use cosamp::{cosamp, CosampParams};
 pub use fista::{fista, FistaParams, Lambda, Restart, StepRule};
 pub use iht::{iht, IhtParams, IhtStep};
-pub use model_based::{model_based, ModelBasedParams, PixelColumns, VoxelOperator};
+pub use pixelwise::{
+    model_based, reflector_amp, tv_depth, ModelBasedParams, ReflectorAmpParams, TvDepthParams,
+};
+#[cfg(feature = "progress")]
 pub use progress::ProgressObserver;
 pub use tv::{tv_denoise, TvNorm, TvParams, TvSteps};
-pub use tv_depth::{tv_depth, TvDepthParams};
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;

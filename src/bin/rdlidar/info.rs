@@ -1,18 +1,37 @@
-//! `rdlidar info`: what a configuration costs, from `rdlidar::lidar::Budget`.
+//! `rdlidar info`: what a configuration costs, from `rdlidar::report::cost::Cost`.
 
-use rdlidar::lidar::{parse_tau, Budget, Geometry, Throughput, DEFAULT_TAU_S};
+use rdlidar::lidar::{parse_tau, Geometry, DEFAULT_TAU_S};
+use rdlidar::report::cost::{Cost, Throughput};
 
 /// Timed runs of each operation of `info --calibrate`, after one warm-up run.
 const CALIBRATION_REPEATS: usize = 5;
 
-/// The options of `info`.
+/// What a configuration costs: regime, physical scales, memory and time per apply.
+///
+/// For a grid MxNxKS and a pulse of K_p samples: the regime (compressive, critical or
+/// redundant) and the critical K_p = (M·N − 1)·K_s + 1; at the sampling period τ (default
+/// 200 ps) the depth resolution τc/2, the range K_s·τc/2, the pulse duration K_p·τ, the frame
+/// time K·τ with K = K_p + K_s − 1 and the maximum frame rate 1/(K·τ); the memory of the
+/// codes (packed bits, int8, dense float), pulse, measurements, a dense scene and the fused
+/// operator; and the estimated time of one forward, adjoint and sparse forward application
+/// in f32 and f64.
+///
+/// Times are the work (2·M·N·K·K_s GEMM-equivalent flops for the forward and the adjoint,
+/// M·N·K_p voxel-samples for the sparse forward over one return per pixel) divided by a
+/// rate: by default the documented rates of the 2-core reference machine (docs/lidar.md);
+/// with --calibrate rates measured on this machine by timing the operator on the
+/// configuration capped at 64x64x64 and K_p 16384. The output says which.
+///
+/// Nothing is read or written. --json prints the same numbers as one line of JSON.
+///
+/// Example: `rdlidar info --size 100x100x40 --pulse-len 30000 --tau 200ps`
 #[derive(clap::Args, Debug)]
 pub struct InfoArgs {
     /// Scene grid MxNxKS: M×N pixels, K_s depth bins.
-    #[arg(long, value_parser = crate::parse_size)]
+    #[arg(long, value_parser = crate::common::parse_size)]
     size: Geometry,
     /// Pulse length K_p.
-    #[arg(long, value_name = "KP", value_parser = crate::parse_positive)]
+    #[arg(long, value_name = "KP", value_parser = crate::common::parse_positive)]
     pulse_len: usize,
     /// Sampling period τ with its unit: fs, ps, ns, us, ms or s (default 200ps).
     #[arg(
@@ -36,7 +55,7 @@ pub struct InfoArgs {
 }
 
 /// Runs `info`: validates τ, computes the budget and prints it.
-pub fn run(a: &InfoArgs) -> Result<(), String> {
+pub fn run(a: &InfoArgs) -> crate::common::CliResult {
     let tau_s = match (&a.tau, a.tau_ps) {
         (Some(text), _) => parse_tau(text).map_err(|e| format!("--tau: {e}"))?,
         (None, Some(ps)) => {
@@ -44,7 +63,8 @@ pub fn run(a: &InfoArgs) -> Result<(), String> {
             if !(s.is_finite() && s > 0.0) {
                 return Err(format!(
                     "--tau-ps: the sampling period must be finite and > 0, got {ps}"
-                ));
+                )
+                .into());
             }
             s
         }
@@ -57,7 +77,7 @@ pub fn run(a: &InfoArgs) -> Result<(), String> {
         Throughput::documented()
     };
     let threads = rayon::current_num_threads();
-    let budget = Budget::new(a.size, a.pulse_len, tau_s, threads, throughput).map_err(|e| {
+    let budget = Cost::new(a.size, a.pulse_len, tau_s, threads, throughput).map_err(|e| {
         let flag = match &e {
             rdlidar::Error::InvalidParameter { name: "tau", .. } if a.tau.is_some() => "--tau",
             rdlidar::Error::InvalidParameter { name: "tau", .. } => "--tau-ps",

@@ -16,13 +16,12 @@ use crate::operator::{Identity, LinearOperator, PowerIteration};
 use crate::real::Real;
 use crate::solver::{
     backprojection, cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, Backprojection,
-    CglsParams, CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams, ProgressObserver,
-    ReflectorAmpParams, Report, Restart, StepRule, Stopping, Termination, Threshold, TvDepthParams,
+    CglsParams, CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams, ReflectorAmpParams,
+    Report, Restart, StepRule, Stopping, Termination, Threshold, TvDepthParams,
 };
 
-use super::geometry::{Geometry, Regime};
-use super::rdop::RdOperator;
-use super::scene::{DepthMap, Scene, NO_RETURN};
+use crate::lidar::{DepthMap, Scene, NO_RETURN};
+use crate::lidar::{Geometry, RdOperator, Regime};
 
 /// How many robust standard deviations above the median a per-pixel peak must be to count as a
 /// return ([`Threshold::Auto`]).
@@ -342,8 +341,31 @@ pub fn is_piecewise_smooth(depth: &ndarray::Array2<i32>) -> bool {
     lit > 0 && smooth as f64 >= SMOOTH_FRACTION * lit as f64
 }
 
-fn progress_bar(max_iter: usize, options: &ReconstructOptions) -> ProgressObserver {
-    ProgressObserver::new(max_iter).quiet(!options.progress)
+#[cfg(feature = "progress")]
+fn progress_bar(max_iter: usize, options: &ReconstructOptions) -> crate::solver::ProgressObserver {
+    crate::solver::ProgressObserver::new(max_iter).quiet(!options.progress)
+}
+
+/// Without the `progress` feature nothing is drawn.
+#[cfg(not(feature = "progress"))]
+fn progress_bar(_max_iter: usize, _options: &ReconstructOptions) -> NoProgress {
+    NoProgress
+}
+
+/// The observer of a solve when progress bars are not compiled in.
+#[cfg(not(feature = "progress"))]
+struct NoProgress;
+
+#[cfg(not(feature = "progress"))]
+impl NoProgress {
+    fn finish(&self) {}
+}
+
+#[cfg(not(feature = "progress"))]
+impl<T> crate::solver::Observer<T> for NoProgress {
+    fn observe(&mut self, _: &crate::solver::IterationInfo<'_, T>) -> crate::solver::Control {
+        crate::solver::Control::Continue
+    }
 }
 
 fn stopping(default: Stopping, options: &ReconstructOptions) -> Stopping {

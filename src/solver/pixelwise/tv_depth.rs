@@ -10,9 +10,10 @@ use rayon::prelude::*;
 
 use super::amp::{reflector_amp_run, PixelPriors, Posteriors};
 use super::model_based::model_based_in;
-use super::{
+use crate::operator::VoxelOperator;
+use crate::solver::{
     misfit, tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping,
-    Termination, TvParams, VoxelOperator,
+    Termination, TvParams,
 };
 
 /// Parameters of [`tv_depth`].

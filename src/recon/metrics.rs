@@ -14,26 +14,7 @@ use ndarray::Array2;
 use crate::error::{Error, Result};
 use crate::real::Real;
 
-use super::scene::{DepthMap, Scene, NO_RETURN};
-
-/// Speed of light in vacuum, m/s.
-pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
-
-/// Length of one depth bin, τ·c/2 metres, for a sampling period of `tau_s` seconds
-/// (τ = 200 ps gives 2.998 cm).
-///
-/// # Errors
-/// [`Error::InvalidParameter`] (`tau_s`) unless τ is finite and > 0.
-pub fn depth_bin_m(tau_s: f64) -> Result<f64> {
-    if tau_s.is_finite() && tau_s > 0.0 {
-        Ok(tau_s * SPEED_OF_LIGHT / 2.0)
-    } else {
-        Err(Error::param(
-            "tau_s",
-            format!("the sampling period must be finite and > 0 seconds, got {tau_s}"),
-        ))
-    }
-}
+use crate::lidar::{depth_bin_m, DepthMap, Scene, NO_RETURN};
 
 /// How well an estimate matches the truth.
 ///

@@ -5,165 +5,13 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
-use crate::operator::{Counted, LinearOperator, OperatorExt, Restriction};
+use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 
 use super::amp::{reflector_amp_in, ReflectorAmpParams};
-use super::{cgls, check_problem, check_tolerance, CglsParams, Monitor, Observer, Report};
-use super::{Stopping, Termination};
-
-/// An operator whose columns come in pixels of `column_len` consecutive voxels, as the
-/// model-based solvers need it: restricted to a set of columns, correlated with a residual, and
-/// with known column norms.
-///
-/// Any operator can be used through [`PixelColumns`]; the lidar operator implements it with a
-/// support operator whose cost is proportional to the support and with the debiased correlation.
-pub trait VoxelOperator<T: Real>: LinearOperator<T> {
-    /// Number of consecutive columns that make one pixel (K_s).
-    fn column_len(&self) -> usize;
-
-    /// The operator restricted to `columns` (A·Rᵀ, columns in the given order).
-    ///
-    /// # Errors
-    /// [`Error::IndexOutOfBounds`] for a column not below `ncols()`.
-    fn restrict(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>>;
-
-    /// The correlation that proposes candidate depths: u = Aᵀr by default. An operator may use a
-    /// better matched filter (the lidar operator correlates with the zero-mean pulse).
-    fn correlate(&self, r: &[T], u: &mut [T]) {
-        self.apply_adjoint(r, u)
-    }
-
-    /// For each voxel c of `voxels`, the correlations ([`correlate`](Self::correlate)) of the
-    /// `column_len` columns of c's pixel with column c: the pixel's own contribution to its
-    /// correlations, which lets a solver judge a pixel's depth with its current reflector added
-    /// back. Returned row by row (`voxels.len() · column_len` values).
-    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
-        let ks = self.column_len();
-        let mut e = vec![T::zero(); self.ncols()];
-        let mut a = vec![T::zero(); self.nrows()];
-        let mut u = vec![T::zero(); self.ncols()];
-        let mut out = Vec::with_capacity(voxels.len() * ks);
-        for &c in voxels {
-            e[c] = T::one();
-            self.apply(&e, &mut a);
-            e[c] = T::zero();
-            self.correlate(&a, &mut u);
-            let p0 = c / ks * ks;
-            out.extend(u[p0..p0 + ks].iter().map(|v| v.as_f64()));
-        }
-        out
-    }
-
-    /// The Gram block AₚᵀAₚ of pixel `pixel`'s `column_len` columns, row-major, in f64 (the
-    /// plain inner products, whatever [`correlate`](Self::correlate) uses). By default from
-    /// `column_len` forward applications.
-    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
-        let ks = self.column_len();
-        let mut e = vec![T::zero(); self.ncols()];
-        let cols: Vec<Vec<T>> = (0..ks)
-            .map(|j| {
-                let mut a = vec![T::zero(); self.nrows()];
-                e[pixel * ks + j] = T::one();
-                self.apply(&e, &mut a);
-                e[pixel * ks + j] = T::zero();
-                a
-            })
-            .collect();
-        let mut g = vec![0.0; ks * ks];
-        for i in 0..ks {
-            for j in i..ks {
-                let v = dot(&cols[i], &cols[j]);
-                g[i * ks + j] = v;
-                g[j * ks + i] = v;
-            }
-        }
-        g
-    }
-
-    /// Whether every pixel has the same Gram block, so that [`pixel_gram`](Self::pixel_gram)
-    /// need only be asked for pixel 0 (default `false`).
-    fn uniform_pixel_gram(&self) -> bool {
-        false
-    }
-
-    /// ‖A e_c‖ for each of `columns`.
-    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
-        let mut e = vec![T::zero(); self.ncols()];
-        let mut a = vec![T::zero(); self.nrows()];
-        columns
-            .iter()
-            .map(|&c| {
-                e[c] = T::one();
-                self.apply(&e, &mut a);
-                e[c] = T::zero();
-                dot(&a, &a).sqrt()
-            })
-            .collect()
-    }
-}
-
-/// Any operator seen as pixels of `column_len` columns: restriction through the operator algebra
-/// and the plain adjoint as correlation.
-#[derive(Debug, Clone, Copy)]
-pub struct PixelColumns<A> {
-    op: A,
-    column_len: usize,
-}
-
-impl<A> PixelColumns<A> {
-    /// `op`, whose columns are pixels of `column_len` voxels.
-    ///
-    /// # Errors
-    /// [`Error::InvalidParameter`] if `column_len` is 0 or does not divide the number of columns.
-    pub fn new<T: Real>(op: A, column_len: usize) -> Result<Self>
-    where
-        A: LinearOperator<T>,
-    {
-        if column_len == 0 || op.ncols() % column_len != 0 {
-            return Err(Error::param(
-                "column_len",
-                format!(
-                    "must be ≥ 1 and divide the {} columns, got {column_len}",
-                    op.ncols()
-                ),
-            ));
-        }
-        Ok(PixelColumns { op, column_len })
-    }
-}
-
-impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for PixelColumns<A> {
-    fn nrows(&self) -> usize {
-        self.op.nrows()
-    }
-    fn ncols(&self) -> usize {
-        self.op.ncols()
-    }
-    fn scratch_len(&self) -> usize {
-        self.op.scratch_len()
-    }
-    fn forward_kernel(&self, x: &[T], y: &mut [T], scratch: &mut [T]) {
-        self.op.forward_kernel(x, y, scratch)
-    }
-    fn adjoint_kernel(&self, y: &[T], x: &mut [T], scratch: &mut [T]) {
-        self.op.adjoint_kernel(y, x, scratch)
-    }
-    fn describe(&self) -> String {
-        format!("PixelColumns({}, {})", self.op.describe(), self.column_len)
-    }
-}
-
-impl<T: Real, A: LinearOperator<T>> VoxelOperator<T> for PixelColumns<A> {
-    fn column_len(&self) -> usize {
-        self.column_len
-    }
-
-    fn restrict(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
-        let r = Restriction::new(self.ncols(), columns)?;
-        Ok(Box::new((&self.op).compose(r.adjoint())?))
-    }
-}
+use crate::operator::{check_pixels, VoxelOperator};
+use crate::solver::{cgls, check_problem, check_tolerance, CglsParams, Monitor, Observer, Report};
+use crate::solver::{Stopping, Termination};
 
 /// Parameters of [`model_based`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -261,13 +109,8 @@ impl ModelBasedParams {
 /// 1.4826 · median |u|: a robust standard deviation of the correlations, dominated by the empty
 /// voxels.
 fn robust_sigma<T: Real>(u: &[T]) -> f64 {
-    let mut a: Vec<f64> = u.iter().map(|v| v.as_f64().abs()).collect();
-    if a.is_empty() {
-        return 0.0;
-    }
-    let mid = a.len() / 2;
-    let (_, m, _) = a.select_nth_unstable_by(mid, |x, y| x.total_cmp(y));
-    1.4826 * *m
+    let mut a: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
+    crate::linalg::robust_sigma(&mut a, 0.0)
 }
 
 /// Counts applications of restricted operators (least-squares steps).
@@ -304,7 +147,7 @@ where
     A: VoxelOperator<T> + ?Sized,
 {
     const NAME: &str = "model-based";
-    let restricted = op.restrict(voxels.to_vec())?;
+    let restricted = op.restrict_columns(voxels.to_vec())?;
     if !voxels.is_empty() {
         let rep = cgls(&restricted, y, b, inner, &mut ()).map_err(|e| match e {
             Error::Breakdown { reason, .. } => Error::Breakdown {
@@ -332,7 +175,11 @@ where
     A: VoxelOperator<T> + ?Sized,
 {
     applies.forward += usize::from(!voxels.is_empty());
-    Ok(residual_of(op.restrict(voxels.to_vec())?.as_ref(), y, b))
+    Ok(residual_of(
+        op.restrict_columns(voxels.to_vec())?.as_ref(),
+        y,
+        b,
+    ))
 }
 
 /// Keeps the rows of `v` (rows of `width` entries) whose flag in `keep` is set.
@@ -343,39 +190,6 @@ fn retain_rows<U: Copy>(v: &mut Vec<U>, keep: &[bool], width: usize) {
         .filter(|(_, k)| **k)
         .flat_map(|(row, _)| row.iter().copied())
         .collect();
-}
-
-/// Checks that `ks` columns make a pixel of an operator with `n` columns and that the depth
-/// windows, if any, give one valid window `lo..=hi` per pixel; returns the number of pixels.
-pub(crate) fn check_pixels(
-    solver: &'static str,
-    n: usize,
-    ks: usize,
-    windows: Option<&[(usize, usize)]>,
-) -> Result<usize> {
-    if ks == 0 || n % ks != 0 {
-        return Err(Error::param(
-            "column_len",
-            format!("must be ≥ 1 and divide the {n} columns, got {ks}"),
-        ));
-    }
-    let pixels = n / ks;
-    if let Some(w) = windows {
-        if w.len() != pixels {
-            return Err(Error::shape(
-                format!("{solver}: depth windows vs pixels"),
-                pixels,
-                w.len(),
-            ));
-        }
-        if let Some(p) = w.iter().position(|&(lo, hi)| lo > hi || hi >= ks) {
-            return Err(Error::param(
-                "windows",
-                format!("pixel {p}: window {:?} is not within 0..{ks}", w[p]),
-            ));
-        }
-    }
-    Ok(pixels)
 }
 
 /// Recovers a scene with at most one nonzero per pixel (a pixel is `column_len` consecutive
@@ -396,7 +210,7 @@ pub(crate) fn check_pixels(
 ///    deviations of all correlations, which measure the cross-talk left and the noise), within a
 ///    support budget;
 /// 4. solves least squares on the new support by [`cgls`] on the restricted operator
-///    ([`VoxelOperator::restrict`]: for the lidar operator O(support × K_p) per application,
+///    ([`LinearOperator::restrict_columns`]: for the lidar operator O(support × K_p) per application,
 ///    never the full cube), warm-started, and drops pixels whose amplitude is not positive
 ///    (nonnegative scenes).
 ///
@@ -605,7 +419,7 @@ where
                 reason: format!("non-finite values at iteration {it}"),
             });
         }
-        let change = super::relative_change(x, &prev);
+        let change = crate::solver::relative_change(x, &prev);
         prev.copy_from_slice(x);
         let stop = monitor.step(it, rr.sqrt() / ynorm, 0.5 * rr, change, x);
         let term = match stop {

@@ -10,84 +10,18 @@
 //! a small problem ([`Throughput::calibrate`]); the estimate is work divided by rate.
 
 use std::sync::Arc;
-use std::time::Instant;
 
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::operator::LinearOperator;
 use crate::real::Real;
+use crate::report::timing::time_operator;
+use crate::report::units::{bytes, frames_per_second, metres, seconds, si};
 
-use super::codes::{CodeAlphabet, Codes};
-use super::geometry::{Geometry, Regime};
-use super::metrics::depth_bin_m;
-use super::pulse::Pulse;
-use super::rdop::RdOperator;
-use super::scenes::random_opaque_scene;
-
-/// The sampling period assumed when none is given: τ = 200 ps (a depth bin of 3 cm).
-pub const DEFAULT_TAU_S: f64 = 200e-12;
-
-/// Parses a sampling period with its unit — `"200ps"`, `"0.2 ns"`, `"2e-10s"` — into seconds.
-/// Units: `fs`, `ps`, `ns`, `us` or `µs`, `ms`, `s`.
-///
-/// # Errors
-/// [`Error::InvalidParameter`] (`tau`) if the text is not a number followed by one of these
-/// units, or if the period is not finite and > 0.
-///
-/// # Example
-/// ```
-/// let tau = rdlidar::lidar::parse_tau("200ps")?;
-/// assert!((tau - 200e-12).abs() < 1e-24);
-/// assert!(rdlidar::lidar::parse_tau("200").is_err()); // a unit is required
-/// # Ok::<(), rdlidar::Error>(())
-/// ```
-pub fn parse_tau(text: &str) -> Result<f64> {
-    const UNITS: [(&str, f64); 7] = [
-        ("fs", 1e-15),
-        ("ps", 1e-12),
-        ("ns", 1e-9),
-        ("us", 1e-6),
-        ("µs", 1e-6),
-        ("ms", 1e-3),
-        ("s", 1.0),
-    ];
-    let t = text.trim();
-    let bad = || {
-        Error::param(
-            "tau",
-            format!(
-                "expected a duration with a unit (fs, ps, ns, us, ms, s), e.g. 200ps, got {text:?}"
-            ),
-        )
-    };
-    let (number, scale) = UNITS
-        .iter()
-        .find_map(|&(u, scale)| t.strip_suffix(u).map(|n| (n, scale)))
-        .ok_or_else(bad)?;
-    let number = number.trim_end();
-    // Reject what `f64::from_str` accepts but a duration is not ("inf", "nan", a bare sign).
-    if !number
-        .chars()
-        .all(|c| c.is_ascii_digit() || matches!(c, '.' | 'e' | 'E' | '+' | '-'))
-    {
-        return Err(bad());
-    }
-    let v: f64 = number.parse().map_err(|_| bad())?;
-    check_tau(v * scale)
-}
-
-/// τ itself, finite and > 0.
-fn check_tau(tau_s: f64) -> Result<f64> {
-    if tau_s.is_finite() && tau_s > 0.0 {
-        Ok(tau_s)
-    } else {
-        Err(Error::param(
-            "tau",
-            format!("the sampling period must be finite and > 0 seconds, got {tau_s:e} s"),
-        ))
-    }
-}
+use crate::lidar::sampling::check_tau;
+use crate::lidar::{
+    depth_bin_m, random_opaque_scene, CodeAlphabet, Codes, Geometry, Pulse, RdOperator, Regime,
+};
 
 /// One value for each precision of the operator.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -119,7 +53,7 @@ pub struct PhysicalScales {
 
 /// Bytes of the arrays of a configuration and of its fused operator (±1 codes).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct MemoryBudget {
+pub struct MemoryCost {
     /// The codes bit-packed as the operator holds them: ⌈M·N/8⌉·K bytes (one bit per ±1
     /// entry; ternary codes take twice as much).
     pub codes_packed_bytes: u64,
@@ -284,26 +218,6 @@ impl Throughput {
     }
 }
 
-/// The median of `repeats` timed runs of `f`, after one warm-up run, in seconds (at least 1 ns).
-fn median_seconds(repeats: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..repeats)
-        .map(|_| {
-            let start = Instant::now();
-            f();
-            start.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    let mid = t.len() / 2;
-    let median = if t.len() % 2 == 1 {
-        t[mid]
-    } else {
-        0.5 * (t[mid - 1] + t[mid])
-    };
-    median.max(1e-9)
-}
-
 /// The rates of the operator on `g` with a pulse of `kp`, and its instruction set.
 fn measure<T: Real>(
     g: Geometry,
@@ -315,23 +229,10 @@ fn measure<T: Real>(
     let codes = Codes::random_binary(g.pixels(), k, 1)?;
     let op = RdOperator::new(g, pulse.into_inner(), Arc::new(codes))?;
     let scene = random_opaque_scene::<T>(g, 1.0, 3)?;
-    let x = scene.as_slice();
-    let mut y = vec![T::zero(); k];
-    op.apply(x, &mut y);
-    let y_in = y.clone();
-    let mut xt = vec![T::zero(); g.voxels()];
-    let forward = median_seconds(repeats, || {
-        op.apply_dense(std::hint::black_box(x), &mut y);
-        std::hint::black_box(&y);
-    });
-    let adjoint = median_seconds(repeats, || {
-        op.apply_adjoint(std::hint::black_box(&y_in), &mut xt);
-        std::hint::black_box(&xt);
-    });
-    let sparse = median_seconds(repeats, || {
-        op.apply_sparse(std::hint::black_box(x), &mut y);
-        std::hint::black_box(&y);
-    });
+    let t = time_operator(&op, scene.as_slice(), repeats);
+    // At least 1 ns, so that the rates stay finite.
+    let [forward, adjoint, sparse] =
+        [t.forward, t.adjoint, t.sparse_forward].map(|t| t.median_s.max(1e-9));
     let flops = 2.0 * g.pixels() as f64 * k as f64 * g.ks as f64;
     let voxel_samples = scene.nnz() as f64 * kp as f64;
     Ok((
@@ -346,7 +247,7 @@ fn measure<T: Real>(
 
 /// Estimated seconds per application of the fused operator.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct TimeBudget {
+pub struct TimeCost {
     /// Work of the dense forward and of the adjoint: 2·M·N·K·K_s GEMM-equivalent flops.
     pub flops_per_apply: f64,
     /// Work of the sparse forward over one return in every pixel: M·N·K_p voxel-samples (an
@@ -368,10 +269,11 @@ pub struct TimeBudget {
 ///
 /// # Example
 /// ```
-/// use rdlidar::lidar::{Budget, Geometry, Regime, Throughput, DEFAULT_TAU_S};
+/// use rdlidar::lidar::{Geometry, Regime, DEFAULT_TAU_S};
+/// use rdlidar::report::cost::{Cost, Throughput};
 ///
 /// let g = Geometry::parse("500x500x100")?;
-/// let b = Budget::new(g, 25_000_000, DEFAULT_TAU_S, 2, Throughput::documented())?;
+/// let b = Cost::new(g, 25_000_000, DEFAULT_TAU_S, 2, Throughput::documented())?;
 /// assert_eq!(b.regime, Regime::Redundant);           // just above (MN − 1)·K_s + 1
 /// assert!((b.physical.range_m - 2.998).abs() < 1e-3); // 100 bins of 3 cm
 /// assert!((b.physical.pulse_duration_s - 5e-3).abs() < 1e-12); // the paper's 5 ms pulse
@@ -380,7 +282,7 @@ pub struct TimeBudget {
 /// # Ok::<(), rdlidar::Error>(())
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Budget {
+pub struct Cost {
     /// The grid, `MxNxKS`.
     pub size: String,
     /// Pixel rows M.
@@ -404,12 +306,12 @@ pub struct Budget {
     /// Physical scales at τ.
     pub physical: PhysicalScales,
     /// Memory of the arrays and of the operator.
-    pub memory: MemoryBudget,
+    pub memory: MemoryCost,
     /// Estimated time per application of the operator.
-    pub time: TimeBudget,
+    pub time: TimeCost,
 }
 
-impl Budget {
+impl Cost {
     /// The budget of a grid with a pulse of `pulse_len` samples at sampling period `tau_s`
     /// seconds, the operator's memory counted for `threads` worker threads, times estimated
     /// with `throughput`.
@@ -475,7 +377,7 @@ impl Budget {
                 .map(|b| b as u64)
                 .map_err(|_| overflow("the operator's memory"))
         };
-        let memory = MemoryBudget {
+        let memory = MemoryCost {
             codes_packed_bytes: mul(pixels.div_ceil(8), k, "the packed codes")?,
             codes_int8_bytes: codes_int8,
             codes_dense_bytes: both(codes_int8, "the dense codes")?,
@@ -537,7 +439,7 @@ impl Budget {
         };
         let forward_s = per(&|q| flops / q.forward_flops_per_s);
         let adjoint_s = per(&|q| flops / q.adjoint_flops_per_s);
-        let time = TimeBudget {
+        let time = TimeCost {
             flops_per_apply: flops,
             sparse_voxel_samples: sparse_work,
             forward_s,
@@ -550,7 +452,7 @@ impl Budget {
             throughput,
         };
 
-        Ok(Budget {
+        Ok(Cost {
             size: g.to_string(),
             m: g.m,
             n: g.n,
@@ -568,128 +470,7 @@ impl Budget {
     }
 }
 
-/// `v` with an SI prefix and four significant digits: `si(0.0921, "s")` is `"92.1 ms"`.
-fn si(v: f64, unit: &str) -> String {
-    const PREFIXES: [(f64, &str); 11] = [
-        (1e18, "E"),
-        (1e15, "P"),
-        (1e12, "T"),
-        (1e9, "G"),
-        (1e6, "M"),
-        (1e3, "k"),
-        (1.0, ""),
-        (1e-3, "m"),
-        (1e-6, "µ"),
-        (1e-9, "n"),
-        (1e-12, "p"),
-    ];
-    if v == 0.0 || !v.is_finite() {
-        return format!("{v} {unit}");
-    }
-    let (scale, prefix) = PREFIXES
-        .iter()
-        .copied()
-        .find(|(s, _)| v.abs() >= *s * (1.0 - 5e-5))
-        .unwrap_or((1e-15, "f"));
-    let x = v / scale;
-    let decimals = if x.abs() >= 99.995 {
-        1
-    } else if x.abs() >= 9.9995 {
-        2
-    } else {
-        3
-    };
-    let text = format!("{x:.decimals$}");
-    // "6.000" → "6", "2.500" → "2.5": the digits that carry information.
-    let text = if text.contains('.') {
-        text.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        text
-    };
-    format!("{text} {prefix}{unit}")
-}
-
-/// A length: centimetres between 1 cm and 1 m, SI prefixes otherwise.
-fn metres(v: f64) -> String {
-    if (0.01..1.0).contains(&v) {
-        let x = v * 100.0;
-        let decimals = if x >= 9.9995 { 2 } else { 3 };
-        return format!("{x:.decimals$} cm");
-    }
-    si(v, "m")
-}
-
-/// A duration: SI prefixes below a minute, then minutes, hours and days.
-fn seconds(v: f64) -> String {
-    let (x, unit) = match v {
-        v if v < 60.0 => return si(v, "s"),
-        v if v < 3600.0 => (v / 60.0, "min"),
-        v if v < 172_800.0 => (v / 3600.0, "h"),
-        v => (v / 86_400.0, "days"),
-    };
-    let decimals = if x >= 99.95 {
-        0
-    } else if x >= 9.995 {
-        1
-    } else {
-        2
-    };
-    format!("{x:.decimals$} {unit}")
-}
-
-/// Bytes with a decimal prefix and three significant digits (`"37.5 MB"`, `"1.2 GB"`).
-fn bytes(b: u64) -> String {
-    if b < 1000 {
-        return format!("{b} B");
-    }
-    let x = b as f64;
-    let (scale, prefix) = [
-        (1e18, "E"),
-        (1e15, "P"),
-        (1e12, "T"),
-        (1e9, "G"),
-        (1e6, "M"),
-    ]
-    .into_iter()
-    .find(|(s, _)| x >= *s * 0.9995)
-    .unwrap_or((1e3, "k"));
-    let y = x / scale;
-    let decimals = if y >= 99.95 {
-        0
-    } else if y >= 9.995 {
-        1
-    } else {
-        2
-    };
-    let text = format!("{y:.decimals$}");
-    let text = if text.contains('.') {
-        text.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        text
-    };
-    format!("{text} {prefix}B")
-}
-
-/// A rate of frames per second: four significant digits below 100, whole frames up to 10⁷,
-/// scientific notation above.
-fn frames_per_second(v: f64) -> String {
-    if v >= 1e7 {
-        return format!("{v:.3e} frames/s");
-    }
-    if v >= 100.0 || !v.is_finite() || v <= 0.0 {
-        return format!("{v:.0} frames/s");
-    }
-    let decimals = (3 - v.log10().floor() as i32).max(0) as usize;
-    let text = format!("{v:.decimals$}");
-    let text = if text.contains('.') {
-        text.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        text
-    };
-    format!("{text} frames/s")
-}
-
-impl std::fmt::Display for Budget {
+impl std::fmt::Display for Cost {
     /// A table for people: the configuration and its regime, the physical scales at τ, memory
     /// and estimated times in f32 and f64, and where the rates come from.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -782,32 +563,5 @@ impl std::fmt::Display for Budget {
             r.f64.sparse_voxel_samples_per_s,
         )?;
         write!(f, "  from {}", t.throughput.source)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn si_prefixes_and_digits() {
-        assert_eq!(si(0.029_979_245_8, "m"), "29.98 mm");
-        assert_eq!(metres(0.029_979_245_8), "2.998 cm");
-        assert_eq!(metres(1.199_169_832), "1.199 m");
-        assert_eq!(metres(0.299_792_458), "29.98 cm");
-        assert_eq!(seconds(4785.0), "1.33 h");
-        assert_eq!(seconds(90.0), "1.50 min");
-        assert_eq!(seconds(5e-3), "5 ms");
-        assert_eq!(frames_per_second(166_450.28), "166450 frames/s");
-        assert_eq!(frames_per_second(39.99), "39.99 frames/s");
-        assert_eq!(frames_per_second(1e15), "1.000e15 frames/s");
-        assert_eq!(si(6e-6, "s"), "6 µs");
-        assert_eq!(si(1.199_169_832, "m"), "1.199 m");
-        assert_eq!(si(200e-12, "s"), "200 ps");
-        assert_eq!(si(0.0921, "s"), "92.1 ms");
-        assert_eq!(bytes(37_548_750), "37.5 MB");
-        assert_eq!(bytes(1_201_560_000), "1.2 GB");
-        assert_eq!(bytes(120_000), "120 kB");
-        assert_eq!(bytes(999), "999 B");
     }
 }

@@ -5,7 +5,7 @@
 //! over it). It simulates one problem per pulse length, seed and noise level — the scene, a
 //! Bernoulli pulse from SEED, binary codes from SEED+1, Gaussian noise from SEED+2 (a random
 //! scene from SEED+3), exactly as `rdlidar simulate --seed SEED` does — and reconstructs each
-//! problem with every solver through [`crate::lidar::reconstruct`], with the iteration budgets of
+//! problem with every solver through [`crate::recon::reconstruct`], with the iteration budgets of
 //! the configuration. Every run gives one [`Row`]: the solver, K_p and its regime, the lit
 //! pixels recovered at the exact depth, false detections, the depth RMSE, ‖X − X̂‖/‖X‖, the
 //! wall time, iterations and why the solver stopped.
@@ -18,8 +18,8 @@
 //!
 //! ```
 //! use std::sync::atomic::AtomicBool;
-//! use rdlidar::experiment::{run_demo, ExperimentConfig};
-//! use rdlidar::lidar::Method;
+//! use rdlidar::report::experiment::{run_demo, ExperimentConfig};
+//! use rdlidar::recon::Method;
 //!
 //! # fn main() -> rdlidar::Result<()> {
 //! let dir = std::env::temp_dir().join(format!("rdlidar-doc-demo-{}", std::process::id()));
@@ -44,7 +44,6 @@ mod table;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use ndarray::Array2;
@@ -52,8 +51,8 @@ use serde::Serialize;
 
 pub use config::{
     noise_text, parse_noise_level, parse_noise_levels, parse_pulse_lens, parse_solvers, run_seed,
-    Budgets, ConfigFile, ExperimentConfig, ExperimentPatch, NoiseLevel, Precision, SceneKind,
-    DEFAULT_SOLVERS, MAX_CODE_BYTES, MAX_SIDE, MAX_VOXELS,
+    ConfigFile, ExperimentConfig, ExperimentPatch, IterationBudgets, NoiseLevel, Precision,
+    SceneKind, DEFAULT_SOLVERS, MAX_CODE_BYTES, MAX_SIDE, MAX_VOXELS,
 };
 pub use console::Console;
 pub use figures::{depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR};
@@ -64,13 +63,10 @@ pub use table::{
 
 use crate::error::{Error, Result};
 use crate::lidar::{
-    compare, paper_scene, random_opaque_scene, reconstruct, Codes, Geometry, Method, NoiseModel,
-    NoiseStage, Pulse, RdOperator, ReconstructOptions, Scene,
+    simulate, Geometry, RdOperator, Scene, SceneSpec, SimulationSpec, DEFAULT_TAU_S,
 };
 use crate::real::Real;
-
-/// Sampling period the depth figures assume: τ = 200 ps, a depth bin of 3 cm.
-pub const TAU_S: f64 = 200e-12;
+use crate::recon::{compare, reconstruct, Method, ReconstructOptions};
 
 /// One simulated problem of a sweep: a pulse length, a seed and a noise level.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -266,30 +262,24 @@ struct Problem<T: Real> {
     y: Vec<T>,
 }
 
-fn scene_of<T: Real>(config: &ExperimentConfig, seed: u64) -> Result<Scene<T>> {
-    match config.scene {
-        SceneKind::Paper => paper_scene(config.size),
-        SceneKind::Random => {
-            random_opaque_scene(config.size, config.lit_fraction, seed.wrapping_add(3))
-        }
-    }
-}
-
-/// Simulates `case` exactly as `rdlidar simulate` does with the same seed.
-fn simulate<T: Real>(truth: Scene<T>, case: &Case) -> Result<Problem<T>> {
-    let g = truth.geometry();
-    let k = g.samples(case.pulse_len);
-    let pulse = Pulse::<T>::bernoulli(case.pulse_len, case.seed)?;
-    let codes = Codes::random_binary(g.pixels(), k, case.seed.wrapping_add(1))?;
-    let op = RdOperator::new(g, pulse.into_inner(), Arc::new(codes))?;
-    let mut y = vec![T::zero(); k];
-    crate::LinearOperator::apply(&op, truth.as_slice(), &mut y);
-    if let Some(snr_db) = case.snr_db {
-        NoiseModel::none()
-            .then(NoiseStage::Gaussian { snr_db })
-            .apply(&mut y, case.seed.wrapping_add(2))?;
-    }
-    Ok(Problem { truth, op, y })
+/// Simulates `case` through [`simulate`], exactly as `rdlidar simulate` does with the same seed.
+fn simulate_case<T: Real>(config: &ExperimentConfig, case: &Case) -> Result<Problem<T>> {
+    let spec = SimulationSpec {
+        scene: match config.scene {
+            SceneKind::Paper => SceneSpec::Paper,
+            SceneKind::Random => SceneSpec::Random {
+                lit_fraction: config.lit_fraction,
+            },
+        },
+        snr_db: case.snr_db,
+        ..SimulationSpec::new(config.size, case.pulse_len, case.seed)
+    };
+    let sim = simulate::<T>(&spec)?;
+    Ok(Problem {
+        op: sim.single_operator()?,
+        truth: sim.scene,
+        y: sim.meas,
+    })
 }
 
 /// Runs one method on one problem; a solver's error becomes the row's `error`.
@@ -340,7 +330,7 @@ fn run_one<T: Real>(
     };
     let start = Instant::now();
     let result = reconstruct(&problem.op, &problem.y, method, &options)
-        .and_then(|r| compare(&problem.truth, &r.scene, TAU_S).map(|m| (r, m)));
+        .and_then(|r| compare(&problem.truth, &r.scene, DEFAULT_TAU_S).map(|m| (r, m)));
     row.time_s = start.elapsed().as_secs_f64();
     match result {
         Ok((r, m)) => {
@@ -426,7 +416,6 @@ fn sweep_in<T: Real>(
         planned: runs,
         elapsed: Duration::ZERO,
     };
-    let mut paper: Option<Scene<T>> = None;
     'cases: for case in &cases {
         if stop.load(Ordering::SeqCst) {
             sweep.interrupted = true;
@@ -436,17 +425,7 @@ fn sweep_in<T: Real>(
             case,
             geometry: config.size,
         });
-        let truth = match (config.scene, &paper) {
-            (SceneKind::Paper, Some(s)) => s.clone(),
-            _ => {
-                let s = scene_of::<T>(config, case.seed)?;
-                if config.scene == SceneKind::Paper {
-                    paper = Some(s.clone());
-                }
-                s
-            }
-        };
-        let problem = simulate(truth, case)?;
+        let problem = simulate_case::<T>(config, case)?;
         let mut depths = CaseDepths {
             case: *case,
             truth: problem.truth.depth_map().depth,
@@ -635,7 +614,7 @@ pub const DEMO_COLUMNS: [Column; 11] = [
     Column::RelativeError,
     Column::Time,
     Column::Iterations,
-    Column::Budget,
+    Column::Cost,
     Column::Termination,
 ];
 
@@ -652,7 +631,7 @@ pub const COMPARE_COLUMNS: [Column; 13] = [
     Column::RelativeError,
     Column::Time,
     Column::Iterations,
-    Column::Budget,
+    Column::Cost,
     Column::Termination,
 ];
 

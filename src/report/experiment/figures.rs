@@ -2,7 +2,7 @@
 //! and the phase-transition plot.
 
 use crate::error::Result;
-use crate::lidar::depth_bin_m;
+use crate::lidar::{depth_bin_m, DEFAULT_TAU_S};
 use crate::plot::{
     depth_panels, line_plot, scatter_plot, Chart, ChartFigure, DepthFigure, DepthOptions,
     LegendPosition, Marker, Rgb, Series, SeriesStyle,
@@ -10,7 +10,7 @@ use crate::plot::{
 
 use super::config::{noise_text, ExperimentConfig, NoiseLevel};
 use super::table::medians;
-use super::{CaseDepths, Row, TAU_S};
+use super::{CaseDepths, Row};
 
 /// Errors and times are drawn on logarithmic axes: values below this floor (an exact
 /// reconstruction's error of 0) are drawn at it.
@@ -63,7 +63,7 @@ pub fn depth_figure(
         c.seed
     );
     let ks = i32::try_from(g.ks).unwrap_or(i32::MAX);
-    let options = DepthOptions::new(depth_bin_m(TAU_S)?, "m")
+    let options = DepthOptions::new(depth_bin_m(DEFAULT_TAU_S)?, "m")
         .title(title)
         .range(0, (ks - 1).max(0));
     depth_panels(&panels, &options)

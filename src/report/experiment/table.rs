@@ -123,7 +123,7 @@ pub enum Column {
     Iterations,
     /// The iteration budget (`default` for the solver's own limit, `-` for the
     /// backprojections).
-    Budget,
+    Cost,
     /// Why the solver stopped.
     Termination,
 }
@@ -142,7 +142,7 @@ impl Column {
             Column::RelativeError => "rel. error",
             Column::Time => "time (s)",
             Column::Iterations => "iterations",
-            Column::Budget => "budget",
+            Column::Cost => "budget",
             Column::Termination => "termination",
         }
     }
@@ -160,7 +160,7 @@ impl Column {
             Column::RelativeError => 10,
             Column::Time => 8,
             Column::Iterations => 10,
-            Column::Budget => 7,
+            Column::Cost => 7,
             Column::Termination => 14,
         };
         w.max(self.title().chars().count())
@@ -206,7 +206,7 @@ impl Column {
             }),
             Column::Time => format!("{:.2}", r.time_s),
             Column::Iterations => r.iterations.map_or_else(dash, |v| v.to_string()),
-            Column::Budget => match (r.max_iter, r.solver.starts_with("backprojection")) {
+            Column::Cost => match (r.max_iter, r.solver.starts_with("backprojection")) {
                 (Some(b), _) => b.to_string(),
                 (None, true) => dash(),
                 (None, false) => "default".into(),
@@ -285,13 +285,7 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     if v.is_empty() {
         return None;
     }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
+    Some(crate::linalg::median(&mut v))
 }
 
 /// Per solver and pulse length, the median over seeds of a row value, for one noise level.

@@ -7,7 +7,8 @@ use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::error::{Error, Result};
-use crate::lidar::{Geometry, Method};
+use crate::lidar::Geometry;
+use crate::recon::Method;
 
 /// Largest number of voxels M·N·K_s of an experiment's scene (2²⁶: 256 MB per f32 cube; a sweep
 /// holds a few cubes per solver).
@@ -87,11 +88,11 @@ impl std::str::FromStr for SceneKind {
 }
 
 /// Iteration limits per method, overriding the method's default limit
-/// ([`crate::lidar::ReconstructOptions::max_iter`]). Methods without an entry keep their default.
+/// ([`crate::recon::ReconstructOptions::max_iter`]). Methods without an entry keep their default.
 ///
 /// In a TOML file, a table from method names to limits: `max_iter = { fista = 20, cgls = 20 }`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Budgets([Option<usize>; Method::ALL.len()]);
+pub struct IterationBudgets([Option<usize>; Method::ALL.len()]);
 
 fn method_index(method: Method) -> usize {
     Method::ALL
@@ -100,10 +101,10 @@ fn method_index(method: Method) -> usize {
         .unwrap_or_default()
 }
 
-impl Budgets {
+impl IterationBudgets {
     /// No override: every method keeps its default limit.
     pub fn none() -> Self {
-        Budgets::default()
+        IterationBudgets::default()
     }
 
     /// The limit of `method`, if overridden.
@@ -129,7 +130,7 @@ impl Budgets {
     /// With `method` limited to `limit` iterations.
     ///
     /// # Errors
-    /// As [`Budgets::set`].
+    /// As [`IterationBudgets::set`].
     pub fn with(mut self, method: Method, limit: usize) -> Result<Self> {
         self.set(method, Some(limit))?;
         Ok(self)
@@ -144,7 +145,7 @@ impl Budgets {
     }
 
     /// The limits of `other` replace those of `self` where `other` has one.
-    pub fn merged(mut self, other: &Budgets) -> Self {
+    pub fn merged(mut self, other: &IterationBudgets) -> Self {
         for (m, l) in other.iter() {
             self.0[method_index(m)] = Some(l);
         }
@@ -157,7 +158,7 @@ impl Budgets {
     /// [`Error::InvalidParameter`] (`max_iter`) for an unknown method, a missing `=`, or a limit
     /// that is not a positive integer.
     pub fn parse(text: &str) -> Result<Self> {
-        let mut b = Budgets::none();
+        let mut b = IterationBudgets::none();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             let Some((name, n)) = item.split_once('=') else {
                 return Err(Error::param(
@@ -178,7 +179,7 @@ impl Budgets {
     }
 }
 
-impl std::fmt::Display for Budgets {
+impl std::fmt::Display for IterationBudgets {
     /// `name=N,…`, or `defaults` when nothing is overridden.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let items: Vec<String> = self.iter().map(|(m, l)| format!("{m}={l}")).collect();
@@ -190,16 +191,16 @@ impl std::fmt::Display for Budgets {
     }
 }
 
-impl Serialize for Budgets {
+impl Serialize for IterationBudgets {
     fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
         s.collect_map(self.iter().map(|(m, l)| (m.name(), l)))
     }
 }
 
-impl<'de> Deserialize<'de> for Budgets {
+impl<'de> Deserialize<'de> for IterationBudgets {
     fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
         let map = std::collections::BTreeMap::<String, usize>::deserialize(d)?;
-        let mut b = Budgets::none();
+        let mut b = IterationBudgets::none();
         for (name, limit) in map {
             let method = parse_method(&name, "max_iter").map_err(D::Error::custom)?;
             b.set(method, Some(limit)).map_err(D::Error::custom)?;
@@ -371,9 +372,9 @@ pub struct ExperimentConfig {
     /// Precision of the computations.
     pub precision: Precision,
     /// Iteration budgets.
-    pub max_iter: Budgets,
+    pub max_iter: IterationBudgets,
     /// Power iterations behind FISTA's step
-    /// ([`crate::lidar::ReconstructOptions::power_iterations`]; `None`: its default of up to
+    /// ([`crate::recon::ReconstructOptions::power_iterations`]; `None`: its default of up to
     /// 200).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub power_iterations: Option<usize>,
@@ -434,8 +435,8 @@ impl ExperimentConfig {
     /// rounds of message passing have their own limits). The
     /// backprojections have no iterations. With [`ExperimentConfig::demo`]'s 30 power
     /// iterations for FISTA's step.
-    pub fn demo_budgets() -> Budgets {
-        let mut b = Budgets::none();
+    pub fn demo_budgets() -> IterationBudgets {
+        let mut b = IterationBudgets::none();
         for (m, l) in [
             (Method::Cgls, 15),
             (Method::Fista, 15),
@@ -481,7 +482,7 @@ impl ExperimentConfig {
             seeds: 3,
             seed: 0,
             precision: Precision::F64,
-            max_iter: Budgets::none(),
+            max_iter: IterationBudgets::none(),
             power_iterations: None,
         }
     }
@@ -689,7 +690,7 @@ impl ExperimentConfig {
             #[serde(serialize_with = "noise_levels")]
             snr_db: &'a [NoiseLevel],
             seeds: usize,
-            max_iter: &'a Budgets,
+            max_iter: &'a IterationBudgets,
             #[serde(skip_serializing_if = "Option::is_none")]
             power_iterations: Option<usize>,
         }
@@ -753,7 +754,7 @@ pub struct ExperimentPatch {
     /// Number of seeds.
     pub seeds: Option<usize>,
     /// Iteration budgets, per method name.
-    pub max_iter: Option<Budgets>,
+    pub max_iter: Option<IterationBudgets>,
     /// Power iterations behind FISTA's step.
     pub power_iterations: Option<usize>,
 }
@@ -972,10 +973,10 @@ mod tests {
         );
         assert!(parse_noise_levels("loud").is_err());
         assert!(parse_pulse_lens("10,0").is_err());
-        let b = Budgets::parse("fista=3,model-based=2").unwrap();
+        let b = IterationBudgets::parse("fista=3,model-based=2").unwrap();
         assert_eq!(b.to_string(), "fista=3,model-based=2");
-        assert!(Budgets::parse("fista=0").is_err());
-        assert!(Budgets::parse("fista").is_err());
+        assert!(IterationBudgets::parse("fista=0").is_err());
+        assert!(IterationBudgets::parse("fista").is_err());
     }
 
     #[test]

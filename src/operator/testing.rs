@@ -1,4 +1,5 @@
-//! The dot test and the operator-norm estimate.
+//! Checking operators: the dot test, and a public catalogue of one instance of every operator
+//! and combinator with the sweep of dot tests over it that `rdlidar selfcheck` prints.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -160,121 +161,142 @@ pub fn dot_test<T: Real, A: LinearOperator<T> + ?Sized>(
     DotTest::new().seed(seed).run(op)
 }
 
-/// Settings of [`operator_norm`].
-#[derive(Debug, Clone, Copy)]
-pub struct PowerIteration {
-    /// Maximum number of iterations (each one forward and one adjoint application).
-    pub max_iter: usize,
-    /// Stop when the estimate changes by at most `tol` relative to itself.
-    pub tol: f64,
-    /// Seed of the random start vector.
-    pub seed: u64,
+/// One row of [`dot_test_sweep`]: an operator of the [`catalogue`] and its dot tests in both
+/// precisions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepRow {
+    /// The operator's name in the catalogue.
+    pub name: &'static str,
+    /// The dot test in `f32`.
+    pub f32: DotTestReport,
+    /// The dot test in `f64`.
+    pub f64: DotTestReport,
 }
 
-impl Default for PowerIteration {
-    fn default() -> Self {
-        PowerIteration {
-            max_iter: 200,
-            tol: 1e-6,
-            seed: 0,
-        }
+impl SweepRow {
+    /// Whether both dot tests passed.
+    pub fn passed(&self) -> bool {
+        self.f32.passed() && self.f64.passed()
     }
 }
 
-/// Why [`operator_norm`] stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum NormStop {
-    /// The relative change of the estimate fell below the tolerance.
-    Converged,
-    /// The iteration limit was reached first.
-    MaxIterations,
-    /// A·v = 0 for the start vector or an iterate: the estimate is 0.
-    ZeroOperator,
-}
-
-/// The result of [`operator_norm`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NormEstimate {
-    /// The estimate of ‖A‖₂ (largest singular value), a lower bound up to rounding.
-    pub value: f64,
-    /// Iterations performed.
-    pub iterations: usize,
-    /// Why it stopped.
-    pub stop: NormStop,
-}
-
-/// Estimates ‖A‖₂ by power iteration on A*A.
-///
-/// Each iteration maps the unit vector v to A*A·v and reports σ = ‖A·v‖ (the square root of the
-/// Rayleigh quotient of A*A), which never exceeds ‖A‖₂ and converges to it at the rate
-/// (σ₂/σ₁)^{2k} when the top singular value is simple.
+/// One instance of every operator and combinator of this module, named, with entries drawn from
+/// `seed`: the basic operators, the three convolution modes by both methods, the three matrix
+/// types, and every combinator over a dense matrix.
 ///
 /// # Errors
-/// [`Error::InvalidParameter`] if `max_iter` is zero or `tol` is not a positive finite number;
-/// [`Error::NonFinite`] if the operator produced NaN or infinite values.
-pub fn operator_norm<T: Real, A: LinearOperator<T> + ?Sized>(
-    op: &A,
-    params: &PowerIteration,
-) -> Result<NormEstimate> {
-    if params.max_iter == 0 {
-        return Err(Error::param("max_iter", "must be at least 1"));
-    }
-    if !(params.tol.is_finite() && params.tol > 0.0) {
-        return Err(Error::param(
-            "tol",
-            format!("must be a positive finite number, got {}", params.tol),
-        ));
-    }
-    let (m, n) = (op.nrows(), op.ncols());
-    let zero = NormEstimate {
-        value: 0.0,
-        iterations: 0,
-        stop: NormStop::ZeroOperator,
+/// None in practice: the sizes are fixed and valid; an error here is a bug of a constructor.
+pub fn catalogue<T: Real>(seed: u64) -> Result<Vec<(&'static str, super::BoxedOperator<T>)>> {
+    use super::{
+        BlockDiag, ConvMethod, ConvMode, Convolve1D, DenseMatrix, Diagonal, Gradient2D, HStack,
+        Identity, NalgebraMatrix, OperatorExt, Restriction, SparseMatrix, VStack, Zero,
     };
-    if m == 0 || n == 0 {
-        return Ok(zero);
+    let mut rng = check_rng(seed, DOT_STREAM);
+    let mut values = |len: usize| gaussian_vector::<T>(len, &mut rng);
+    let (m, n) = (23, 17);
+    let entries = values(m * n);
+    let dense = || -> Result<DenseMatrix<T>> {
+        let a = ndarray::Array2::from_shape_vec((m, n), entries.clone())
+            .map_err(|e| Error::param("catalogue", e.to_string()))?;
+        DenseMatrix::new(a)
+    };
+    let mut sp = sprs::TriMat::new((m, n));
+    for (k, v) in values(m * n)
+        .into_iter()
+        .enumerate()
+        .filter(|(k, _)| k % 4 == 0)
+    {
+        sp.add_triplet(k / n, k % n, v);
     }
-    let mut rng = check_rng(params.seed, NORM_STREAM);
-    let mut v: Vec<T> = gaussian_vector(n, &mut rng);
-    let nv = norm2(&v);
-    v.iter_mut().for_each(|e| *e = T::of_f64(e.as_f64() / nv));
-    let mut av = vec![T::zero(); m];
-    let mut scratch = vec![T::zero(); op.scratch_len()];
-    let mut prev = 0.0f64;
-    for it in 1..=params.max_iter {
-        op.apply_with_scratch(&v, &mut av, &mut scratch);
-        let sigma = norm2(&av);
-        if !sigma.is_finite() {
-            return Err(Error::NonFinite {
-                what: format!("operator output during power iteration {it}"),
-            });
-        }
-        if sigma == 0.0 {
-            return Ok(NormEstimate {
-                iterations: it,
-                ..zero
-            });
-        }
-        op.apply_adjoint_with_scratch(&av, &mut v, &mut scratch);
-        let nu = norm2(&v);
-        if !nu.is_finite() || nu == 0.0 {
-            return Err(Error::NonFinite {
-                what: format!("adjoint output during power iteration {it}"),
-            });
-        }
-        v.iter_mut().for_each(|e| *e = T::of_f64(e.as_f64() / nu));
-        if it > 1 && (sigma - prev).abs() <= params.tol * sigma {
-            return Ok(NormEstimate {
-                value: sigma,
-                iterations: it,
-                stop: NormStop::Converged,
-            });
-        }
-        prev = sigma;
-    }
-    Ok(NormEstimate {
-        value: prev,
-        iterations: params.max_iter,
-        stop: NormStop::MaxIterations,
-    })
+    let pulse: Vec<T> = values(300)
+        .into_iter()
+        .map(|v| if v > T::zero() { T::one() } else { T::zero() })
+        .collect();
+    let taps = values(9);
+    let conv = |len: usize, taps: &[T], mode: ConvMode, method: ConvMethod| {
+        Convolve1D::new(7, len, taps.to_vec(), mode, method)
+    };
+    let (direct, fft) = (ConvMethod::Direct, ConvMethod::Fft);
+    Ok(vec![
+        ("Identity", Identity::<T>::new(n).boxed()),
+        ("Zero", Zero::<T>::new(m, n).boxed()),
+        ("Diagonal", Diagonal::new(values(n))?.boxed()),
+        (
+            "Restriction (repeated indices)",
+            Restriction::<T>::new(n, vec![3, 1, 3, 16, 0, 3])?.boxed(),
+        ),
+        ("Gradient2D 12x9", Gradient2D::<T>::new(12, 9)?.boxed()),
+        (
+            "Convolve1D direct, full",
+            conv(40, &taps, ConvMode::Full, direct)?.boxed(),
+        ),
+        (
+            "Convolve1D direct, same",
+            conv(40, &taps, ConvMode::Same, direct)?.boxed(),
+        ),
+        (
+            "Convolve1D direct, valid",
+            conv(40, &taps, ConvMode::Valid, direct)?.boxed(),
+        ),
+        (
+            "Convolve1D FFT, full (0/1 pulse 300)",
+            conv(40, &pulse, ConvMode::Full, fft)?.boxed(),
+        ),
+        (
+            "Convolve1D FFT, same",
+            conv(400, &pulse, ConvMode::Same, fft)?.boxed(),
+        ),
+        (
+            "Convolve1D FFT, valid",
+            conv(400, &pulse, ConvMode::Valid, fft)?.boxed(),
+        ),
+        ("DenseMatrix", dense()?.boxed()),
+        (
+            "NalgebraMatrix",
+            NalgebraMatrix::new(nalgebra::DMatrix::from_vec(m, n, values(m * n)))?.boxed(),
+        ),
+        ("SparseMatrix", SparseMatrix::new(sp.to_csr())?.boxed()),
+        (
+            "Compose",
+            dense()?.compose(Diagonal::new(values(n))?)?.boxed(),
+        ),
+        ("Adjoint", dense()?.adjoint().boxed()),
+        ("Scaled", dense()?.scaled(T::of_f64(-2.5))?.boxed()),
+        ("Sum", dense()?.plus(Zero::new(m, n))?.boxed()),
+        ("Difference", dense()?.minus(dense()?)?.boxed()),
+        ("Normal", dense()?.normal().boxed()),
+        (
+            "VStack",
+            VStack::new(vec![dense()?.boxed(), Identity::new(n).boxed()])?.boxed(),
+        ),
+        (
+            "HStack",
+            HStack::new(vec![dense()?.boxed(), Identity::new(m).boxed()])?.boxed(),
+        ),
+        (
+            "BlockDiag",
+            BlockDiag::new(vec![dense()?.boxed(), Gradient2D::new(3, 4)?.boxed()])?.boxed(),
+        ),
+        ("Counted", dense()?.counted().boxed()),
+    ])
+}
+
+/// The dot test of every operator of the [`catalogue`], in `f32` and `f64`, with test vectors
+/// and operator entries drawn from `seed`.
+///
+/// # Errors
+/// Those of [`catalogue`].
+pub fn dot_test_sweep(seed: u64) -> Result<Vec<SweepRow>> {
+    let ops32 = catalogue::<f32>(seed)?;
+    let ops64 = catalogue::<f64>(seed)?;
+    let test = DotTest::new().seed(seed);
+    Ok(ops32
+        .iter()
+        .zip(&ops64)
+        .map(|((name, a32), (_, a64))| SweepRow {
+            name,
+            f32: test.measure(a32),
+            f64: test.measure(a64),
+        })
+        .collect())
 }

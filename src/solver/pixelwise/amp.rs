@@ -16,8 +16,8 @@ use crate::linalg::dot;
 use crate::operator::Counted;
 use crate::real::Real;
 
-use super::model_based::{check_pixels, VoxelOperator};
-use super::{check_problem, Monitor, Observer, Report, Stopping, Termination};
+use crate::operator::{check_pixels, VoxelOperator};
+use crate::solver::{check_problem, Monitor, Observer, Report, Stopping, Termination};
 
 /// Parameters of [`reflector_amp`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -543,7 +543,7 @@ where
                 .zip(&prev)
                 .all(|(a, b)| (*a == T::zero()) == (*b == T::zero()));
         stable = if same_support { stable + 1 } else { 0 };
-        let change = super::relative_change(x, &prev);
+        let change = crate::solver::relative_change(x, &prev);
         prev.copy_from_slice(x);
         let stop = monitor.step(it, res, 0.5 * rr, change, x);
         let term = match stop {

@@ -1,0 +1,92 @@
+//! `rdlidar adjoint`: x̃ = A* y from files, plain or debiased.
+
+use std::path::PathBuf;
+
+use ndarray_npy::WritableElement;
+use rdlidar::io;
+use rdlidar::lidar::{zero_mean, Scene, TileSize};
+use rdlidar::Real;
+
+use crate::common::{
+    check_out_file, npy_dtype, parse_positive, parse_tile, with_precision, CliResult, Globals,
+};
+use crate::layout::{architecture_of, expectation, read_measurements, Layout};
+
+/// Apply the adjoint (backprojection): x̃ = A* y.
+///
+/// Reads the pulse (K_p,), the codes (M, N, K) and the measurements (K,), with
+/// K = K_p + K_s − 1, and writes x̃ (M, N, K_s) to OUT. With --debiased the zero-mean pulse
+/// p − mean(p) is used, which removes the constant floor plain backprojection adds to every
+/// depth bin of a pixel with a 0/1 pulse.
+///
+/// Codes of shape (G, M, N, K) (`simulate --adcs G`) need measurements (G, K); with
+/// --tiles AxB the measurements are (T, K), one row per tile.
+///
+/// Example: `rdlidar adjoint --pulse run0/pulse.npy --codes run0/codes.npy --meas run0/meas.npy --depth-bins 40 --out xt.npy --debiased`
+#[derive(clap::Args, Debug)]
+pub struct AdjointArgs {
+    /// Pulse file (K_p,), float32 or float64, ≥ 0.
+    #[arg(long, value_name = "P")]
+    pub pulse: PathBuf,
+    /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
+    #[arg(long, value_name = "S")]
+    pub codes: PathBuf,
+    /// Measurements file (K,), or (ADCs, K) for several ADCs; float32 or float64.
+    #[arg(long, value_name = "Y")]
+    pub meas: PathBuf,
+    /// Depth bins K_s of the scene.
+    #[arg(long, value_name = "KS", value_parser = parse_positive)]
+    pub depth_bins: usize,
+    /// Output file (M, N, K_s).
+    #[arg(long, value_name = "XT")]
+    pub out: PathBuf,
+    /// Correlate with the zero-mean pulse (debiased backprojection).
+    #[arg(long)]
+    pub debiased: bool,
+    /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
+    #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+    pub tiles: Option<TileSize>,
+}
+
+/// Runs `adjoint`.
+pub fn run(a: &AdjointArgs, globals: &Globals) -> CliResult {
+    check_out_file(&a.out)?;
+    with_precision!(globals.precision_of(&[&a.meas, &a.pulse])?, adjoint(a))
+}
+
+fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
+    let out = &a.out;
+    let p = io::read_pulse::<T>(&a.pulse)?;
+    let expect = expectation(p.len(), a.depth_bins)?;
+    let (arch, codes_shape) = architecture_of(&a.codes, a.tiles)?;
+    let y = read_measurements::<T>(&a.meas, &a.codes, arch, &codes_shape, &expect)?;
+    let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins)?;
+    let g = layout.geometry;
+    let pulse = if a.debiased {
+        zero_mean(p.as_slice())
+    } else {
+        p.into_inner()
+    };
+    let op = layout.operator(pulse)?;
+    let mut x = vec![T::zero(); g.voxels()];
+    op.apply_adjoint(&y, &mut x);
+    let xt = Scene::from_vec(g, x).map_err(|e| {
+        format!(
+            "{}: the backprojection overflows {}: {e}",
+            out.display(),
+            T::NAME
+        )
+    })?;
+    io::write_scene(out, &xt)?;
+    println!(
+        "wrote {}: {}backprojection ({}, {}, {}) {}{}",
+        out.display(),
+        if a.debiased { "debiased " } else { "" },
+        g.m,
+        g.n,
+        a.depth_bins,
+        npy_dtype::<T>(),
+        layout.note()
+    );
+    Ok(())
+}

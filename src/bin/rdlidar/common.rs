@@ -1,0 +1,178 @@
+//! What every subcommand shares: the one-line failure, the precision flag, value parsers, and
+//! the checks of output paths made before any work.
+
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
+use rdlidar::io::{self, NpyDtype};
+use rdlidar::lidar::{Geometry, TileSize};
+use rdlidar::Real;
+
+/// A command-line failure: the one-line message printed after `error: `.
+#[derive(Debug)]
+pub struct Failure(pub String);
+
+impl From<rdlidar::Error> for Failure {
+    fn from(e: rdlidar::Error) -> Self {
+        Failure(e.to_string())
+    }
+}
+
+impl From<String> for Failure {
+    fn from(msg: String) -> Self {
+        Failure(msg)
+    }
+}
+
+/// The result of a subcommand.
+pub type CliResult<T = ()> = Result<T, Failure>;
+
+/// Floating-point precision of a computation and of the float arrays it writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Precision {
+    /// Single precision (float32 files).
+    #[value(name = "f32")]
+    F32,
+    /// Double precision (float64 files).
+    #[value(name = "f64")]
+    F64,
+}
+
+/// The global flags, as every subcommand sees them.
+#[derive(Debug, Clone, Copy)]
+pub struct Globals {
+    /// --threads.
+    pub threads: Option<usize>,
+    /// --seed.
+    pub seed: Option<u64>,
+    /// --precision.
+    pub precision: Option<Precision>,
+    /// --quiet.
+    pub quiet: bool,
+}
+
+impl Globals {
+    /// The base seed (default 0).
+    pub fn seed(&self) -> u64 {
+        self.seed.unwrap_or(0)
+    }
+
+    /// --precision, or f64 if one of `files` holds float64 data and f32 otherwise (the headers
+    /// are read, not the data).
+    pub fn precision_of(&self, files: &[&Path]) -> CliResult<Precision> {
+        if let Some(p) = self.precision {
+            return Ok(p);
+        }
+        for f in files {
+            if io::read_header(f)?.dtype == NpyDtype::Float64 {
+                return Ok(Precision::F64);
+            }
+        }
+        Ok(Precision::F32)
+    }
+}
+
+/// Calls `$f::<f32>` or `$f::<f64>` with the arguments, as the precision says.
+macro_rules! with_precision {
+    ($precision:expr, $f:ident($($arg:expr),* $(,)?)) => {
+        match $precision {
+            $crate::common::Precision::F32 => $f::<f32>($($arg),*),
+            $crate::common::Precision::F64 => $f::<f64>($($arg),*),
+        }
+    };
+}
+pub(crate) use with_precision;
+
+/// A positive integer flag value.
+pub fn parse_positive(text: &str) -> Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(0) => Err("must be at least 1".to_string()),
+        Ok(v) => Ok(v),
+        Err(_) => Err(format!("expected a positive integer, got {text:?}")),
+    }
+}
+
+/// A grid `MxNxKS`.
+pub fn parse_size(text: &str) -> Result<Geometry, String> {
+    Geometry::parse(text).map_err(|e| e.to_string())
+}
+
+/// A tile size `AxB`.
+pub fn parse_tile(text: &str) -> Result<TileSize, String> {
+    TileSize::parse(text).map_err(|e| e.to_string())
+}
+
+/// The npy name of `T`'s dtype.
+pub fn npy_dtype<T: Real>() -> &'static str {
+    match T::NAME {
+        "f32" => "float32",
+        _ => "float64",
+    }
+}
+
+/// The directory a path's file lives in (`.` for a bare file name).
+pub fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Checks, before any work, that an output file can be created where asked.
+pub fn check_out_file(out: &Path) -> CliResult {
+    if out.is_dir() {
+        return Err(format!("{}: is a directory, expected a file name", out.display()).into());
+    }
+    let dir = parent_dir(out);
+    if !dir.is_dir() {
+        return Err(format!(
+            "{}: directory {} does not exist",
+            out.display(),
+            dir.display()
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Checks, before any work, that an output folder can be written: an existing folder must be
+/// empty unless `force` (`replaced` names what would be replaced), a new one needs its parent.
+pub fn check_out_dir(dir: &Path, force: bool, flag: &str, replaced: &str) -> CliResult {
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(format!("{}: exists and is not a folder ({flag})", dir.display()).into());
+        }
+        let mut entries = std::fs::read_dir(dir)
+            .map_err(|e| format!("{}: cannot read the folder: {e}", dir.display()))?;
+        if entries.next().is_some() && !force {
+            return Err(format!(
+                "{}: the output folder exists and is not empty; pass --force to replace \
+                 {replaced}, or {flag} DIR to write elsewhere",
+                dir.display()
+            )
+            .into());
+        }
+    } else {
+        let parent = parent_dir(dir);
+        if !parent.is_dir() {
+            return Err(format!(
+                "{}: the parent folder {} does not exist ({flag})",
+                dir.display(),
+                parent.display()
+            )
+            .into());
+        }
+    }
+    Ok(())
+}
+
+/// Sets the size of the global thread pool; `source` names where the count came from.
+pub fn set_threads(threads: Option<usize>, source: &str) -> CliResult {
+    if let Some(n) = threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| format!("{source} {n}: {e}"))?;
+    }
+    Ok(())
+}

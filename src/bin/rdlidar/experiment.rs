@@ -1,0 +1,295 @@
+//! `rdlidar demo` (also the command with no subcommand) and `rdlidar compare`: the experiments.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use rdlidar::lidar::Geometry;
+use rdlidar::recon::Method;
+use rdlidar::report::experiment::{
+    self, ConfigFile, Console, ExperimentConfig, ExperimentPatch, IterationBudgets, NoiseLevel,
+    SceneKind as ExpSceneKind,
+};
+
+use crate::common::{
+    check_out_dir, parse_positive, parse_size, set_threads, CliResult, Globals, Precision,
+};
+
+/// The options of `demo` (and of the command with no subcommand) and `compare`.
+///
+/// Each option overrides the experiment's preset and the config file's section.
+#[derive(clap::Args, Debug, Default, PartialEq)]
+pub struct ExperimentArgs {
+    /// TOML file describing the experiment: top-level seed, precision, threads, quiet, and
+    /// [demo] / [compare] sections with the keys out, scene, size, lit_fraction, pulse_lens,
+    /// solvers, snr_db, seeds, max_iter, power_iterations (see docs/experiments.md). Flags
+    /// override it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Output folder (default: out/ for demo, out-compare/ for compare).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Write into an existing non-empty output folder, replacing the experiment's files.
+    #[arg(long)]
+    pub force: bool,
+    /// A small preset that runs in seconds (demo: 8x8x8, K_p 100,300,1000; compare: 6x6x6,
+    /// K_p 50,211,800).
+    #[arg(long)]
+    pub tiny: bool,
+    /// Scene: paper (the default) or random.
+    #[arg(long, value_parser = parse_scene)]
+    pub scene: Option<ExpScene>,
+    /// Scene grid MxNxKS (at most 1024 rows and columns, 2^26 voxels).
+    #[arg(long, value_name = "MxNxKS", value_parser = parse_size)]
+    pub size: Option<Geometry>,
+    /// Fraction of lit pixels of --scene random, in [0, 1] (default 0.5).
+    #[arg(long, value_name = "F")]
+    pub lit_fraction: Option<f64>,
+    /// Pulse lengths K_p, comma-separated.
+    #[arg(long, value_name = "LIST", value_parser = parse_pulse_lens)]
+    pub pulse_lens: Option<PulseLens>,
+    /// Solvers, comma-separated, or `all` (every solver but iht): backprojection,
+    /// backprojection-debiased, cgls, fista, iht, cosamp, model-based, tv, auto.
+    #[arg(long, value_name = "LIST", value_parser = parse_solver_list)]
+    pub solvers: Option<Solvers>,
+    /// Noise levels in dB SNR, comma-separated; `none` for noise-free.
+    #[arg(long, value_name = "LIST", value_parser = parse_noise_list, allow_hyphen_values = true)]
+    pub snr_db: Option<NoiseLevels>,
+    /// Number of seeds (SEED, SEED+10, …).
+    #[arg(long, value_name = "N", value_parser = parse_positive)]
+    pub seeds: Option<usize>,
+    /// Iteration budgets, e.g. `fista=50,model-based=12` (other solvers keep the preset's).
+    #[arg(long, value_name = "SOLVER=N,...", value_parser = parse_budgets)]
+    pub max_iter: Option<IterationBudgets>,
+    /// Power iterations that estimate ‖A‖² for FISTA's step (demo default 30; compare: the
+    /// solver's default of up to 200).
+    #[arg(long, value_name = "N", value_parser = parse_positive)]
+    pub power_iterations: Option<usize>,
+}
+
+/// The options of `compare`.
+#[derive(clap::Args, Debug)]
+pub struct CompareArgs {
+    #[command(flatten)]
+    pub common: ExperimentArgs,
+    /// The quick sweep: 6 pulse lengths, 2 seeds, 2 noise levels (under 5 minutes on 2 cores).
+    #[arg(long, conflicts_with = "tiny")]
+    pub quick: bool,
+}
+
+/// Values of the experiment flags (newtypes, so that clap takes each list as one value).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PulseLens(Vec<usize>);
+#[derive(Debug, Clone, PartialEq)]
+pub struct Solvers(Vec<Method>);
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseLevels(Vec<NoiseLevel>);
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExpScene(ExpSceneKind);
+
+fn parse_scene(text: &str) -> Result<ExpScene, String> {
+    text.parse()
+        .map(ExpScene)
+        .map_err(|e: rdlidar::Error| e.to_string())
+}
+
+fn parse_pulse_lens(text: &str) -> Result<PulseLens, String> {
+    experiment::parse_pulse_lens(text)
+        .map(PulseLens)
+        .map_err(|e| e.to_string())
+}
+
+fn parse_solver_list(text: &str) -> Result<Solvers, String> {
+    experiment::parse_solvers(text)
+        .map(Solvers)
+        .map_err(|e| e.to_string())
+}
+
+fn parse_noise_list(text: &str) -> Result<NoiseLevels, String> {
+    experiment::parse_noise_levels(text)
+        .map(NoiseLevels)
+        .map_err(|e| e.to_string())
+}
+
+fn parse_budgets(text: &str) -> Result<IterationBudgets, String> {
+    IterationBudgets::parse(text).map_err(|e| e.to_string())
+}
+
+
+/// The two experiments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Experiment {
+    /// The main job.
+    Demo,
+    /// The sweep across regimes.
+    Compare,
+}
+
+impl Experiment {
+    fn name(self) -> &'static str {
+        match self {
+            Experiment::Demo => "demo",
+            Experiment::Compare => "compare",
+        }
+    }
+}
+
+/// Set by the first Ctrl-C: the experiment stops after the run under way.
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// The flag an experiment setting (a configuration key) is given with on the command line.
+fn flag_of(key: &str) -> String {
+    format!("--{}", key.replace('_', "-"))
+}
+
+/// Resolves an experiment's configuration: the preset (--tiny, --quick or the default), the
+/// config file's section and top-level keys over it, the flags over both.
+fn experiment_config(
+    which: Experiment,
+    a: &ExperimentArgs,
+    quick: bool,
+    globals: &Globals,
+) -> CliResult<(ExperimentConfig, Option<usize>, bool)> {
+    let mut config = match (which, a.tiny, quick) {
+        (Experiment::Demo, true, _) => ExperimentConfig::demo_tiny(),
+        (Experiment::Demo, false, _) => ExperimentConfig::demo(),
+        (Experiment::Compare, true, _) => ExperimentConfig::compare_tiny(),
+        (Experiment::Compare, false, true) => ExperimentConfig::compare_quick(),
+        (Experiment::Compare, false, false) => ExperimentConfig::compare(),
+    };
+    let file = match &a.config {
+        Some(path) => ConfigFile::load(path)?,
+        None => ConfigFile::default(),
+    };
+    let section = match which {
+        Experiment::Demo => &file.demo,
+        Experiment::Compare => &file.compare,
+    };
+    if let Some(patch) = section {
+        config = config.patched(patch);
+    }
+    let flags = ExperimentPatch {
+        out: a.out.clone(),
+        scene: a.scene.map(|s| s.0),
+        size: a.size,
+        lit_fraction: a.lit_fraction,
+        pulse_lens: a.pulse_lens.as_ref().map(|v| v.0.clone()),
+        solvers: a.solvers.as_ref().map(|v| v.0.clone()),
+        snr_db: a.snr_db.as_ref().map(|v| v.0.clone()),
+        seeds: a.seeds,
+        max_iter: a.max_iter,
+        power_iterations: a.power_iterations,
+    };
+    config = config.patched(&flags);
+    config.seed = globals.seed.or(file.seed).unwrap_or(config.seed);
+    config.precision = match globals.precision {
+        Some(Precision::F32) => experiment::Precision::F32,
+        Some(Precision::F64) => experiment::Precision::F64,
+        None => file.precision.unwrap_or(config.precision),
+    };
+    if let Err(e) = config.validate() {
+        let msg = match e {
+            rdlidar::Error::InvalidParameter { name, reason } => {
+                let place = match &a.config {
+                    Some(path) => format!(" (or `{name}` in {})", path.display()),
+                    None => String::new(),
+                };
+                format!("{}{place}: {reason}", flag_of(name))
+            }
+            other => other.to_string(),
+        };
+        return Err(msg.into());
+    }
+    let threads = globals.threads.or(file.threads);
+    let quiet = globals.quiet || file.quiet.unwrap_or(false);
+    Ok((config, threads, quiet))
+}
+
+/// `demo` (also the command with no subcommand) and `compare`.
+pub fn run(
+    which: Experiment,
+    a: &ExperimentArgs,
+    quick: bool,
+    globals: &Globals,
+) -> CliResult<ExitCode> {
+    let (config, threads, quiet) = experiment_config(which, a, quick, globals)?;
+    check_out_dir(&config.out, a.force, "--out", "the results in it")?;
+    set_threads(threads, "threads")?;
+    let out = config.out.display().to_string();
+    ctrlc::set_handler(move || {
+        if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
+            eprintln!(
+                "\ninterrupted again: quitting; finished rows are in {out}/results.csv.partial"
+            );
+            std::process::exit(130);
+        }
+        eprintln!("\nCtrl-C: stopping after the current run (Ctrl-C again to quit at once)");
+    })
+    .map_err(|e| format!("cannot handle Ctrl-C: {e}"))?;
+
+    let kps: Vec<String> = config.pulse_lens.iter().map(usize::to_string).collect();
+    let levels: Vec<String> = config
+        .snr_db
+        .iter()
+        .map(|l| experiment::noise_text(*l))
+        .collect();
+    println!(
+        "rdlidar {}: {} scene {} (critical K_p {}), K_p {}, {}, {} seed(s) from {}, {}, {} \
+         threads; {} runs",
+        which.name(),
+        config.scene.name(),
+        config.size,
+        config.size.critical_pulse_len(),
+        kps.join(", "),
+        levels.join(", "),
+        config.seeds,
+        config.seed,
+        config.precision,
+        rayon::current_num_threads(),
+        config.runs()
+    );
+    println!(
+        "iteration budgets: {}; FISTA step from {} power iterations",
+        config.max_iter,
+        config
+            .power_iterations
+            .map_or_else(|| "up to 200".to_string(), |n| n.to_string())
+    );
+    let mut console = Console::new(quiet);
+    let outcome = match which {
+        Experiment::Demo => experiment::run_demo(&config, a.force, &mut console, &STOP),
+        Experiment::Compare => experiment::run_compare(&config, a.force, &mut console, &STOP),
+    };
+    console.finish();
+    let outcome = outcome?;
+    let names: Vec<String> = outcome
+        .files
+        .iter()
+        .map(|f| {
+            f.file_name()
+                .map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into())
+        })
+        .collect();
+    let failed = outcome.rows.iter().filter(|r| r.error.is_some()).count();
+    println!(
+        "{} of {} runs finished{} in {:.1} s (total {:.1} s with tables and figures); wrote {}: {}",
+        outcome.rows.len(),
+        outcome.planned,
+        if failed > 0 {
+            format!(" ({failed} with a solver error)")
+        } else {
+            String::new()
+        },
+        outcome.elapsed.as_secs_f64(),
+        outcome.total.as_secs_f64(),
+        config.out.display(),
+        names.join(", ")
+    );
+    if outcome.interrupted {
+        eprintln!(
+            "interrupted: the tables and figures hold the {} finished runs",
+            outcome.rows.len()
+        );
+        return Ok(ExitCode::from(130));
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,87 @@
+//! `rdlidar forward`: y = A x from files.
+
+use std::path::PathBuf;
+
+use ndarray_npy::WritableElement;
+use rdlidar::io::{self, ShapeExpectation};
+use rdlidar::lidar::TileSize;
+use rdlidar::Real;
+
+use crate::common::{check_out_file, npy_dtype, parse_tile, with_precision, CliResult, Globals};
+use crate::layout::{architecture_of, Layout};
+
+/// Apply the measurement operator: y = A x.
+///
+/// Reads the pulse (K_p,), the codes (M, N, K_p + K_s − 1) and the scene (M, N, K_s), and
+/// writes the measurements (K,) to OUT.
+///
+/// Codes of shape (G, M, N, K), as `simulate --adcs G` writes them, are G code sets with one
+/// ADC each, and OUT is (G, K). With --tiles AxB the array is split into T tiles with one
+/// ADC each, and OUT is (T, K).
+///
+/// Example: `rdlidar forward --pulse run0/pulse.npy --codes run0/codes.npy --scene run0/scene.npy --out y.npy`
+#[derive(clap::Args, Debug)]
+pub struct ForwardArgs {
+    /// Pulse file (K_p,), float32 or float64, ≥ 0.
+    #[arg(long, value_name = "P")]
+    pub pulse: PathBuf,
+    /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
+    #[arg(long, value_name = "S")]
+    pub codes: PathBuf,
+    /// Scene file (M, N, K_s), float32 or float64.
+    #[arg(long, value_name = "X")]
+    pub scene: PathBuf,
+    /// Output measurements file (K,), or (ADCs, K) for several ADCs.
+    #[arg(long, value_name = "Y")]
+    pub out: PathBuf,
+    /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
+    #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+    pub tiles: Option<TileSize>,
+}
+
+/// Runs `forward`.
+pub fn run(a: &ForwardArgs, globals: &Globals) -> CliResult {
+    check_out_file(&a.out)?;
+    with_precision!(globals.precision_of(&[&a.scene, &a.pulse])?, forward(a))
+}
+
+fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
+    let out = &a.out;
+    let p = io::read_pulse::<T>(&a.pulse)?;
+    let x = io::read_scene::<T>(&a.scene)?;
+    let g = x.geometry();
+    let expect = ShapeExpectation {
+        pulse_len: p.len(),
+        depth_bins: g.ks,
+        grid: Some((g.m, g.n)),
+    };
+    let (arch, _) = architecture_of(&a.codes, a.tiles)?;
+    let layout = Layout::read(&a.codes, arch, &expect, g.ks)?;
+    let op = layout.operator(p.into_inner())?;
+    let mut y = vec![T::zero(); op.nrows()];
+    op.apply(x.as_slice(), &mut y);
+    match layout.rows() {
+        None => {
+            io::write_measurements(out, &y)?;
+            println!(
+                "wrote {}: measurements ({},) {}",
+                out.display(),
+                y.len(),
+                npy_dtype::<T>()
+            );
+        }
+        Some(rows) => {
+            let k = expect.samples();
+            let y2 = ndarray::ArrayView2::from_shape((rows, k), &y[..])
+                .map_err(|e| format!("cannot shape the measurements: {e}"))?;
+            io::write_array(out, &y2)?;
+            println!(
+                "wrote {}: measurements ({rows}, {k}) {}, one row per ADC{}",
+                out.display(),
+                npy_dtype::<T>(),
+                layout.note()
+            );
+        }
+    }
+    Ok(())
+}

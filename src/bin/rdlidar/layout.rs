@@ -1,0 +1,209 @@
+//! The codes of a problem read as its architecture says: one code set (M, N, K) with one ADC
+//! (a coded aperture is such a file with zero codes), G code sets (G, M, N, K) with one ADC
+//! each, or one code set with one ADC per tile (`--tiles AxB`).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use rdlidar::io::{self, NpyDtype, ShapeExpectation};
+use rdlidar::lidar::{
+    multi_adc, pixel_groups, tiles, Architecture, CodeAlphabet, Codes, Geometry, RdOperator,
+    TileSize,
+};
+use rdlidar::operator::{BoxedOperator, OperatorExt};
+use rdlidar::Real;
+
+use crate::common::CliResult;
+
+/// The architecture of a problem, from the header of its codes file and `--tiles`, with the
+/// codes' shape; the codes themselves are not read.
+pub fn architecture_of(
+    codes: &Path,
+    tile: Option<TileSize>,
+) -> CliResult<(Architecture, Vec<usize>)> {
+    let h = io::read_header(codes)?;
+    let arch = match (h.shape.len(), tile) {
+        (4, Some(t)) => {
+            return Err(format!(
+                "{}: codes of shape {} are {} code sets, one ADC each; --tiles {t} and several \
+                 code sets are not supported together",
+                codes.display(),
+                io::shape_text(&h.shape),
+                h.shape[0]
+            )
+            .into())
+        }
+        (4, None) => Architecture::MultiAdc(h.shape[0]),
+        (_, Some(t)) => Architecture::Tiles(t),
+        (_, None) => Architecture::Single,
+    };
+    Ok((arch, h.shape))
+}
+
+/// The codes of a problem with its architecture.
+pub struct Layout {
+    /// How the pixels reach the ADCs.
+    pub arch: Architecture,
+    /// The scene grid.
+    pub geometry: Geometry,
+    /// One code set per ADC for several code sets, one otherwise.
+    pub code_sets: Vec<Arc<Codes>>,
+    /// The tiles' pixel groups ([`Architecture::Tiles`] only).
+    pub groups: Option<Vec<Vec<usize>>>,
+}
+
+impl Layout {
+    /// Reads the codes as `arch` says, for `ks` depth bins.
+    pub fn read(
+        codes: &Path,
+        arch: Architecture,
+        expect: &ShapeExpectation,
+        ks: usize,
+    ) -> CliResult<Layout> {
+        let geometry = |(m, n): (usize, usize)| {
+            Geometry::new(m, n, ks).map_err(|e| format!("--depth-bins: {e}"))
+        };
+        let (grid, code_sets) = match arch {
+            Architecture::MultiAdc(_) => {
+                let (grid, sets) = io::read_code_sets(codes, expect)?;
+                (grid, sets.into_iter().map(Arc::new).collect())
+            }
+            _ => {
+                let (grid, s) = io::read_codes(codes, expect)?;
+                (grid, vec![Arc::new(s)])
+            }
+        };
+        let geometry = geometry(grid)?;
+        let groups = match arch {
+            Architecture::Tiles(t) => {
+                Some(tiles(geometry, t.m, t.n).map_err(|e| format!("--tiles: {e}"))?)
+            }
+            _ => None,
+        };
+        Ok(Layout {
+            arch,
+            geometry,
+            code_sets,
+            groups,
+        })
+    }
+
+    /// Rows of the measurements: `None` for the (K,) vector of one ADC, `Some(R)` for (R, K).
+    pub fn rows(&self) -> Option<usize> {
+        self.arch.rows(self.geometry.m, self.geometry.n)
+    }
+
+    /// The measurement operator with the pulse `pulse`.
+    pub fn operator<T: Real>(&self, pulse: Vec<T>) -> rdlidar::Result<BoxedOperator<T>> {
+        let g = self.geometry;
+        let codes = &self.code_sets[0];
+        Ok(match (&self.arch, &self.groups) {
+            (Architecture::MultiAdc(_), _) => multi_adc(g, &pulse, self.code_sets.clone())?.boxed(),
+            (Architecture::Tiles(_), Some(groups)) => {
+                pixel_groups(g, &pulse, codes, groups)?.boxed()
+            }
+            _ => RdOperator::new(g, pulse, codes.clone())?.boxed(),
+        })
+    }
+
+    /// "binary" if every code set is ±1, "ternary" otherwise.
+    pub fn alphabet(&self) -> &'static str {
+        if self
+            .code_sets
+            .iter()
+            .all(|c| c.alphabet() == CodeAlphabet::Binary)
+        {
+            "binary"
+        } else {
+            "ternary"
+        }
+    }
+
+    /// A note for the messages of the multi-ADC layouts (empty for a single ADC).
+    pub fn note(&self) -> String {
+        match (self.arch, self.rows()) {
+            (Architecture::MultiAdc(g), _) => format!(", {g} ADCs (one code set each)"),
+            (Architecture::Tiles(t), Some(r)) => format!(", tiles of {t} pixels ({r} ADCs)"),
+            _ => String::new(),
+        }
+    }
+}
+
+/// Reads the measurements in the shape `arch` needs: (K,) for one ADC, (R, K) for R ADCs, with
+/// a message that names the flag or the file that decides the shape when the shapes disagree.
+pub fn read_measurements<T: Real>(
+    meas: &Path,
+    codes: &Path,
+    arch: Architecture,
+    codes_shape: &[usize],
+    expect: &ShapeExpectation,
+) -> CliResult<Vec<T>> {
+    let h = io::read_header(meas)?;
+    let k = expect.samples();
+    let float = matches!(h.dtype, NpyDtype::Float32 | NpyDtype::Float64);
+    let (rows, why) = match arch {
+        Architecture::MultiAdc(sets) => (
+            (sets > 0).then_some(sets),
+            format!(
+                "the codes {} of shape {} are {sets} code sets, one ADC each",
+                codes.display(),
+                io::shape_text(codes_shape)
+            ),
+        ),
+        Architecture::Tiles(t) => match codes_shape {
+            [m, n, _] if *m > 0 && *n > 0 => {
+                let count = t.count(*m, *n);
+                (
+                    Some(count),
+                    format!(
+                        "--tiles {t} splits the {m}x{n} array into {count} tiles, one ADC each"
+                    ),
+                )
+            }
+            _ => (None, String::new()),
+        },
+        Architecture::Single | Architecture::Aperture(_) => {
+            if float && h.shape.len() == 2 && codes_shape.len() == 3 {
+                return Err(format!(
+                    "{}: measurements of shape {} have one row per ADC, but the codes {} are \
+                     one code set read as a single ADC: for a tiled array pass --tiles AxB \
+                     with its tile size (meta.json \"architecture\" \"tile\")",
+                    meas.display(),
+                    io::shape_text(&h.shape),
+                    codes.display()
+                )
+                .into());
+            }
+            return Ok(io::read_measurements::<T>(meas, Some(expect))?);
+        }
+    };
+    if let (Some(r), true) = (rows, float) {
+        let found = match h.shape[..] {
+            [_] => Some("are those of one ADC".to_string()),
+            [n, _] if n != r => Some(format!("have {n} rows")),
+            _ => None,
+        };
+        if let Some(found) = found {
+            return Err(format!(
+                "{}: measurements of shape {} {found}, but {why}: expected shape ({r}, {k})",
+                meas.display(),
+                io::shape_text(&h.shape)
+            )
+            .into());
+        }
+    }
+    let y = io::read_measurement_rows::<T>(meas, Some(expect), rows)?;
+    Ok(y.into_raw_vec_and_offset().0)
+}
+
+/// The expectation of the other files for a pulse of `pulse_len` samples and `depth_bins` bins.
+pub fn expectation(pulse_len: usize, depth_bins: usize) -> CliResult<ShapeExpectation> {
+    if pulse_len.checked_add(depth_bins).is_none() {
+        return Err(format!("--depth-bins {depth_bins} is too large").into());
+    }
+    Ok(ShapeExpectation {
+        pulse_len,
+        depth_bins,
+        grid: None,
+    })
+}

@@ -1,0 +1,332 @@
+//! `rdlidar simulate`: a scene, a pulse, codes and measurements written to a folder.
+
+use std::path::PathBuf;
+
+use clap::ValueEnum;
+use ndarray_npy::WritableElement;
+use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
+use rdlidar::io::{self, StagedFile};
+use rdlidar::lidar::{simulate, Architecture, Geometry, SceneSpec, SimulationSpec, TileSize};
+use rdlidar::Real;
+
+use crate::common::{
+    check_out_dir, npy_dtype, parse_positive, parse_size, parse_tile, with_precision, CliResult,
+    Globals, Precision,
+};
+
+/// The scenes `simulate` generates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SceneKind {
+    /// The paper's experiment: a square, a disk and a slanted plane, one return per pixel.
+    Paper,
+    /// Random opaque scene: each pixel lit with probability --lit-fraction, random depth and
+    /// amplitude in [0.2, 1].
+    Random,
+    /// Semi-transparent scene: 1 to 3 returns per pixel (at most K_s), amplitudes in [0.1, 1].
+    Transparent,
+}
+
+impl SceneKind {
+    fn name(self) -> &'static str {
+        match self {
+            SceneKind::Paper => "paper",
+            SceneKind::Random => "random",
+            SceneKind::Transparent => "transparent",
+        }
+    }
+}
+
+/// Generate a scene, a pulse and codes, and simulate the measurements.
+///
+/// Writes DIR/scene.npy (M, N, K_s), pulse.npy (K_p,), codes.npy (M, N, K) int8,
+/// meas.npy (K,) and meta.json (geometry, K_p, K, seeds, scene kind, code alphabet, regime and
+/// critical K_p, noise, PRNG, crate version), with K = K_p + K_s − 1.
+///
+/// Seeds (all ChaCha8): the pulse is drawn from SEED, the codes from SEED+1, the noise from
+/// SEED+2 and the random and transparent scenes from SEED+3. The same arguments give the same
+/// files on every machine.
+///
+/// Architectures (the paper's §3; at most one of the three flags, meta.json records it under
+/// "architecture"):
+///
+/// * --adcs G (G > 1): G ADCs, every pixel modulated by G independent code sets, code set g
+///   (g = 0 … G−1) drawn from SEED+1+1000·g. codes.npy is (G, M, N, K) int8, meas.npy (G, K),
+///   row g measured through set g.
+///
+/// * --tiles AxB: the array split into tiles of AxB pixels (row-major, the last ones clipped
+///   at the edges), one ADC per tile summing only its pixels. codes.npy is the usual
+///   (M, N, K), meas.npy (T, K) for T tiles, in row-major tile order. Read them back with
+///   `forward`/`adjoint`/`dottest --tiles AxB`.
+///
+/// * --aperture F: a coded aperture, only ⌈F·M·N⌉ pixels drawn at random from SEED+4 reach
+///   the single ADC. The other pixels' codes are written as 0 in codes.npy, which is thus an
+///   ordinary (M, N, K) file whose single-ADC operator is the coded aperture; meas.npy is (K,).
+///
+/// DIR is created if needed (its parent must exist). An existing non-empty DIR is refused
+/// unless --force is given, which replaces the five files and leaves other files alone.
+/// Files are written under temporary names and renamed into place once all are complete; on
+/// an error nothing is left behind.
+///
+/// Example: `rdlidar simulate --scene paper --size 100x100x40 --pulse-len 10000 --seed 0 --out run0`
+#[derive(clap::Args, Debug)]
+pub struct SimulateArgs {
+    /// Scene to generate.
+    #[arg(long, value_enum)]
+    pub scene: SceneKind,
+    /// Scene grid MxNxKS: M×N pixels, K_s depth bins.
+    #[arg(long, value_parser = parse_size)]
+    pub size: Geometry,
+    /// Pulse length K_p (Bernoulli 0/1 samples).
+    #[arg(long, value_parser = parse_positive)]
+    pub pulse_len: usize,
+    /// Output directory.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Fraction of lit pixels of `--scene random`, in [0, 1] (default 0.5).
+    #[arg(long, value_name = "F")]
+    pub lit_fraction: Option<f64>,
+    /// Draw ternary codes in {-1, 0, 1} with P(0) = P, in [0, 1) (default: binary ±1 codes).
+    #[arg(long, value_name = "P")]
+    pub ternary_zero_prob: Option<f64>,
+    /// Add white Gaussian noise at this SNR in dB, relative to the mean power of the
+    /// noiseless measurements (default: noise-free).
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub snr_db: Option<f64>,
+    /// Replace scene.npy, pulse.npy, codes.npy, meas.npy and meta.json in a non-empty DIR.
+    #[arg(long)]
+    pub force: bool,
+    /// Number of ADCs G ≥ 1, each with its own code set for every pixel (G > 1 writes codes.npy
+    /// (G, M, N, K) and meas.npy (G, K)).
+    #[arg(long, value_name = "G", value_parser = parse_positive, default_value_t = 1)]
+    pub adcs: usize,
+    /// Split the array into tiles of AxB pixels with one ADC each (meas.npy (T, K) for T tiles).
+    #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+    pub tiles: Option<TileSize>,
+    /// Coded aperture: only a random fraction F in (0, 1] of the pixels (⌈F·M·N⌉ of them)
+    /// reaches the ADC; the others' codes are written as 0.
+    #[arg(long, value_name = "F")]
+    pub aperture: Option<f64>,
+}
+
+/// Checks the flags that the generators would otherwise reject later, by name, and returns the
+/// specification they select.
+fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
+    if let Some(f) = a.lit_fraction {
+        if a.scene != SceneKind::Random {
+            return Err(format!(
+                "--lit-fraction applies only to --scene random, not --scene {}",
+                a.scene.name()
+            )
+            .into());
+        }
+        if !(0.0..=1.0).contains(&f) {
+            return Err(format!("--lit-fraction: must be in [0, 1], got {f}").into());
+        }
+    }
+    if let Some(p) = a.ternary_zero_prob {
+        if !(0.0..1.0).contains(&p) {
+            return Err(format!("--ternary-zero-prob: must be in [0, 1), got {p}").into());
+        }
+    }
+    if let Some(s) = a.snr_db {
+        if !s.is_finite() {
+            return Err(format!("--snr-db: must be finite, got {s}").into());
+        }
+    }
+    if let Some(f) = a.aperture {
+        if !(f > 0.0 && f <= 1.0) {
+            return Err(format!("--aperture: must be in (0, 1], got {f}").into());
+        }
+    }
+    let mut chosen = Vec::new();
+    if a.adcs > 1 {
+        chosen.push(format!("--adcs {}", a.adcs));
+    }
+    if let Some(t) = a.tiles {
+        chosen.push(format!("--tiles {t}"));
+    }
+    if let Some(f) = a.aperture {
+        chosen.push(format!("--aperture {f}"));
+    }
+    if let [first @ .., last] = &chosen[..] {
+        if !first.is_empty() {
+            return Err(format!(
+                "{} and {last} are not supported together: choose one architecture",
+                first.join(", ")
+            )
+            .into());
+        }
+    }
+    let architecture = match (a.adcs, a.tiles, a.aperture) {
+        (_, Some(t), _) => Architecture::Tiles(t),
+        (_, _, Some(f)) => Architecture::Aperture(f),
+        (1, _, _) => Architecture::Single,
+        (n, _, _) => Architecture::MultiAdc(n),
+    };
+    let g = a.size;
+    let kp = a.pulse_len;
+    let k = kp
+        .checked_add(g.ks - 1)
+        .ok_or_else(|| format!("--pulse-len {kp} is too large"))?;
+    if let Some(r) = architecture.rows(g.m, g.n) {
+        if r.checked_mul(k)
+            .and_then(|v| v.checked_mul(g.pixels()))
+            .is_none()
+        {
+            let flag = match architecture {
+                Architecture::Tiles(t) => format!("--tiles {t}"),
+                _ => format!("--adcs {r}"),
+            };
+            return Err(format!("{flag}: {r} ADCs of {k} samples are too many").into());
+        }
+    }
+    let scene = match a.scene {
+        SceneKind::Paper => SceneSpec::Paper,
+        SceneKind::Random => SceneSpec::Random {
+            lit_fraction: a.lit_fraction.unwrap_or(0.5),
+        },
+        SceneKind::Transparent => SceneSpec::Transparent,
+    };
+    Ok(SimulationSpec {
+        scene,
+        ternary_zero_prob: a.ternary_zero_prob,
+        architecture,
+        snr_db: a.snr_db,
+        ..SimulationSpec::new(g, kp, seed)
+    })
+}
+
+/// Runs `simulate` (in f64 unless --precision says otherwise).
+pub fn run(a: &SimulateArgs, globals: &Globals) -> CliResult {
+    let spec = spec_of(a, globals.seed())?;
+    check_out_dir(
+        &a.out,
+        a.force,
+        "--out",
+        &format!("its {}", SIMULATION_FILES.join(", ")),
+    )?;
+    let precision = globals.precision.unwrap_or(Precision::F64);
+    with_precision!(precision, simulate_into(a, &spec))
+}
+
+fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationSpec) -> CliResult {
+    let g = spec.geometry;
+    let kp = spec.pulse_len;
+    let sim = simulate::<T>(spec).map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { name, reason } => {
+            format!("--{}: {reason}", name.replace('_', "-"))
+        }
+        other => format!("--scene {}: {other}", a.scene.name()),
+    })?;
+    let meta = SimulationMeta::new(&sim);
+    let mut json =
+        serde_json::to_string_pretty(&meta).map_err(|e| format!("cannot format meta.json: {e}"))?;
+    json.push('\n');
+    let k = meta.k;
+    let meas_shape = match sim.rows() {
+        None => vec![k],
+        Some(r) => vec![r, k],
+    };
+    let meas = ndarray::ArrayView::from_shape(ndarray::IxDyn(&meas_shape), &sim.meas[..])
+        .map_err(|e| format!("cannot shape the measurements: {e}"))?;
+    let codes_shape = match spec.architecture {
+        Architecture::MultiAdc(n) => vec![n, g.m, g.n, k],
+        _ => vec![g.m, g.n, k],
+    };
+
+    let dir = &a.out;
+    let created = !dir.exists();
+    if created {
+        std::fs::create_dir(dir)
+            .map_err(|e| format!("{}: cannot create the directory: {e}", dir.display()))?;
+    }
+    let written = (|| -> rdlidar::Result<Vec<PathBuf>> {
+        let [f_scene, f_pulse, f_codes, f_meas, f_meta] = SIMULATION_FILES.map(|f| dir.join(f));
+        let grid = (g.m, g.n);
+        let codes = &sim.code_sets[0];
+        // Each file is complete and synced before the first one is renamed into place; on an
+        // error the staged files are dropped, which removes them.
+        let staged: Vec<StagedFile> = vec![
+            io::stage_array(f_scene, sim.scene.data())?,
+            io::stage_array(f_pulse, &ndarray::ArrayView1::from(sim.pulse.as_slice()))?,
+            match (spec.architecture, &sim.active) {
+                (Architecture::MultiAdc(_), _) => {
+                    io::stage_code_sets(f_codes, grid, &sim.code_sets)?
+                }
+                (_, Some(active)) => io::stage_masked_codes(f_codes, grid, codes, active)?,
+                _ => io::stage_codes(f_codes, grid, codes)?,
+            },
+            io::stage_array(f_meas, &meas)?,
+            io::stage_bytes(f_meta, json.as_bytes())?,
+        ];
+        io::commit_all(staged)
+    })();
+    if let Err(e) = written {
+        if created {
+            for f in SIMULATION_FILES {
+                let _ = std::fs::remove_file(dir.join(f));
+            }
+            let _ = std::fs::remove_dir(dir);
+        }
+        return Err(e.into());
+    }
+    let dt = npy_dtype::<T>();
+    println!(
+        "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, codes.npy {} int8, \
+         meas.npy {} {dt}, meta.json",
+        dir.display(),
+        g.m,
+        g.n,
+        g.ks,
+        io::shape_text(&codes_shape),
+        io::shape_text(&meas_shape),
+    );
+    println!(
+        "{} scene, {} lit pixels; {} codes; {} regime (critical K_p = {}); {}",
+        a.scene.name(),
+        meta.scene.lit_pixels,
+        meta.code_alphabet,
+        g.regime(kp),
+        g.critical_pulse_len(),
+        match a.snr_db {
+            Some(s) => format!("Gaussian noise at {s} dB SNR"),
+            None => "noise-free".to_string(),
+        }
+    );
+    if let Some(note) = architecture_note(&meta, g) {
+        println!("architecture: {note}");
+    }
+    Ok(())
+}
+
+/// The line that describes a multi-ADC, tiled or coded-aperture acquisition.
+fn architecture_note(meta: &SimulationMeta, g: Geometry) -> Option<String> {
+    let arch = &meta.architecture;
+    match arch.kind.as_str() {
+        "multi_adc" => Some(format!(
+            "{} ADCs, one code set each (code seeds {})",
+            arch.adcs,
+            meta.seeds
+                .code_sets
+                .iter()
+                .map(u64::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+        "tiles" => {
+            let [tm, tn] = arch.tile.unwrap_or_default();
+            Some(format!(
+                "tiles of {tm}x{tn} pixels, {} ADCs (one per tile)",
+                arch.adcs
+            ))
+        }
+        "aperture" => Some(format!(
+            "coded aperture, {} of {} pixels active (fraction {}, seed {})",
+            arch.active_pixels,
+            g.pixels(),
+            arch.aperture_fraction.unwrap_or_default(),
+            meta.seeds.aperture.unwrap_or_default()
+        )),
+        _ => None,
+    }
+}

@@ -1,0 +1,301 @@
+//! One simulated acquisition: a scene, a pulse, the code sets of an architecture, the
+//! measurements and their noise, every random draw seeded from one base seed ([`Seeds`]).
+//!
+//! `rdlidar simulate` and the experiments both simulate through [`simulate`], so a problem of an
+//! experiment is exactly the one `rdlidar simulate --seed SEED` writes.
+//!
+//! ```
+//! use rdlidar::lidar::{simulate, Geometry, SceneSpec, SimulationSpec};
+//!
+//! # fn main() -> rdlidar::Result<()> {
+//! let spec = SimulationSpec::new(Geometry::new(8, 8, 10)?, 400, 7);
+//! let sim = simulate::<f64>(&spec)?;
+//! assert_eq!(sim.meas.len(), 400 + 10 - 1);
+//! assert_eq!(spec.scene, SceneSpec::Paper);
+//! # Ok(())
+//! # }
+//! ```
+
+use std::sync::Arc;
+
+use crate::error::{Error, Result};
+use crate::operator::{BoxedOperator, LinearOperator, OperatorExt};
+use crate::real::Real;
+
+use super::architectures::{aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles};
+use super::{
+    paper_scene, random_opaque_scene, semi_transparent_scene, Architecture, Codes, Geometry,
+    NoiseModel, NoiseReport, NoiseStage, Pulse, RdOperator, Scene,
+};
+
+/// The seeds of a simulation, all derived from one base seed: the pulse from SEED, code set g
+/// from SEED + 1 + 1000·g, the noise from SEED + 2, a random scene from SEED + 3 and a coded
+/// aperture's pixels from SEED + 4 (wrapping).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Seeds {
+    /// The base seed.
+    pub base: u64,
+}
+
+impl Seeds {
+    /// The seeds derived from `base`.
+    pub fn new(base: u64) -> Self {
+        Seeds { base }
+    }
+
+    /// The pulse's seed.
+    pub fn pulse(&self) -> u64 {
+        self.base
+    }
+
+    /// The seed of code set `set` (set 0 for a single code set).
+    pub fn code_set(&self, set: usize) -> u64 {
+        self.base
+            .wrapping_add(1)
+            .wrapping_add(1000u64.wrapping_mul(set as u64))
+    }
+
+    /// The noise's seed.
+    pub fn noise(&self) -> u64 {
+        self.base.wrapping_add(2)
+    }
+
+    /// A random scene's seed.
+    pub fn scene(&self) -> u64 {
+        self.base.wrapping_add(3)
+    }
+
+    /// The seed of a coded aperture's pixel selection.
+    pub fn aperture(&self) -> u64 {
+        self.base.wrapping_add(4)
+    }
+}
+
+/// The scene of a simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SceneSpec {
+    /// The paper's scene ([`paper_scene`]), deterministic.
+    Paper,
+    /// A random opaque scene ([`random_opaque_scene`]) with this fraction of lit pixels.
+    Random {
+        /// Probability that a pixel has a return.
+        lit_fraction: f64,
+    },
+    /// A semi-transparent scene ([`semi_transparent_scene`]) with 1 to min(3, K_s) returns per
+    /// pixel.
+    Transparent,
+}
+
+impl SceneSpec {
+    /// "paper", "random" or "transparent".
+    pub fn name(&self) -> &'static str {
+        match self {
+            SceneSpec::Paper => "paper",
+            SceneSpec::Random { .. } => "random",
+            SceneSpec::Transparent => "transparent",
+        }
+    }
+
+    /// The range of returns per pixel of a semi-transparent scene of `ks` depth bins.
+    pub fn returns_per_pixel(&self, ks: usize) -> Option<[usize; 2]> {
+        match self {
+            SceneSpec::Transparent => Some([1, 3.min(ks)]),
+            _ => None,
+        }
+    }
+
+    /// The scene itself, random ones drawn from `seeds.scene()`.
+    ///
+    /// # Errors
+    /// The generators' errors.
+    pub fn generate<T: Real>(&self, g: Geometry, seeds: Seeds) -> Result<Scene<T>> {
+        match *self {
+            SceneSpec::Paper => paper_scene(g),
+            SceneSpec::Random { lit_fraction } => {
+                random_opaque_scene(g, lit_fraction, seeds.scene())
+            }
+            SceneSpec::Transparent => semi_transparent_scene(g, 1..=3.min(g.ks), seeds.scene()),
+        }
+    }
+}
+
+/// What to simulate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimulationSpec {
+    /// M×N pixels, K_s depth bins.
+    pub geometry: Geometry,
+    /// Pulse length K_p.
+    pub pulse_len: usize,
+    /// The base seed of every draw ([`Seeds`]).
+    pub seed: u64,
+    /// The scene.
+    pub scene: SceneSpec,
+    /// `None` for ±1 codes; `Some(p)` for {−1, 0, +1} codes with zeros of probability p.
+    pub ternary_zero_prob: Option<f64>,
+    /// How the pixels reach the ADCs.
+    pub architecture: Architecture,
+    /// Gaussian noise at this SNR (dB) on the measurements; `None` for none.
+    pub snr_db: Option<f64>,
+}
+
+impl SimulationSpec {
+    /// The paper's scene, ±1 codes, one ADC, no noise.
+    pub fn new(geometry: Geometry, pulse_len: usize, seed: u64) -> Self {
+        SimulationSpec {
+            geometry,
+            pulse_len,
+            seed,
+            scene: SceneSpec::Paper,
+            ternary_zero_prob: None,
+            architecture: Architecture::Single,
+            snr_db: None,
+        }
+    }
+
+    /// The seeds of its draws.
+    pub fn seeds(&self) -> Seeds {
+        Seeds::new(self.seed)
+    }
+
+    /// Number of measurements per ADC, K = K_p + K_s − 1.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`pulse_len`) if it overflows.
+    pub fn samples(&self) -> Result<usize> {
+        self.pulse_len
+            .checked_add(self.geometry.ks - 1)
+            .ok_or_else(|| Error::param("pulse_len", format!("{} is too large", self.pulse_len)))
+    }
+}
+
+/// A simulated acquisition.
+#[derive(Debug)]
+pub struct Simulation<T> {
+    /// What was simulated.
+    pub spec: SimulationSpec,
+    /// The true scene.
+    pub scene: Scene<T>,
+    /// The pulse.
+    pub pulse: Pulse<T>,
+    /// The code sets, one per ADC for [`Architecture::MultiAdc`], one otherwise.
+    pub code_sets: Vec<Arc<Codes>>,
+    /// The pixels that reach the ADC, in increasing order ([`Architecture::Aperture`] only).
+    pub active: Option<Vec<usize>>,
+    /// The pixel groups of the tiles, row-major ([`Architecture::Tiles`] only).
+    pub groups: Option<Vec<Vec<usize>>>,
+    /// The measurements, ADC by ADC (R·K values for R ADCs).
+    pub meas: Vec<T>,
+    /// What the noise did (`None` when noise-free).
+    pub noise: Option<NoiseReport>,
+}
+
+impl<T: Real> Simulation<T> {
+    /// The measurement operator of the architecture (the one that took [`meas`](Self::meas)).
+    ///
+    /// # Errors
+    /// None for a simulation made by [`simulate`]; the operators' constructors' errors otherwise.
+    pub fn operator(&self) -> Result<BoxedOperator<T>> {
+        let g = self.spec.geometry;
+        let p = self.pulse.as_slice();
+        let codes = &self.code_sets[0];
+        Ok(
+            match (&self.spec.architecture, &self.groups, &self.active) {
+                (Architecture::MultiAdc(_), _, _) => {
+                    multi_adc(g, p, self.code_sets.clone())?.boxed()
+                }
+                (Architecture::Tiles(_), Some(groups), _) => {
+                    pixel_groups(g, p, codes, groups)?.boxed()
+                }
+                (Architecture::Aperture(_), _, Some(active)) => {
+                    coded_aperture(g, p, codes, active)?.boxed()
+                }
+                _ => self.single_operator()?.boxed(),
+            },
+        )
+    }
+
+    /// The fused operator of the first code set, every pixel reaching one ADC: the measurement
+    /// operator of [`Architecture::Single`].
+    ///
+    /// # Errors
+    /// Those of [`RdOperator::new`].
+    pub fn single_operator(&self) -> Result<RdOperator<T>> {
+        RdOperator::new(
+            self.spec.geometry,
+            self.pulse.as_slice().to_vec(),
+            self.code_sets[0].clone(),
+        )
+    }
+
+    /// Rows of the measurements: `None` for one ADC's (K,), `Some(R)` for (R, K).
+    pub fn rows(&self) -> Option<usize> {
+        let g = self.spec.geometry;
+        self.spec.architecture.rows(g.m, g.n)
+    }
+}
+
+/// Simulates `spec`: draws the scene, the pulse and the codes from its [`Seeds`], measures the
+/// scene through the architecture's operator and adds the noise.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] naming the setting for an impossible request (a pulse length
+/// that overflows, a zero-size tile, an aperture fraction outside (0, 1], too many ADCs, a
+/// ternary zero probability outside [0, 1)); the generators' and operators' errors.
+pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
+    let g = spec.geometry;
+    let k = spec.samples()?;
+    let seeds = spec.seeds();
+    let arch = spec.architecture;
+    if let Some(r) = arch.rows(g.m, g.n) {
+        if r.checked_mul(k)
+            .and_then(|v| v.checked_mul(g.pixels()))
+            .is_none()
+        {
+            return Err(Error::param(
+                "adcs",
+                format!("{r} ADCs of {k} samples are too many"),
+            ));
+        }
+    }
+    let groups = match arch {
+        Architecture::Tiles(t) => Some(tiles(g, t.m, t.n)?),
+        _ => None,
+    };
+    let active = match arch {
+        Architecture::Aperture(f) => Some(aperture_pixels(g.pixels(), f, seeds.aperture())?),
+        _ => None,
+    };
+    let scene = spec.scene.generate::<T>(g, seeds)?;
+    let pulse = Pulse::<T>::bernoulli(spec.pulse_len, seeds.pulse())?;
+    let code_sets = (0..arch.code_sets())
+        .map(|set| {
+            let seed = seeds.code_set(set);
+            match spec.ternary_zero_prob {
+                None => Codes::random_binary(g.pixels(), k, seed),
+                Some(p) => Codes::random_ternary(g.pixels(), k, p, seed),
+            }
+            .map(Arc::new)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut sim = Simulation {
+        spec: *spec,
+        scene,
+        pulse,
+        code_sets,
+        active,
+        groups,
+        meas: Vec::new(),
+        noise: None,
+    };
+    let op = sim.operator()?;
+    let mut y = vec![T::zero(); op.nrows()];
+    op.apply(sim.scene.as_slice(), &mut y);
+    if let Some(snr_db) = spec.snr_db {
+        let report = NoiseModel::none()
+            .then(NoiseStage::Gaussian { snr_db })
+            .apply(&mut y, seeds.noise())?;
+        sim.noise = Some(report);
+    }
+    sim.meas = y;
+    Ok(sim)
+}

@@ -1,0 +1,76 @@
+//! Wall-clock timing of the fused operator: the one timer behind `rdlidar bench` and the
+//! calibrated rates of the cost model.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::lidar::RdOperator;
+use crate::operator::LinearOperator;
+use crate::real::Real;
+
+/// Median and minimum wall time of one operation, in seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Timing {
+    /// The median of the timed runs.
+    pub median_s: f64,
+    /// The fastest timed run.
+    pub min_s: f64,
+}
+
+/// Runs `f` once as a warm-up, then `repeats` (at least 1) timed times.
+pub fn time_runs(repeats: usize, mut f: impl FnMut()) -> Timing {
+    f();
+    let mut t: Vec<f64> = (0..repeats.max(1))
+        .map(|_| {
+            let start = Instant::now();
+            f();
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    Timing {
+        median_s: crate::linalg::median_sorted(&t),
+        min_s: t[0],
+    }
+}
+
+/// The timings of the three operations of the fused operator.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct OperatorTimings {
+    /// The dense forward over all voxels ([`RdOperator::apply_dense`]).
+    pub forward: Timing,
+    /// The adjoint (backprojection).
+    pub adjoint: Timing,
+    /// The forward over the nonzero voxels only ([`RdOperator::apply_sparse`]).
+    pub sparse_forward: Timing,
+}
+
+/// Times the dense forward and the sparse forward on the scene `x` and the adjoint on its
+/// measurements, each once as a warm-up and then `repeats` times.
+///
+/// # Panics
+/// If `x` does not have one value per column of `op`.
+pub fn time_operator<T: Real>(op: &RdOperator<T>, x: &[T], repeats: usize) -> OperatorTimings {
+    let mut y = vec![T::zero(); op.nrows()];
+    op.apply(x, &mut y);
+    let y_in = y.clone();
+    let mut xt = vec![T::zero(); op.ncols()];
+    let forward = time_runs(repeats, || {
+        op.apply_dense(std::hint::black_box(x), &mut y);
+        std::hint::black_box(&y);
+    });
+    let adjoint = time_runs(repeats, || {
+        op.apply_adjoint(std::hint::black_box(&y_in), &mut xt);
+        std::hint::black_box(&xt);
+    });
+    let sparse_forward = time_runs(repeats, || {
+        op.apply_sparse(std::hint::black_box(x), &mut y);
+        std::hint::black_box(&y);
+    });
+    OperatorTimings {
+        forward,
+        adjoint,
+        sparse_forward,
+    }
+}

@@ -1,0 +1,13 @@
+//! The one-reflector family: solvers for operators whose columns come in pixels
+//! ([`VoxelOperator`](crate::operator::VoxelOperator)) with at most one return per pixel —
+//! message passing with the one-reflector prior ([`reflector_amp`]), model-based recovery
+//! ([`model_based`], which starts from it) and TV on the depth map ([`tv_depth`], which runs both
+//! within depth windows).
+
+mod amp;
+mod model_based;
+mod tv_depth;
+
+pub use amp::{reflector_amp, ReflectorAmpParams};
+pub use model_based::{model_based, ModelBasedParams};
+pub use tv_depth::{tv_depth, TvDepthParams};
