@@ -158,3 +158,56 @@ pub fn robust_sigma(v: &mut [f64], center: f64) -> f64 {
     v.iter_mut().for_each(|x| *x = (*x - center).abs());
     1.4826 * median(v)
 }
+
+/// Which entry of a column [`column_peaks`] takes as its peak.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PeakRule {
+    /// The largest value, whatever its sign (every column has a peak).
+    Largest,
+    /// The largest positive value (a column without one has no peak).
+    LargestPositive,
+    /// The value of largest magnitude (an all-zero column has no peak).
+    LargestMagnitude,
+}
+
+/// The peak of each column of `x` (consecutive runs of `column_len` values) under `rule`: its
+/// index within the column and its value, the first one on ties; `None` where the rule finds
+/// none. NaN values are never peaks.
+///
+/// # Panics
+/// If `column_len` is zero or does not divide `x.len()`.
+pub fn column_peaks<T: Real>(
+    x: &[T],
+    column_len: usize,
+    rule: PeakRule,
+) -> Vec<Option<(usize, f64)>> {
+    assert!(
+        column_len > 0 && x.len() % column_len == 0,
+        "column_peaks: column length {column_len} does not divide {} values",
+        x.len()
+    );
+    let key = |v: f64| match rule {
+        PeakRule::Largest => v,
+        PeakRule::LargestPositive => v,
+        PeakRule::LargestMagnitude => v.abs(),
+    };
+    let floor = match rule {
+        PeakRule::Largest => f64::NEG_INFINITY,
+        PeakRule::LargestPositive | PeakRule::LargestMagnitude => 0.0,
+    };
+    x.chunks_exact(column_len)
+        .map(|col| {
+            let mut best: Option<(usize, f64)> = None;
+            let mut best_key = floor;
+            for (j, v) in col.iter().enumerate() {
+                let v = v.as_f64();
+                let k = key(v);
+                if k > best_key || (best.is_none() && rule == PeakRule::Largest && k == best_key) {
+                    best_key = k;
+                    best = Some((j, v));
+                }
+            }
+            best
+        })
+        .collect()
+}

@@ -10,9 +10,9 @@ use argmin::core::{Executor, Solver, State, TerminationReason, TerminationStatus
 use ndarray::Array2;
 use rdlidar::operator::{DenseMatrix, LinearOperator, PowerIteration};
 use rdlidar::solver::{
-    cosamp, fista, iht, ArgminCosamp, ArgminFista, ArgminIht, Control, CosampParams, FistaParams,
-    IhtParams, IhtStep, IterationInfo, Lambda, LinearLeastSquares, ProgressObserver, Report,
-    Restart, SparseState, Stagnation, StepRule, Stopping, Termination,
+    cosamp, fista, iht, ArgminCosamp, ArgminFista, ArgminIht, ArgminState, Control, CosampParams,
+    FistaParams, IhtParams, IhtStep, IterationInfo, Lambda, LinearLeastSquares, ProgressObserver,
+    Report, Restart, Stagnation, StepRule, Stopping, Termination,
 };
 use rdlidar::Error;
 use serde::de::DeserializeOwned;
@@ -47,10 +47,10 @@ type Trajectory = Vec<(Vec<f64>, f64)>;
 /// An argmin observer that records the trajectory.
 struct Recorder(Arc<Mutex<Trajectory>>);
 
-impl Observe<SparseState<f64>> for Recorder {
+impl Observe<ArgminState<f64>> for Recorder {
     fn observe_iter(
         &mut self,
-        state: &SparseState<f64>,
+        state: &ArgminState<f64>,
         _kv: &KV,
     ) -> Result<(), argmin::core::Error> {
         let x = state.get_param().expect("a current x").clone();
@@ -62,7 +62,7 @@ impl Observe<SparseState<f64>> for Recorder {
 /// What an argmin run left behind.
 struct ArgminRun<S> {
     solver: S,
-    state: SparseState<f64>,
+    state: ArgminState<f64>,
     forward: u64,
     adjoint: u64,
     trajectory: Trajectory,
@@ -72,13 +72,13 @@ fn execute<'a, S>(
     solver: S,
     op: &'a DenseMatrix<f64>,
     y: &'a [f64],
-    configure: impl FnOnce(SparseState<f64>) -> SparseState<f64>,
+    configure: impl FnOnce(ArgminState<f64>) -> ArgminState<f64>,
 ) -> Result<ArgminRun<S>, argmin::core::Error>
 where
-    S: Solver<LinearLeastSquares<'a, f64, DenseMatrix<f64>>, SparseState<f64>> + Clone,
+    S: Solver<LinearLeastSquares<'a, f64, DenseMatrix<f64>>, ArgminState<f64>> + Clone,
 {
     let trajectory = Arc::new(Mutex::new(Vec::new()));
-    let problem = LinearLeastSquares { op, y, damp: 0.0 };
+    let problem = LinearLeastSquares { op, y };
     let res = Executor::new(problem, solver)
         .configure(configure)
         .add_observer(Recorder(trajectory.clone()), ObserverMode::Always)
@@ -151,7 +151,7 @@ fn argmin_reason(t: Termination) -> TerminationReason {
 /// passed through JSON in between, and checks the same again.
 fn matches_native<S>(what: &str, params: Params, make: impl Fn() -> S, x0: &[f64], seed: u64)
 where
-    S: for<'a> Solver<LinearLeastSquares<'a, f64, DenseMatrix<f64>>, SparseState<f64>>
+    S: for<'a> Solver<LinearLeastSquares<'a, f64, DenseMatrix<f64>>, ArgminState<f64>>
         + Clone
         + Serialize
         + DeserializeOwned,
@@ -378,7 +378,7 @@ fn the_cases_cover_convergence_and_the_iteration_limit() {
 fn argmin_max_iters_stops_every_solver() {
     let (op, y) = problem(400);
     let x0 = vec![0.0; N];
-    let configure = |s: SparseState<f64>| s.param(vec![0.0; N]).max_iters(3);
+    let configure = |s: ArgminState<f64>| s.param(vec![0.0; N]).max_iters(3);
     let tol_free = Stopping {
         rel_residual: None,
         ..Stopping::iterations(1000)
@@ -476,7 +476,7 @@ fn zero_measurements_end_in_init_like_the_native_solvers() {
     let (op, _) = problem(500);
     let y = vec![0.0; M];
     let x0 = random_vec(N, 501);
-    let configure = |s: SparseState<f64>| s.param(x0.clone()).max_iters(50);
+    let configure = |s: ArgminState<f64>| s.param(x0.clone()).max_iters(50);
     let runs = [
         execute(
             ArgminFista::new(FistaParams::default()).unwrap(),
@@ -550,8 +550,8 @@ fn invalid_problems_and_parameters_are_typed_errors() {
     .is_err_and(param("max_iter")));
 
     // init reports what needs the problem.
-    let run = |solver: ArgminIht<f64>, y: &[f64], damp: f64, x0: Option<Vec<f64>>| {
-        let problem = LinearLeastSquares { op: &op, y, damp };
+    let run = |solver: ArgminIht<f64>, y: &[f64], x0: Option<Vec<f64>>| {
+        let problem = LinearLeastSquares { op: &op, y };
         Executor::new(problem, solver)
             .configure(|s| match x0 {
                 Some(x) => s.param(x).max_iters(5),
@@ -562,39 +562,27 @@ fn invalid_problems_and_parameters_are_typed_errors() {
             .map_err(typed)
     };
     let ok = ArgminIht::new(IhtParams::new(3)).unwrap();
-    assert!(run(ok.clone(), &y, 0.0, Some(vec![0.0; N])).is_ok());
-    assert!(run(ok.clone(), &y, 0.5, Some(vec![0.0; N])).is_err_and(param("damp")));
-    assert!(run(ok.clone(), &y, 0.0, None).is_err_and(param("param")));
+    assert!(run(ok.clone(), &y, Some(vec![0.0; N])).is_ok());
+    assert!(run(ok.clone(), &y, None).is_err_and(param("param")));
     assert!(matches!(
-        run(ok.clone(), &y[1..], 0.0, Some(vec![0.0; N])),
+        run(ok.clone(), &y[1..], Some(vec![0.0; N])),
         Err(Error::ShapeMismatch { .. })
     ));
     assert!(matches!(
-        run(ok.clone(), &y, 0.0, Some(vec![f64::NAN; N])),
+        run(ok.clone(), &y, Some(vec![f64::NAN; N])),
         Err(Error::NonFinite { .. })
     ));
     let too_sparse = ArgminIht::new(IhtParams::new(N + 1)).unwrap();
-    assert!(run(too_sparse, &y, 0.0, Some(vec![0.0; N])).is_err_and(param("sparsity")));
+    assert!(run(too_sparse, &y, Some(vec![0.0; N])).is_err_and(param("sparsity")));
     // The parameters are not serialized: a deserialized solver that never ran cannot start.
     let json = serde_json::to_string(&ok).unwrap();
     let restored: ArgminIht<f64> = serde_json::from_str(&json).unwrap();
-    assert!(run(restored, &y, 0.0, Some(vec![0.0; N])).is_err_and(param("params")));
+    assert!(run(restored, &y, Some(vec![0.0; N])).is_err_and(param("params")));
 
     // FISTA and CoSaMP go through the same checks.
     let problem = LinearLeastSquares {
         op: &op,
-        y: &y,
-        damp: 1.0,
-    };
-    let e = Executor::new(problem, ArgminFista::new(FistaParams::default()).unwrap())
-        .configure(|s| s.param(vec![0.0; N]))
-        .run()
-        .map_err(typed);
-    assert!(e.is_err_and(param("damp")));
-    let problem = LinearLeastSquares {
-        op: &op,
         y: &y[..M - 1],
-        damp: 0.0,
     };
     let e = Executor::new(problem, ArgminCosamp::new(CosampParams::new(2)).unwrap())
         .configure(|s| s.param(vec![0.0; N]))

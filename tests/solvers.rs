@@ -346,12 +346,15 @@ fn argmin_executor_drives_cgls_to_the_same_solution() {
     let op = DenseMatrix::new(a).unwrap();
     for lambda in [0.0, 0.7] {
         let want = reference(&an, &y, lambda);
-        let problem = LinearLeastSquares {
-            op: &op,
-            y: &y,
+        let problem = LinearLeastSquares { op: &op, y: &y };
+        let argmin_params = CglsParams {
             damp: lambda,
+            stopping: Stopping {
+                rel_residual: Some(1e-12),
+                ..Stopping::default()
+            },
         };
-        let res = Executor::new(problem, ArgminCgls::new(1e-12).unwrap())
+        let res = Executor::new(problem, ArgminCgls::new(argmin_params).unwrap())
             .configure(|s| s.param(vec![0.0; 15]).max_iters(200))
             .run()
             .unwrap();
@@ -379,12 +382,8 @@ fn argmin_executor_drives_cgls_to_the_same_solution() {
         assert_eq!(res.state().get_iter() as usize, report.iterations);
     }
     // Argmin's iteration limit applies.
-    let problem = LinearLeastSquares {
-        op: &op,
-        y: &y,
-        damp: 0.0,
-    };
-    let res = Executor::new(problem, ArgminCgls::new(0.0).unwrap())
+    let problem = LinearLeastSquares { op: &op, y: &y };
+    let res = Executor::new(problem, ArgminCgls::new(CglsParams::default()).unwrap())
         .configure(|s| s.param(vec![0.0; 15]).max_iters(3))
         .run()
         .unwrap();
@@ -393,11 +392,16 @@ fn argmin_executor_drives_cgls_to_the_same_solution() {
     let problem = LinearLeastSquares {
         op: &op,
         y: &y[..39],
-        damp: 0.0,
     };
-    assert!(Executor::new(problem, ArgminCgls::new(1e-6).unwrap())
-        .configure(|s| s.param(vec![0.0; 15]))
-        .run()
-        .is_err());
-    assert!(ArgminCgls::<f64>::new(f64::NAN).is_err());
+    assert!(
+        Executor::new(problem, ArgminCgls::new(CglsParams::default()).unwrap())
+            .configure(|s| s.param(vec![0.0; 15]))
+            .run()
+            .is_err()
+    );
+    let nan_damp = CglsParams {
+        damp: f64::NAN,
+        ..CglsParams::default()
+    };
+    assert!(ArgminCgls::<f64>::new(nan_damp).is_err());
 }

@@ -3,6 +3,7 @@
 use ndarray::{Array2, Array3};
 
 use crate::error::{Error, Result};
+use crate::linalg::{column_peaks, PeakRule};
 use crate::real::Real;
 
 use super::geometry::Geometry;
@@ -101,23 +102,15 @@ impl<T: Real> Scene<T> {
         let g = self.geometry();
         let mut depth = Array2::from_elem((g.m, g.n), NO_RETURN);
         let mut amp = Array2::zeros((g.m, g.n));
-        for ((i, j), col) in self
-            .data
-            .lanes(ndarray::Axis(2))
+        for (k, peak) in column_peaks(self.as_slice(), g.ks, PeakRule::LargestMagnitude)
             .into_iter()
             .enumerate()
-            .map(|(k, c)| ((k / g.n, k % g.n), c))
         {
-            let mut best = T::zero();
-            let mut at = NO_RETURN;
-            for (d, &v) in col.iter().enumerate() {
-                if num_traits::Float::abs(v) > num_traits::Float::abs(best) {
-                    best = v;
-                    at = d as i32;
-                }
+            if let Some((d, v)) = peak {
+                let at = [k / g.n, k % g.n];
+                depth[at] = d as i32;
+                amp[at] = T::of_f64(v);
             }
-            depth[[i, j]] = at;
-            amp[[i, j]] = best;
         }
         DepthMap {
             depth,

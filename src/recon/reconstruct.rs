@@ -11,13 +11,13 @@ use std::str::FromStr;
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
-use crate::linalg::{norm2, norm_inf};
-use crate::operator::{Identity, LinearOperator, PowerIteration};
+use crate::linalg::norm2;
+use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 use crate::solver::{
-    backprojection, cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, Backprojection,
-    CglsParams, CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams, ReflectorAmpParams,
-    Report, Restart, StepRule, Stopping, Termination, Threshold, TvDepthParams,
+    backprojection, cgls, cosamp, fista, iht, model_based, reflector_amp, select_peaks, tv_depth,
+    Backprojection, CglsParams, CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams,
+    ReflectorAmpParams, Report, Restart, StepRule, Stopping, Termination, Threshold, TvDepthParams,
 };
 
 use crate::lidar::{DepthMap, Scene, NO_RETURN};
@@ -279,14 +279,7 @@ pub fn reconstruct<T: Real>(
             }
             report = Some(match report {
                 Some(mut r) => {
-                    r.solver = tv.solver;
-                    r.iterations += tv.iterations;
-                    r.termination = tv.termination;
-                    r.residual_history.extend(tv.residual_history);
-                    r.objective_history.extend(tv.objective_history);
-                    r.forward_applies += tv.forward_applies;
-                    r.adjoint_applies += tv.adjoint_applies;
-                    r.elapsed += tv.elapsed;
+                    r.absorb(tv);
                     r
                 }
                 None => tv,
@@ -294,7 +287,7 @@ pub fn reconstruct<T: Real>(
         }
     }
     if report.is_some() {
-        x = pixel_peaks(&x, g)?;
+        x = pixel_peaks(&x, g);
     }
     let scene = Scene::from_vec(g, x)?;
     let depth = scene.depth_map();
@@ -577,33 +570,10 @@ fn estimate_sparsity<T: Real>(op: &RdOperator<T>, y: &[T]) -> Result<usize> {
     Ok((2 * found).clamp(1, cap))
 }
 
-/// One return per pixel from a voxel estimate: the per-pixel peak rule of [`backprojection`]
-/// (applied through the identity), then peaks below [`RELATIVE_FLOOR`] of the strongest dropped.
-fn pixel_peaks<T: Real>(x: &[T], g: Geometry) -> Result<Vec<T>> {
-    if x.iter().all(|v| v.as_f64() <= 0.0) {
-        return Ok(vec![T::zero(); x.len()]);
-    }
-    let id = Identity::<T>::new(x.len());
-    let auto = backprojection(
-        &id,
-        x,
-        &Backprojection {
-            column_len: g.ks,
-            normalization: 1.0,
-            threshold: Threshold::Auto { k: AUTO_K },
-        },
-    )?;
-    if norm_inf(&auto.x) == 0.0 {
-        return Ok(auto.x);
-    }
-    let floor = backprojection(
-        &id,
-        &auto.x,
-        &Backprojection {
-            column_len: g.ks,
-            normalization: 1.0,
-            threshold: Threshold::RelativeToMax(RELATIVE_FLOOR),
-        },
-    )?;
-    Ok(floor.x)
+/// One return per pixel from a voxel estimate: each pixel's largest positive entry, kept above the
+/// robust threshold median + [`AUTO_K`]·σ of all entries ([`select_peaks`]), then peaks below
+/// [`RELATIVE_FLOOR`] of the strongest dropped.
+fn pixel_peaks<T: Real>(x: &[T], g: Geometry) -> Vec<T> {
+    let auto = select_peaks(x, g.ks, Threshold::Auto { k: AUTO_K });
+    select_peaks(&auto.x, g.ks, Threshold::RelativeToMax(RELATIVE_FLOOR)).x
 }

@@ -1,7 +1,7 @@
 //! Backprojection and per-column peak thresholding: the paper's reconstruction.
 
 use crate::error::{Error, Result};
-use crate::linalg::{median, robust_sigma};
+use crate::linalg::{column_peaks, median, robust_sigma, PeakRule};
 use crate::operator::LinearOperator;
 use crate::real::Real;
 
@@ -105,47 +105,73 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
     op.apply_adjoint(y, &mut bp);
     let inv = T::of_f64(1.0 / params.normalization);
     bp.iter_mut().for_each(|v| *v = *v * inv);
-    let cols = n / cl;
-    let mut peaks = vec![-1i32; cols];
-    let mut values = vec![f64::NEG_INFINITY; cols];
-    for (c, col) in bp.chunks_exact(cl).enumerate() {
-        let (mut at, mut best) = (0usize, f64::NEG_INFINITY);
-        for (j, v) in col.iter().enumerate() {
-            let v = v.as_f64();
-            if v > best {
-                best = v;
-                at = j;
-            }
-        }
-        peaks[c] = at as i32;
-        values[c] = best;
-    }
-    let threshold = match params.threshold {
+    let selection = select_peaks(&bp, cl, params.threshold);
+    Ok(BackprojectionResult {
+        x: selection.x,
+        peaks: selection.peaks,
+        backprojection: bp,
+        threshold: selection.threshold,
+    })
+}
+
+/// What [`select_peaks`] keeps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeakSelection<T> {
+    /// Each kept column's peak value at its position, zero elsewhere.
+    pub x: Vec<T>,
+    /// Per column: the peak's index, or −1 where there is none or it was thresholded away.
+    pub peaks: Vec<i32>,
+    /// The threshold value applied (0 for [`Threshold::None`]).
+    pub threshold: f64,
+}
+
+/// One return per column: each column's largest value ([`PeakRule::Largest`]), kept when it is
+/// positive and at least the threshold. The threshold's parameters are not checked here (see
+/// [`backprojection`]).
+///
+/// # Panics
+/// If `column_len` is zero or does not divide `values.len()`.
+pub fn select_peaks<T: Real>(
+    values: &[T],
+    column_len: usize,
+    threshold: Threshold,
+) -> PeakSelection<T> {
+    let found = column_peaks(values, column_len, PeakRule::Largest);
+    let threshold = match threshold {
         Threshold::None => f64::NEG_INFINITY,
         Threshold::Absolute(v) => v,
-        Threshold::RelativeToMax(f) => f * values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        Threshold::RelativeToMax(f) => {
+            f * found
+                .iter()
+                .flatten()
+                .map(|p| p.1)
+                .fold(f64::NEG_INFINITY, f64::max)
+        }
         Threshold::Auto { k } => {
-            let mut all: Vec<f64> = bp.iter().map(|v| v.as_f64()).collect();
+            let mut all: Vec<f64> = values.iter().map(|v| v.as_f64()).collect();
             let med = median(&mut all);
             med + k * robust_sigma(&mut all, med)
         }
     };
-    let mut x = vec![T::zero(); n];
-    for c in 0..cols {
-        if values[c] >= threshold && values[c] > 0.0 {
-            x[c * cl + peaks[c] as usize] = T::of_f64(values[c]);
-        } else {
-            peaks[c] = -1;
-        }
-    }
-    Ok(BackprojectionResult {
+    let mut x = vec![T::zero(); values.len()];
+    let peaks = found
+        .iter()
+        .enumerate()
+        .map(|(c, p)| match *p {
+            Some((j, v)) if v >= threshold && v > 0.0 => {
+                x[c * column_len + j] = T::of_f64(v);
+                j as i32
+            }
+            _ => -1,
+        })
+        .collect();
+    PeakSelection {
         x,
         peaks,
-        backprojection: bp,
         threshold: if threshold.is_finite() {
             threshold
         } else {
             0.0
         },
-    })
+    }
 }

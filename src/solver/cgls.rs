@@ -1,11 +1,16 @@
 //! Conjugate gradients on the normal equations (CGLS), with Tikhonov damping.
 
+use std::ops::ControlFlow;
+
+use serde::{Deserialize, Serialize};
+
 use crate::error::{Error, Result};
 use crate::linalg::{axpy, dot};
-use crate::operator::{Counted, LinearOperator};
+use crate::operator::LinearOperator;
 use crate::real::Real;
 
-use super::{check_problem, Monitor, Observer, Report, Stopping, Termination};
+use super::iteration::{fit_scratch, solve, Iteration, Progress};
+use super::{check_problem, Observer, Report, Stopping, Termination};
 
 /// Parameters of [`cgls`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -26,12 +31,155 @@ impl Default for CglsParams {
     }
 }
 
+impl CglsParams {
+    /// Checks λ and the stopping rules.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the field.
+    pub fn validate(&self) -> Result<()> {
+        self.stopping.validate()?;
+        if !(self.damp.is_finite() && self.damp >= 0.0) {
+            return Err(Error::param(
+                "damp",
+                format!("λ must be finite and ≥ 0, got {}", self.damp),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The state of [`cgls`] between iterations: the residual r = y − Ax, the normal-equation
+/// residual s = Aᵀr − λx, the search direction p and its image q = Ap.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CglsIteration<T> {
+    damp: f64,
+    r: Vec<T>,
+    s: Vec<T>,
+    p: Vec<T>,
+    q: Vec<T>,
+    /// ‖s‖² now and at the start.
+    gamma: f64,
+    gamma0: f64,
+    /// The objective at x.
+    objective: f64,
+    #[serde(skip)]
+    scratch: Vec<T>,
+}
+
+impl<T: Real> Iteration<T> for CglsIteration<T> {
+    const NAME: &'static str = "cgls";
+    type Params = CglsParams;
+
+    fn stopping(params: &CglsParams) -> Stopping {
+        params.stopping
+    }
+
+    fn check_params(params: &CglsParams) -> Result<()> {
+        params.validate()
+    }
+
+    fn start<A: LinearOperator<T> + ?Sized>(
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        params: &CglsParams,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        params.validate()?;
+        let (m, n) = (op.nrows(), op.ncols());
+        check_problem(Self::NAME, m, n, y, x)?;
+        let mut scratch = vec![T::zero(); op.scratch_len()];
+        // r = y − Ax, s = Aᵀr − λx, p = s.
+        let mut r = vec![T::zero(); m];
+        op.apply_with_scratch(x, &mut r, &mut scratch);
+        r.iter_mut().zip(y).for_each(|(ri, &yi)| *ri = yi - *ri);
+        let mut s = vec![T::zero(); n];
+        op.apply_adjoint_with_scratch(&r, &mut s, &mut scratch);
+        axpy(T::of_f64(-params.damp), x, &mut s);
+        let gamma = dot(&s, &s);
+        if gamma == 0.0 {
+            return Ok(ControlFlow::Break(Termination::ZeroResidual));
+        }
+        let objective = 0.5 * (dot(&r, &r) + params.damp * dot(x, x));
+        Ok(ControlFlow::Continue(CglsIteration {
+            damp: params.damp,
+            p: s.clone(),
+            q: vec![T::zero(); m],
+            r,
+            s,
+            gamma,
+            gamma0: gamma,
+            objective,
+            scratch,
+        }))
+    }
+
+    fn step<A: LinearOperator<T> + ?Sized>(
+        &mut self,
+        op: &A,
+        _y: &[T],
+        x: &mut [T],
+        it: usize,
+    ) -> Result<Progress> {
+        fit_scratch(&mut self.scratch, op);
+        let lambda = self.damp;
+        op.apply_with_scratch(&self.p, &mut self.q, &mut self.scratch);
+        let pp = dot(&self.p, &self.p);
+        let delta = dot(&self.q, &self.q) + lambda * pp;
+        if !(delta.is_finite() && delta > 0.0) {
+            return Err(Error::Breakdown {
+                solver: Self::NAME,
+                reason: format!("search direction with curvature {delta} at iteration {it}"),
+            });
+        }
+        let alpha = self.gamma / delta;
+        axpy(T::of_f64(alpha), &self.p, x);
+        axpy(T::of_f64(-alpha), &self.q, &mut self.r);
+        op.apply_adjoint_with_scratch(&self.r, &mut self.s, &mut self.scratch);
+        axpy(T::of_f64(-lambda), x, &mut self.s);
+        let gamma_new = dot(&self.s, &self.s);
+        if !gamma_new.is_finite() {
+            return Err(Error::Breakdown {
+                solver: Self::NAME,
+                reason: format!("non-finite residual at iteration {it}"),
+            });
+        }
+        let xx = dot(x, x);
+        let change = if xx > 0.0 {
+            alpha * (pp / xx).sqrt()
+        } else {
+            0.0
+        };
+        self.objective = 0.5 * (dot(&self.r, &self.r) + lambda * xx);
+        if gamma_new > 0.0 {
+            let beta = T::of_f64(gamma_new / self.gamma);
+            self.p
+                .iter_mut()
+                .zip(&self.s)
+                .for_each(|(pi, &si)| *pi = si + beta * *pi);
+        }
+        self.gamma = gamma_new;
+        Ok(Progress {
+            residual: (gamma_new / self.gamma0).sqrt(),
+            objective: self.objective,
+            change,
+            converged: gamma_new == 0.0,
+        })
+    }
+
+    fn objective(&self) -> f64 {
+        self.objective
+    }
+}
+
 /// Solves min ‖Ax − y‖² + λ‖x‖² by CGLS (Hestenes–Stiefel conjugate gradients applied to
 /// (AᵀA + λI)x = Aᵀy without forming AᵀA), starting from `x`.
 ///
 /// Each iteration costs one forward and one adjoint application and a few vector operations;
 /// inner products are accumulated in `f64` whatever `T` is. In exact arithmetic the iterates
 /// minimize the objective over growing Krylov subspaces, so the residual decreases monotonically.
+/// The residual of the [`Stopping`] rules is the normal-equation residual ‖Aᵀ(y − Ax) − λx‖
+/// relative to its value at the initial x; an exactly zero one ends the run as
+/// [`Termination::Converged`] ([`Termination::ZeroResidual`] before the first iteration).
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for a negative or non-finite λ or invalid stopping rules;
@@ -50,78 +198,5 @@ where
     A: LinearOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    const NAME: &str = "cgls";
-    params.stopping.validate()?;
-    if !(params.damp.is_finite() && params.damp >= 0.0) {
-        return Err(Error::param(
-            "damp",
-            format!("λ must be finite and ≥ 0, got {}", params.damp),
-        ));
-    }
-    let (m, n) = (op.nrows(), op.ncols());
-    check_problem(NAME, m, n, y, x)?;
-    let op = Counted::new(op);
-    let lambda = params.damp;
-    let lam_t = T::of_f64(lambda);
-    let mut scratch = vec![T::zero(); op.scratch_len()];
-    let mut monitor = Monitor::new(NAME, params.stopping, observer);
-
-    // r = y − Ax, s = Aᵀr − λx, p = s.
-    let mut r = vec![T::zero(); m];
-    op.apply_with_scratch(x, &mut r, &mut scratch);
-    r.iter_mut().zip(y).for_each(|(ri, &yi)| *ri = yi - *ri);
-    let mut s = vec![T::zero(); n];
-    op.apply_adjoint_with_scratch(&r, &mut s, &mut scratch);
-    axpy(-lam_t, x, &mut s);
-    let mut p = s.clone();
-    let mut q = vec![T::zero(); m];
-    let mut gamma = dot(&s, &s);
-    let gamma0 = gamma;
-    if gamma0 == 0.0 {
-        return Ok(monitor.finish(0, Termination::ZeroResidual, &op));
-    }
-    let mut it = 0;
-    loop {
-        it += 1;
-        op.apply_with_scratch(&p, &mut q, &mut scratch);
-        let pp = dot(&p, &p);
-        let delta = dot(&q, &q) + lambda * pp;
-        if !(delta.is_finite() && delta > 0.0) {
-            return Err(Error::Breakdown {
-                solver: NAME,
-                reason: format!("search direction with curvature {delta} at iteration {it}"),
-            });
-        }
-        let alpha = gamma / delta;
-        axpy(T::of_f64(alpha), &p, x);
-        axpy(T::of_f64(-alpha), &q, &mut r);
-        op.apply_adjoint_with_scratch(&r, &mut s, &mut scratch);
-        axpy(-lam_t, x, &mut s);
-        let gamma_new = dot(&s, &s);
-        if !gamma_new.is_finite() {
-            return Err(Error::Breakdown {
-                solver: NAME,
-                reason: format!("non-finite residual at iteration {it}"),
-            });
-        }
-        let xx = dot(x, x);
-        let change = if xx > 0.0 {
-            alpha * (pp / xx).sqrt()
-        } else {
-            0.0
-        };
-        let objective = 0.5 * (dot(&r, &r) + lambda * xx);
-        let residual = (gamma_new / gamma0).sqrt();
-        if let Some(t) = monitor.step(it, residual, objective, change, x) {
-            return Ok(monitor.finish(it, t, &op));
-        }
-        if gamma_new == 0.0 {
-            return Ok(monitor.finish(it, Termination::Converged, &op));
-        }
-        let beta = T::of_f64(gamma_new / gamma);
-        p.iter_mut()
-            .zip(&s)
-            .for_each(|(pi, &si)| *pi = si + beta * *pi);
-        gamma = gamma_new;
-    }
+    solve::<T, A, O, CglsIteration<T>>(op, y, x, params, observer)
 }

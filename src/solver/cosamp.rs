@@ -82,7 +82,7 @@ fn union(a: &[usize], b: &[usize]) -> Vec<usize> {
 /// The state of [`cosamp`] between iterations: the forward product and residual of x, its
 /// support and the proxy.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub(super) struct CosampIteration<T> {
+pub struct CosampIteration<T> {
     sparsity: usize,
     fixed_point_tol: f64,
     /// The damping and the stopping rules of the inner [`CglsParams`].
@@ -107,6 +107,11 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
 
     fn stopping(params: &CosampParams) -> Stopping {
         params.stopping
+    }
+
+    fn check_params(params: &CosampParams) -> Result<()> {
+        params.validate_settings()?;
+        super::check_nonzero_sparsity(params.sparsity)
     }
 
     fn start<A: LinearOperator<T> + ?Sized>(

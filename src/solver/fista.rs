@@ -6,7 +6,7 @@ use std::ops::ControlFlow;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::linalg::{norm2, norm_inf};
+use crate::linalg::{dist2_sq, norm2, norm_inf};
 use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 
@@ -180,11 +180,7 @@ impl<T: Real> Lasso<T> {
 
     /// ½‖Ax − y‖² + λ‖x‖₁, from x and Ax.
     fn objective(&self, y: &[T], x: &[T], ax: &[T]) -> f64 {
-        let fit: f64 = ax
-            .iter()
-            .zip(y)
-            .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-            .sum();
+        let fit: f64 = dist2_sq(ax, y);
         let l1: f64 = x.iter().map(|v| v.as_f64().abs()).sum();
         0.5 * fit + self.lambda * l1
     }
@@ -227,18 +223,8 @@ impl<T: Real> Lasso<T> {
                 return Ok(());
             };
             // ‖A(p − z)‖ ≤ √L ‖p − z‖, with a slack for the rounding of Ap and Az.
-            let ad = ap
-                .iter()
-                .zip(az)
-                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            let d = p
-                .iter()
-                .zip(z)
-                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-                .sum::<f64>()
-                .sqrt();
+            let ad = dist2_sq(ap, az).sqrt();
+            let d = dist2_sq(p, z).sqrt();
             let slack = 4.0 * T::EPS * (norm2(ap) + norm2(az));
             if ad <= self.l.sqrt() * d + slack {
                 return Ok(());
@@ -270,7 +256,7 @@ enum RestartDef {
 /// The state of [`fista`] between iterations: the lasso, the previous iterate, the extrapolated
 /// point z, the forward products of all three, and the momentum.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub(super) struct FistaIteration<T> {
+pub struct FistaIteration<T> {
     lasso: Lasso<T>,
     #[serde(with = "RestartDef")]
     restart: Restart,
@@ -295,6 +281,10 @@ impl<T: Real> Iteration<T> for FistaIteration<T> {
 
     fn stopping(params: &FistaParams) -> Stopping {
         params.stopping
+    }
+
+    fn check_params(params: &FistaParams) -> Result<()> {
+        params.validate()
     }
 
     fn start<A: LinearOperator<T> + ?Sized>(
@@ -424,14 +414,7 @@ impl<T: Real> Iteration<T> for FistaIteration<T> {
         self.momentum = beta > 0.0;
         extrapolate(&mut self.z, x, &self.x_prev, beta);
         extrapolate(&mut self.az, &self.ax, &self.ax_prev, beta);
-        let residual = self
-            .ax
-            .iter()
-            .zip(y)
-            .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-            .sum::<f64>()
-            .sqrt()
-            / self.ynorm;
+        let residual = dist2_sq(&self.ax, y).sqrt() / self.ynorm;
         Ok(Progress {
             residual,
             objective: self.f_x,

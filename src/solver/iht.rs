@@ -5,7 +5,7 @@ use std::ops::ControlFlow;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::linalg::{dot, norm2};
+use crate::linalg::{dist2_sq, dot, norm2};
 use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 
@@ -124,7 +124,7 @@ fn normalized_step<T: Real, A: LinearOperator<T> + ?Sized>(
 /// The state of [`iht`] between iterations: the forward product and residual of x, its support,
 /// the gradient, and the buffers of the step.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub(super) struct IhtIteration<T> {
+pub struct IhtIteration<T> {
     sparsity: usize,
     /// μ = 1/L of [`IhtStep::PowerIteration`]; `None` for the normalized step.
     fixed_mu: Option<f64>,
@@ -151,6 +151,11 @@ impl<T: Real> Iteration<T> for IhtIteration<T> {
 
     fn stopping(params: &IhtParams) -> Stopping {
         params.stopping
+    }
+
+    fn check_params(params: &IhtParams) -> Result<()> {
+        params.validate_settings()?;
+        super::check_nonzero_sparsity(params.sparsity)
     }
 
     fn start<A: LinearOperator<T> + ?Sized>(
@@ -250,18 +255,8 @@ impl<T: Real> Iteration<T> for IhtIteration<T> {
             if new_supp == *gamma {
                 break new_supp;
             }
-            let dx: f64 = self
-                .xn
-                .iter()
-                .zip(x.iter())
-                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-                .sum();
-            let adx: f64 = self
-                .axn
-                .iter()
-                .zip(&self.ax)
-                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-                .sum();
+            let dx: f64 = dist2_sq(&self.xn, x);
+            let adx: f64 = dist2_sq(&self.axn, &self.ax);
             let omega = if adx > 0.0 {
                 (1.0 - C) * dx / adx
             } else {

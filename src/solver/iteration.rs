@@ -1,7 +1,8 @@
-//! The iteration of a sparse solver as a value: set up once, then stepped. The native solvers
-//! ([`fista`](super::fista), [`iht`](super::iht), [`cosamp`](super::cosamp)) drive it with a
-//! [`Monitor`]; their argmin drivers step the same value from `next_iter`, so both perform the
-//! same arithmetic.
+//! The iteration protocol: an iterative solver's state as a value, set up once from the warm
+//! start, then stepped. [`solve`] is the one loop that owns the stopping rules, the observer and
+//! the report of every native solver ([`cgls`](super::cgls), [`fista`](super::fista),
+//! [`iht`](super::iht), [`cosamp`](super::cosamp)); [`ArgminSolver`](super::ArgminSolver) steps
+//! the same value from argmin's `next_iter`, so both drivers perform the same arithmetic.
 
 use std::ops::ControlFlow;
 use std::time::Duration;
@@ -16,7 +17,7 @@ use super::{Monitor, Observer, Report, Stagnation, Stopping, Termination};
 
 /// What one iteration reports.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Progress {
+pub struct Progress {
     /// ‖Ax − y‖ / ‖y‖.
     pub residual: f64,
     /// The solver's objective.
@@ -27,15 +28,22 @@ pub(super) struct Progress {
     pub converged: bool,
 }
 
-/// A solver's state between iterations.
-pub(super) trait Iteration<T: Real>: Sized {
+/// A solver's state between iterations: the protocol every iterative solver of this module
+/// implements.
+pub trait Iteration<T: Real>: Sized {
     /// The solver's name in reports and errors.
     const NAME: &'static str;
     /// The solver's parameters.
-    type Params;
+    type Params: Clone + std::fmt::Debug;
 
     /// The stopping rules in `params`.
     fn stopping(params: &Self::Params) -> Stopping;
+
+    /// Checks what can be checked of `params` without the operator.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the field.
+    fn check_params(params: &Self::Params) -> Result<()>;
 
     /// Validates the inputs and prepares the first iteration from the warm start `x` (which it
     /// may modify). Ends the run at once (`Break`) when there is nothing to iterate.
@@ -67,7 +75,10 @@ pub(super) trait Iteration<T: Real>: Sized {
 
 /// The native loop: `prepare`, `step`, and the [`Stopping`] rules with the observer, until one
 /// of them ends the run. The solver's own convergence takes precedence over the iteration limit.
-pub(super) fn solve<T, A, O, I>(
+///
+/// # Errors
+/// Those of the iteration's `start` and `step`.
+pub fn solve<T, A, O, I>(
     op: &A,
     y: &[T],
     x: &mut [T],

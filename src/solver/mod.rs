@@ -13,8 +13,7 @@
 //! Reaching the iteration limit is a termination reason, not an error; invalid parameters,
 //! mismatched shapes, non-finite data and numerical breakdowns are [`Error`]s.
 
-mod argmin_cgls;
-mod argmin_sparse;
+mod argmin;
 mod backprojection;
 mod cgls;
 mod cosamp;
@@ -28,13 +27,17 @@ mod tv;
 
 use std::time::{Duration, Instant};
 
-pub use argmin_cgls::{ArgminCgls, CglsState, LinearLeastSquares};
-pub use argmin_sparse::{ArgminCosamp, ArgminFista, ArgminIht, SparseState};
-pub use backprojection::{backprojection, Backprojection, BackprojectionResult, Threshold};
-pub use cgls::{cgls, CglsParams};
-pub use cosamp::{cosamp, CosampParams};
-pub use fista::{fista, FistaParams, Lambda, Restart, StepRule};
-pub use iht::{iht, IhtParams, IhtStep};
+pub use argmin::{
+    ArgminCgls, ArgminCosamp, ArgminFista, ArgminIht, ArgminSolver, ArgminState, LinearLeastSquares,
+};
+pub use backprojection::{
+    backprojection, select_peaks, Backprojection, BackprojectionResult, PeakSelection, Threshold,
+};
+pub use cgls::{cgls, CglsIteration, CglsParams};
+pub use cosamp::{cosamp, CosampIteration, CosampParams};
+pub use fista::{fista, FistaIteration, FistaParams, Lambda, Restart, StepRule};
+pub use iht::{iht, IhtIteration, IhtParams, IhtStep};
+pub use iteration::{solve, Iteration, Progress};
 pub use pixelwise::{
     model_based, reflector_amp, tv_depth, ModelBasedParams, ReflectorAmpParams, TvDepthParams,
 };
@@ -43,7 +46,7 @@ pub use progress::ProgressObserver;
 pub use tv::{tv_denoise, TvNorm, TvParams, TvSteps};
 
 use crate::error::{Error, Result};
-use crate::linalg::dot;
+use crate::linalg::{dist2_sq, dot};
 use crate::operator::Counted;
 use crate::operator::{operator_norm, PowerIteration};
 use crate::real::Real;
@@ -211,6 +214,21 @@ pub struct Report {
     pub elapsed: Duration,
 }
 
+impl Report {
+    /// Appends a later run to this one: counts, histories and time are added, the termination
+    /// and the solver's name become the later run's.
+    pub fn absorb(&mut self, later: Report) {
+        self.solver = later.solver;
+        self.iterations += later.iterations;
+        self.termination = later.termination;
+        self.residual_history.extend(later.residual_history);
+        self.objective_history.extend(later.objective_history);
+        self.forward_applies += later.forward_applies;
+        self.adjoint_applies += later.adjoint_applies;
+        self.elapsed += later.elapsed;
+    }
+}
+
 /// The shared bookkeeping of an iterative run: histories, stopping rules, the observer.
 pub(crate) struct Monitor<'o, T, O: Observer<T> + ?Sized> {
     solver: &'static str,
@@ -356,19 +374,12 @@ pub(crate) fn misfit<T: Real, A: crate::operator::LinearOperator<T> + ?Sized>(
 ) -> f64 {
     let mut ax = vec![T::zero(); y.len()];
     op.apply(x, &mut ax);
-    y.iter()
-        .zip(&ax)
-        .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
-        .sum()
+    dist2_sq(y, &ax)
 }
 
 /// ‖x − prev‖ / ‖x‖ accumulated in `f64`: 0 when the two are equal, +∞ when only `x` is zero.
 pub(crate) fn relative_change<T: Real>(x: &[T], prev: &[T]) -> f64 {
-    let d: f64 = x
-        .iter()
-        .zip(prev)
-        .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
-        .sum();
+    let d: f64 = dist2_sq(x, prev);
     let xx = dot(x, x);
     if d == 0.0 {
         0.0
@@ -480,6 +491,14 @@ pub(crate) fn check_tolerance(name: &'static str, value: f64) -> Result<()> {
             name,
             format!("must be a finite number ≥ 0, got {value}"),
         ));
+    }
+    Ok(())
+}
+
+/// The part of the sparsity check that needs no operator.
+pub(crate) fn check_nonzero_sparsity(sparsity: usize) -> Result<()> {
+    if sparsity == 0 {
+        return Err(Error::param("sparsity", "must be at least 1, got 0"));
     }
     Ok(())
 }

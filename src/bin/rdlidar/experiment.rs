@@ -114,7 +114,6 @@ fn parse_budgets(text: &str) -> Result<IterationBudgets, String> {
     IterationBudgets::parse(text).map_err(|e| e.to_string())
 }
 
-
 /// The two experiments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Experiment {

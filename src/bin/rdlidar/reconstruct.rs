@@ -76,7 +76,6 @@ fn parse_method(text: &str) -> Result<Method, String> {
     })
 }
 
-
 /// Runs `reconstruct`.
 pub fn run(a: &ReconstructArgs, globals: &Globals) -> CliResult {
     check_out_file(&a.out_depth)?;

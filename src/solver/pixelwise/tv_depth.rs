@@ -4,6 +4,7 @@
 use ndarray::Array2;
 
 use crate::error::{Error, Result};
+use crate::linalg::{column_peaks, PeakRule};
 use crate::real::Real;
 
 use rayon::prelude::*;
@@ -198,31 +199,6 @@ fn changed_fraction<T: Real>(a: &[T], b: &[T], ks: usize) -> f64 {
     changed as f64 / pixels.max(1) as f64
 }
 
-/// Adds the counts and histories of `more` to `report`.
-fn absorb(report: &mut Report, more: Report) {
-    report.iterations += more.iterations;
-    report.forward_applies += more.forward_applies;
-    report.adjoint_applies += more.adjoint_applies;
-    report.residual_history.extend(more.residual_history);
-    report.objective_history.extend(more.objective_history);
-    report.termination = more.termination;
-    report.elapsed += more.elapsed;
-}
-
-/// Per pixel of `x` (pixels of `ks` entries): the depth and amplitude of its largest positive
-/// entry, if any.
-fn peaks<T: Real>(x: &[T], ks: usize) -> Vec<Option<(usize, f64)>> {
-    x.chunks(ks)
-        .map(|c| {
-            c.iter()
-                .enumerate()
-                .map(|(j, v)| (j, v.as_f64()))
-                .filter(|(_, v)| *v > 0.0)
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-        })
-        .collect()
-}
-
 /// Recovers a scene with one reflector per pixel whose depth map is piecewise smooth: the
 /// regularization acts on the M×N depth map, not on the voxel cube.
 ///
@@ -350,7 +326,7 @@ where
                 }
                 let priors = neighbour_priors(&post, grid, ks, &hood);
                 let (more, p) = reflector_amp_run(op, y, x, &capped, None, Some(&priors), &mut ())?;
-                absorb(&mut rep, more);
+                rep.absorb(more);
                 post = p;
                 if changed_fraction(x, &last, ks) <= params.neighbour_change {
                     break;
@@ -362,7 +338,7 @@ where
     }
     let mut report = model_based_in(op, y, x, &params.model, None, observer)?;
     if let Some(mut first) = start {
-        absorb(&mut first, report);
+        first.absorb(report);
         report = first;
     }
     if report.termination == Termination::Residual {
@@ -378,7 +354,7 @@ where
     let mut fit_before = misfit(op, y, x);
     report.forward_applies += 1;
     for _ in 0..params.rounds {
-        let found = peaks(x, ks);
+        let found = column_peaks(x, ks, PeakRule::LargestPositive);
         let amax = found.iter().flatten().map(|p| p.1).fold(0.0, f64::max);
         if amax == 0.0 {
             break;
@@ -422,7 +398,7 @@ where
             }
         }
         let r = model_based_in(op, y, x, &windowed, Some(&windows), observer)?;
-        absorb(&mut report, r);
+        report.absorb(r);
         // The windows are a heuristic: a windowed fit that lost what the previous one had found
         // (more than doubling the squared residual) is undone. Smaller increases are expected
         // in noise, where dropping false detections leaves more of the noise unexplained.

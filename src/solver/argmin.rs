@@ -1,0 +1,339 @@
+//! Every iterative solver of the [`Iteration`] protocol driven by argmin's `Executor`, so that
+//! argmin's observers, time limits and checkpointing apply: one adapter, [`ArgminSolver`], whose
+//! `next_iter` steps the native solver's iteration (the same code, so the iterates agree to the
+//! last bit).
+
+use std::collections::VecDeque;
+use std::ops::ControlFlow;
+
+use argmin::core::{IterState, Problem, Solver, State, TerminationReason, TerminationStatus, KV};
+use serde::{Deserialize, Serialize};
+
+use crate::error::Error;
+use crate::linalg::norm2_sq;
+use crate::operator::{Counted, LinearOperator};
+use crate::real::Real;
+
+use super::iteration::{Iteration, Progress, StoppingRecord};
+use super::{CglsIteration, CosampIteration, FistaIteration, IhtIteration, Stopping};
+
+/// The least-squares data term ½‖Ax − y‖² of a problem, as an argmin problem. Each solver adds
+/// its own terms through its parameters (CGLS its damping λ‖x‖², FISTA its ℓ1 penalty, IHT and
+/// CoSaMP their sparsity constraint).
+#[derive(Debug, Clone, Copy)]
+pub struct LinearLeastSquares<'a, T, A: ?Sized> {
+    /// The operator A.
+    pub op: &'a A,
+    /// The measurements y.
+    pub y: &'a [T],
+}
+
+/// The argmin state of an [`ArgminSolver`]: the parameter is the iterate x, the cost the
+/// solver's objective.
+pub type ArgminState<T> = IterState<Vec<T>, (), (), (), (), f64>;
+
+/// The operator and the measurements of the problem.
+fn operands<'a, T, A: ?Sized>(
+    problem: &Problem<LinearLeastSquares<'a, T, A>>,
+) -> Result<(&'a A, &'a [T]), Error> {
+    let lls = problem
+        .problem
+        .as_ref()
+        .ok_or_else(|| Error::param("problem", "missing"))?;
+    Ok((lls.op, lls.y))
+}
+
+/// Adds `forward` and `adjoint` applications of the operator to argmin's per-problem counters
+/// (`operator_forward`, `operator_adjoint`).
+fn count_applies<O>(problem: &mut Problem<O>, forward: usize, adjoint: usize) {
+    for (name, applies) in [("operator_forward", forward), ("operator_adjoint", adjoint)] {
+        *problem.counts.entry(name).or_insert(0) += applies as u64;
+    }
+}
+
+/// The native solver's convergence rules, apart from its limits (`max_iter` and `time_limit`
+/// are left to the executor).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Rules {
+    stopping: StoppingRecord,
+    /// The last `window + 1` objectives, for the stagnation rule.
+    objectives: VecDeque<f64>,
+}
+
+impl Rules {
+    /// Records an iteration; `true` when the solver's own test or one of the residual, change and
+    /// stagnation rules holds.
+    fn met(&mut self, p: &Progress) -> bool {
+        let mut stagnated = false;
+        if let Some((rel, window)) = self.stopping.stagnation {
+            self.objectives.push_back(p.objective);
+            if self.objectives.len() > window + 1 {
+                self.objectives.pop_front();
+            }
+            if let (true, Some(&old), Some(&new)) = (
+                self.objectives.len() == window + 1,
+                self.objectives.front(),
+                self.objectives.back(),
+            ) {
+                stagnated = (old - new) <= rel * old.abs().max(f64::MIN_POSITIVE);
+            }
+        }
+        p.converged
+            || stagnated
+            || self.stopping.rel_residual.is_some_and(|t| p.residual <= t)
+            || self.stopping.rel_change.is_some_and(|t| p.change <= t)
+    }
+}
+
+/// The part of an argmin solver that steps a native iteration.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Driver<I> {
+    rules: Rules,
+    /// `None` before `init`, and after an `init` that found nothing to iterate.
+    iteration: Option<I>,
+    /// Whether [`Iteration::prepare`] has run for the next update.
+    prepared: bool,
+    /// Whether the run has converged.
+    converged: bool,
+}
+
+impl<I> Driver<I> {
+    fn new(stopping: Stopping) -> Self {
+        Driver {
+            rules: Rules {
+                stopping: stopping.into(),
+                objectives: VecDeque::new(),
+            },
+            iteration: None,
+            prepared: false,
+            converged: false,
+        }
+    }
+
+    fn init<'a, T, A>(
+        &mut self,
+        params: Option<&I::Params>,
+        problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
+        mut state: ArgminState<T>,
+    ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error>
+    where
+        T: Real,
+        A: LinearOperator<T> + ?Sized,
+        I: Iteration<T>,
+    {
+        let mut x = state.take_param().ok_or_else(|| {
+            Error::param(
+                "param",
+                format!("{} needs an initial x (configure `param`)", I::NAME),
+            )
+        })?;
+        let (op, y) = operands(problem)?;
+        let params = params.ok_or_else(|| {
+            Error::param(
+                "params",
+                "the parameters are not serialized: a deserialized solver can only resume a run",
+            )
+        })?;
+        let op = Counted::new(op);
+        let started = I::start(&op, y, &mut x, params);
+        let cost = match started {
+            Ok(ControlFlow::Continue(mut iteration)) => {
+                // The work before the first update, unless the executor allows no iteration.
+                self.prepared = state.get_iter() < state.get_max_iters();
+                self.converged = self.prepared && iteration.prepare(&op);
+                let cost = iteration.objective();
+                self.iteration = Some(iteration);
+                Ok(cost)
+            }
+            // Zero measurements or a zero operator: x is a solution and Ax = 0, so the objective
+            // is ½‖y‖².
+            Ok(ControlFlow::Break(_)) => {
+                self.converged = true;
+                Ok(0.5 * norm2_sq(y))
+            }
+            Err(e) => Err(e),
+        };
+        count_applies(problem, op.forward_count(), op.adjoint_count());
+        Ok((state.param(x).cost(cost?), None))
+    }
+
+    /// Iteration `iter + 1` (the executor has completed `iter`), updating `x`. `None` when the
+    /// work before the update shows that x is a solution already, which can only happen when a
+    /// run continues past the iteration limit it was prepared for (the work is then done here,
+    /// and the executor counts one iteration more than the native solver would).
+    fn advance<T, A>(
+        &mut self,
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        iter: u64,
+        max_iters: u64,
+    ) -> Result<Option<Progress>, Error>
+    where
+        T: Real,
+        A: LinearOperator<T> + ?Sized,
+        I: Iteration<T>,
+    {
+        let iteration = self
+            .iteration
+            .as_mut()
+            .ok_or_else(|| Error::param("state", "no iteration to continue"))?;
+        if !self.prepared && iteration.prepare(op) {
+            self.converged = true;
+            return Ok(None);
+        }
+        let p = iteration.step(op, y, x, (iter + 1) as usize)?;
+        self.converged = self.rules.met(&p);
+        // Like the native solver, prepare the next update only when there is one.
+        self.prepared = !self.converged && iter + 1 < max_iters;
+        if self.prepared {
+            self.converged = iteration.prepare(op);
+        }
+        Ok(Some(p))
+    }
+
+    fn next_iter<'a, T, A>(
+        &mut self,
+        problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
+        mut state: ArgminState<T>,
+    ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error>
+    where
+        T: Real,
+        A: LinearOperator<T> + ?Sized,
+        I: Iteration<T>,
+    {
+        let mut x = state
+            .take_param()
+            .ok_or_else(|| Error::param("param", "no current x"))?;
+        let (op, y) = operands(problem)?;
+        let op = Counted::new(op);
+        let advanced = self.advance(&op, y, &mut x, state.get_iter(), state.get_max_iters());
+        count_applies(problem, op.forward_count(), op.adjoint_count());
+        match advanced? {
+            Some(p) => {
+                let kv = argmin::kv!("residual" => p.residual; "change" => p.change;);
+                Ok((state.param(x).cost(p.objective), Some(kv)))
+            }
+            None => Ok((
+                state
+                    .param(x)
+                    .terminate_with(TerminationReason::SolverConverged),
+                None,
+            )),
+        }
+    }
+
+    fn terminate(&self) -> TerminationStatus {
+        if self.converged {
+            TerminationStatus::Terminated(TerminationReason::SolverConverged)
+        } else {
+            TerminationStatus::NotTerminated
+        }
+    }
+}
+
+/// A native iterative solver (any [`Iteration`]) as an argmin [`Solver`] on a
+/// [`LinearLeastSquares`] problem, one native iteration per `next_iter`.
+///
+/// `init` does what the native solver does before its first iteration (e.g. FISTA's λ from
+/// ‖Aᵀy‖∞ and its power iteration, the pruning of a greedy solver's warm start) and `next_iter`
+/// one iteration with the same arithmetic, so the iterates are those of the native solver. The
+/// work an iteration starts from (a gradient or proxy) is done at the end of the previous one
+/// only when the executor allows another iteration, so the apply counts added to argmin's
+/// counters `operator_forward` and `operator_adjoint` equal the native solver's. The cost is the
+/// solver's objective; the key-value log has the relative residual (`residual`) and the relative
+/// change of x (`change`).
+///
+/// The run ends with `SolverConverged` when the solver's own convergence test or a residual,
+/// change or stagnation rule of its [`Stopping`] holds, or after `init` when the native solver
+/// would not iterate (y = 0, a zero operator). `stopping.max_iter` and `stopping.time_limit` are
+/// not used: the executor's `max_iters` and `timeout` limit the run. The solver is serializable
+/// for argmin's checkpoints; its parameters are only needed by `init` and are not serialized, so
+/// a deserialized solver resumes a run but cannot start one.
+///
+/// # Example
+/// ```
+/// use argmin::core::{Executor, State};
+/// use rdlidar::operator::DenseMatrix;
+/// use rdlidar::solver::{ArgminFista, FistaParams, Lambda, LinearLeastSquares};
+///
+/// let a = DenseMatrix::new(ndarray::array![[1.0, 0.0], [0.0, 1.0]]).unwrap();
+/// let y = [3.0, 0.5];
+/// let problem = LinearLeastSquares { op: &a, y: &y };
+/// let params = FistaParams { lambda: Lambda::Absolute(1.0), ..FistaParams::default() };
+/// let result = Executor::new(problem, ArgminFista::new(params).unwrap())
+///     .configure(|s| s.param(vec![0.0, 0.0]).max_iters(100))
+///     .run()
+///     .unwrap();
+/// // Soft thresholding of y at λ = 1.
+/// let x: &Vec<f64> = result.state().get_param().unwrap();
+/// assert!((x[0] - 2.0).abs() < 1e-6 && x[1] == 0.0);
+/// ```
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(bound(serialize = "I: Serialize", deserialize = "I: Deserialize<'de>"))]
+pub struct ArgminSolver<T, I: Iteration<T>>
+where
+    T: Real,
+{
+    #[serde(skip)]
+    params: Option<I::Params>,
+    driver: Driver<I>,
+    #[serde(skip)]
+    _t: std::marker::PhantomData<T>,
+}
+
+impl<T: Real, I: Iteration<T>> ArgminSolver<T, I> {
+    /// A solver with these parameters.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for parameters the native solver rejects; what needs the
+    /// operator (e.g. a sparsity above the number of unknowns) is reported by `init`.
+    pub fn new(params: I::Params) -> Result<Self, Error> {
+        I::check_params(&params)?;
+        Ok(ArgminSolver {
+            driver: Driver::new(I::stopping(&params)),
+            params: Some(params),
+            _t: std::marker::PhantomData,
+        })
+    }
+}
+
+impl<'a, T, A, I> Solver<LinearLeastSquares<'a, T, A>, ArgminState<T>> for ArgminSolver<T, I>
+where
+    T: Real,
+    A: LinearOperator<T> + ?Sized,
+    I: Iteration<T>,
+{
+    fn name(&self) -> &str {
+        I::NAME
+    }
+
+    fn init(
+        &mut self,
+        problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
+        state: ArgminState<T>,
+    ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error> {
+        self.driver.init(self.params.as_ref(), problem, state)
+    }
+
+    fn next_iter(
+        &mut self,
+        problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
+        state: ArgminState<T>,
+    ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error> {
+        self.driver.next_iter(problem, state)
+    }
+
+    fn terminate(&mut self, _state: &ArgminState<T>) -> TerminationStatus {
+        self.driver.terminate()
+    }
+}
+
+/// CGLS ([`cgls`](super::cgls)) for argmin.
+pub type ArgminCgls<T> = ArgminSolver<T, CglsIteration<T>>;
+/// FISTA ([`fista`](super::fista)) for argmin.
+pub type ArgminFista<T> = ArgminSolver<T, FistaIteration<T>>;
+/// IHT ([`iht`](super::iht)) for argmin.
+pub type ArgminIht<T> = ArgminSolver<T, IhtIteration<T>>;
+/// CoSaMP ([`cosamp`](super::cosamp)) for argmin.
+pub type ArgminCosamp<T> = ArgminSolver<T, CosampIteration<T>>;
