@@ -1,0 +1,365 @@
+//! Reading the interchange arrays, checked against each other.
+
+use std::path::Path;
+
+use ndarray::{Array2, ArrayD, Ix1, Ix2, Ix3};
+
+use crate::error::{Error, Result};
+use crate::lidar::{Codes, Pulse, Scene};
+use crate::real::Real;
+
+use super::super::file_error;
+use super::{
+    check_ndim, first_bad, index_text, into_dim, open_npy, read_data, read_real, shape_text,
+    wrong_dtype, NpyDtype,
+};
+
+/// Reads a scene: a float32 or float64 array of shape (M, N, K_s), converted to `T`.
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype, another number of dimensions, an empty axis, or a NaN or infinite value (named by its
+/// index).
+pub fn read_scene<T: Real>(path: impl AsRef<Path>) -> Result<Scene<T>> {
+    let path = path.as_ref();
+    let a = into_dim::<T, Ix3>(path, read_real(path, "a scene", 3, "(M, N, K_s)")?)?;
+    Scene::new(a).map_err(|e| file_error(path, e.to_string()))
+}
+
+/// Reads a pulse: a float32 or float64 vector of length K_p, converted to `T`, nonnegative and not
+/// all zero.
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype or number of dimensions, an empty pulse, a NaN, infinite or negative value (named by its
+/// index), or an all-zero pulse.
+pub fn read_pulse<T: Real>(path: impl AsRef<Path>) -> Result<Pulse<T>> {
+    let path = path.as_ref();
+    let a = into_dim::<T, Ix1>(path, read_real(path, "a pulse", 1, "(K_p,)")?)?;
+    if let Some((i, v)) = a.indexed_iter().find(|(_, v)| **v < T::zero()) {
+        return Err(file_error(
+            path,
+            format!(
+                "pulse value {v} at index {i} is negative: a pulse is light intensity, which \
+                 must be ≥ 0"
+            ),
+        ));
+    }
+    if a.iter().all(|v| *v == T::zero()) {
+        return Err(file_error(
+            path,
+            format!(
+                "pulse is all zero ({} samples): nothing is transmitted",
+                a.len()
+            ),
+        ));
+    }
+    Pulse::new(a.into_raw_vec_and_offset().0).map_err(|e| file_error(path, e.to_string()))
+}
+
+/// Reads measurements: a float32 or float64 vector, converted to `T`.
+///
+/// With `expect`, the length must be K = K_p + K_s − 1.
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype or number of dimensions, a length other than K, or a NaN or infinite value (named by its
+/// index).
+pub fn read_measurements<T: Real>(
+    path: impl AsRef<Path>,
+    expect: Option<&ShapeExpectation>,
+) -> Result<Vec<T>> {
+    let path = path.as_ref();
+    // The length is checked from the header, before reading the data.
+    if let Some(e) = expect {
+        let h = open_npy(path)?.header;
+        let k = e.samples();
+        if matches!(h.dtype, NpyDtype::Float32 | NpyDtype::Float64)
+            && h.shape.len() == 1
+            && h.shape[0] != k
+        {
+            return Err(file_error(
+                path,
+                format!(
+                    "measurements have {} samples, expected K = K_p + K_s − 1 = {} + {} − 1 = \
+                     {k} (pulse length {}, {} depth bins)",
+                    h.shape[0], e.pulse_len, e.depth_bins, e.pulse_len, e.depth_bins
+                ),
+            ));
+        }
+    }
+    let a = into_dim::<T, Ix1>(path, read_real(path, "measurements", 1, "(K,)")?)?;
+    Ok(a.into_raw_vec_and_offset().0)
+}
+
+/// Reads the measurements of several ADCs (one per code set, or one per tile of the array): a
+/// float32 or float64 array of shape (R, K), row r holding the K samples of ADC r, converted to
+/// `T`.
+///
+/// Only two-dimensional files are accepted; the (K,) measurements of one ADC are read by
+/// [`read_measurements`]. With `expect`, the row length must be K = K_p + K_s − 1; with `rows`,
+/// there must be that many rows.
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype or number of dimensions, an empty axis, a row length other than K, a number of rows other
+/// than `rows`, or a NaN or infinite value (named by its index).
+pub fn read_measurement_rows<T: Real>(
+    path: impl AsRef<Path>,
+    expect: Option<&ShapeExpectation>,
+    rows: Option<usize>,
+) -> Result<Array2<T>> {
+    let path = path.as_ref();
+    let role = "measurements";
+    // The shape is checked from the header, before reading the data.
+    let h = open_npy(path)?.header;
+    if !matches!(h.dtype, NpyDtype::Float32 | NpyDtype::Float64) {
+        return Err(wrong_dtype(path, role, &h.dtype, "float32 or float64"));
+    }
+    check_ndim(path, role, &h, 2, "(ADCs, K), one row per ADC")?;
+    if let Some(e) = expect {
+        let k = e.samples();
+        if h.shape[1] != k {
+            return Err(file_error(
+                path,
+                format!(
+                    "measurements shape {} has rows of {} samples, expected K = K_p + K_s − 1 = \
+                     {} + {} − 1 = {k} (pulse length {}, {} depth bins)",
+                    shape_text(&h.shape),
+                    h.shape[1],
+                    e.pulse_len,
+                    e.depth_bins,
+                    e.pulse_len,
+                    e.depth_bins
+                ),
+            ));
+        }
+    }
+    if let Some(r) = rows {
+        if h.shape[0] != r {
+            return Err(file_error(
+                path,
+                format!(
+                    "measurements shape {} has {} rows, expected {r} (one per ADC)",
+                    shape_text(&h.shape),
+                    h.shape[0]
+                ),
+            ));
+        }
+    }
+    into_dim::<T, Ix2>(
+        path,
+        read_real(path, role, 2, "(ADCs, K), one row per ADC")?,
+    )
+}
+
+/// What codes and measurements must fit: the pulse length, the depth bins and, when a scene is
+/// given, its grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShapeExpectation {
+    /// K_p, the pulse length.
+    pub pulse_len: usize,
+    /// K_s, the depth bins.
+    pub depth_bins: usize,
+    /// (M, N) of the scene, if known.
+    pub grid: Option<(usize, usize)>,
+}
+
+impl ShapeExpectation {
+    /// K = K_p + K_s − 1.
+    pub fn samples(&self) -> usize {
+        self.pulse_len
+            .saturating_add(self.depth_bins)
+            .saturating_sub(1)
+    }
+}
+
+/// Reads codes: an int8 (or float32/float64) array of shape (M, N, K) with values in {−1, 0, 1},
+/// K = K_p + K_s − 1. Returns (M, N) and the packed codes (binary when no entry is 0, ternary
+/// otherwise).
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype or number of dimensions, an empty axis, a grid other than `expect.grid`, a last axis other
+/// than K, or a value outside {−1, 0, 1} (named by its index); [`Error::InvalidParameter`] if
+/// `expect` has a zero pulse length or zero depth bins.
+pub fn read_codes(
+    path: impl AsRef<Path>,
+    expect: &ShapeExpectation,
+) -> Result<((usize, usize), Codes)> {
+    let path = path.as_ref();
+    let (shape, codes) = read_dense_codes(path, expect, 3, "(M, N, K)")?;
+    let (m, n, k) = (shape[0], shape[1], shape[2]);
+    let flat = codes
+        .into_shape_with_order((m * n, k))
+        .map_err(|e| file_error(path, format!("cannot reshape the codes: {e}")))?;
+    let packed = Codes::from_dense(flat.view()).map_err(|e| file_error(path, e.to_string()))?;
+    Ok(((m, n), packed))
+}
+
+/// Reads G code sets, one per ADC of a multi-ADC array: an int8 (or float32/float64) array of
+/// shape (G, M, N, K) with values in {−1, 0, 1}, K = K_p + K_s − 1, whose slice g is the
+/// (M, N, K) codes of set g. Returns (M, N) and the G packed code sets, in order (each binary
+/// when it has no 0 entry, ternary otherwise).
+///
+/// Only four-dimensional files are accepted; a single code set (M, N, K) is read by
+/// [`read_codes`].
+///
+/// # Errors
+/// As [`read_codes`], with four dimensions (G, M, N, K) expected: the grid is axes 1 and 2, K the
+/// last axis, and a bad value is named by its four-dimensional index.
+pub fn read_code_sets(
+    path: impl AsRef<Path>,
+    expect: &ShapeExpectation,
+) -> Result<((usize, usize), Vec<Codes>)> {
+    let path = path.as_ref();
+    let (shape, codes) = read_dense_codes(path, expect, 4, "(G, M, N, K)")?;
+    let (sets, m, n, k) = (shape[0], shape[1], shape[2], shape[3]);
+    let flat = codes
+        .into_shape_with_order((sets, m * n, k))
+        .map_err(|e| file_error(path, format!("cannot reshape the codes: {e}")))?;
+    let packed = flat
+        .outer_iter()
+        .map(|set| Codes::from_dense(set).map_err(|e| file_error(path, e.to_string())))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(((m, n), packed))
+}
+
+/// Reads and checks a codes file of `ndim` dimensions whose last three axes are (M, N, K): the
+/// dtype, the number of dimensions, empty axes, the grid, K and the values. Returns the shape and
+/// the values as int8, in C order.
+fn read_dense_codes(
+    path: &Path,
+    expect: &ShapeExpectation,
+    ndim: usize,
+    axes: &str,
+) -> Result<(Vec<usize>, ArrayD<i8>)> {
+    if expect.pulse_len == 0 || expect.depth_bins == 0 {
+        return Err(Error::param(
+            "expect",
+            format!(
+                "pulse length and depth bins must be at least 1, got {} and {}",
+                expect.pulse_len, expect.depth_bins
+            ),
+        ));
+    }
+    let opened = open_npy(path)?;
+    let h = opened.header.clone();
+    let role = "codes";
+    if !matches!(
+        h.dtype,
+        NpyDtype::Int8 | NpyDtype::Float32 | NpyDtype::Float64
+    ) {
+        return Err(wrong_dtype(
+            path,
+            role,
+            &h.dtype,
+            "int8 (or float32/float64 holding −1, 0, 1)",
+        ));
+    }
+    check_ndim(path, role, &h, ndim, axes)?;
+    let (m, n, k) = (h.shape[ndim - 3], h.shape[ndim - 2], h.shape[ndim - 1]);
+    if let Some((gm, gn)) = expect.grid {
+        if (m, n) != (gm, gn) {
+            return Err(file_error(
+                path,
+                format!(
+                    "codes shape {} has {m}x{n} pixels, the scene has {gm}x{gn}",
+                    shape_text(&h.shape)
+                ),
+            ));
+        }
+    }
+    let want = expect.samples();
+    if k != want {
+        return Err(file_error(
+            path,
+            format!(
+                "codes shape {} does not fit: the last axis must be K = K_p + K_s − 1 = \
+                 {} + {} − 1 = {want} (pulse length {}, {} depth bins), found {k}",
+                shape_text(&h.shape),
+                expect.pulse_len,
+                expect.depth_bins,
+                expect.pulse_len,
+                expect.depth_bins
+            ),
+        ));
+    }
+    let bad_value = |idx: &[usize], v: String| {
+        file_error(
+            path,
+            format!(
+                "codes value {v} at index {} is not in {{-1, 0, 1}}",
+                index_text(idx)
+            ),
+        )
+    };
+    let codes: ArrayD<i8> = match h.dtype {
+        NpyDtype::Int8 => {
+            let a = read_data::<i8>(path, opened)?;
+            if let Some((i, v)) = first_bad(&a, |v| (-1..=1).contains(&v)) {
+                return Err(bad_value(&i, v.to_string()));
+            }
+            a
+        }
+        NpyDtype::Float32 => float_codes(read_data::<f32>(path, opened)?, bad_value)?,
+        NpyDtype::Float64 => float_codes(read_data::<f64>(path, opened)?, bad_value)?,
+        ref other => {
+            return Err(wrong_dtype(
+                path,
+                role,
+                other,
+                "int8 (or float32/float64 holding −1, 0, 1)",
+            ))
+        }
+    };
+    Ok((h.shape, codes))
+}
+
+fn float_codes<S: Copy + Into<f64> + std::fmt::Display>(
+    a: ArrayD<S>,
+    bad: impl Fn(&[usize], String) -> Error,
+) -> Result<ArrayD<i8>> {
+    if let Some((i, v)) = first_bad(&a, |v| {
+        let x: f64 = v.into();
+        x == -1.0 || x == 0.0 || x == 1.0
+    }) {
+        return Err(bad(&i, v.to_string()));
+    }
+    Ok(a.mapv(|v| v.into() as i8))
+}
+
+/// Reads a depth map: an int32 array of shape (M, N) whose entries are depth bins, −1 for no
+/// return. With `depth_bins` = K_s, bins must lie in [−1, K_s).
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype or number of dimensions, an empty axis, or an entry out of range (named by its index).
+pub fn read_depth(path: impl AsRef<Path>, depth_bins: Option<usize>) -> Result<Array2<i32>> {
+    let path = path.as_ref();
+    let opened = open_npy(path)?;
+    let h = opened.header.clone();
+    if h.dtype != NpyDtype::Int32 {
+        return Err(wrong_dtype(path, "a depth map", &h.dtype, "int32"));
+    }
+    check_ndim(path, "a depth map", &h, 2, "(M, N)")?;
+    let a = into_dim::<i32, Ix2>(path, read_data::<i32>(path, opened)?)?;
+    let top = depth_bins.map_or(i64::MAX, |k| k as i64);
+    if let Some(((i, j), d)) = a
+        .indexed_iter()
+        .find(|(_, &d)| d < -1 || i64::from(d) >= top)
+    {
+        let range = match depth_bins {
+            Some(k) => format!("[-1, {k})"),
+            None => "≥ -1".to_string(),
+        };
+        return Err(file_error(
+            path,
+            format!(
+                "depth bin {d} at index ({i}, {j}) is out of range: expected {range} (-1 = no \
+                 return)"
+            ),
+        ));
+    }
+    Ok(a)
+}
