@@ -15,9 +15,10 @@ use crate::linalg::norm2;
 use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 use crate::solver::{
-    backprojection, cgls, cosamp, fista, iht, model_based, reflector_amp, select_peaks, tv_depth,
-    Backprojection, CglsParams, CosampParams, FistaParams, IhtParams, Lambda, ModelBasedParams,
-    ReflectorAmpParams, Report, Restart, StepRule, Stopping, Termination, Threshold, TvDepthParams,
+    backprojection, cgls, cosamp, fista, iht, model_based, reflector_amp, residual_norm_sq,
+    select_peaks, tv_depth, Backprojection, CglsParams, CosampParams, FistaParams, IhtParams,
+    Lambda, ModelBasedParams, ReflectorAmpParams, Report, Restart, StepRule, Stopping, Termination,
+    Threshold, TvDepthParams,
 };
 
 use crate::lidar::{DepthMap, Scene, NO_RETURN};
@@ -271,7 +272,8 @@ pub fn reconstruct<T: Real>(
             let mut x_tv = vec![T::zero(); x.len()];
             let tv = tv_depth(op, (g.m, g.n), y, &mut x_tv, &params, &mut progress)?;
             progress.finish();
-            let (r_mb, r_tv) = (residual_norm(op, y, &x), residual_norm(op, y, &x_tv));
+            let r_mb = residual_norm_sq(op, y, &x).sqrt();
+            let r_tv = residual_norm_sq(op, y, &x_tv).sqrt();
             let y_norm = norm2(y);
             if r_tv <= TV_RESIDUAL_MARGIN * r_mb + 1e-6 * y_norm {
                 x = x_tv;
@@ -299,11 +301,6 @@ pub fn reconstruct<T: Real>(
         report,
         elapsed: start.elapsed(),
     })
-}
-
-/// ‖Ax − y‖ in `f64`.
-fn residual_norm<T: Real>(op: &RdOperator<T>, y: &[T], x: &[T]) -> f64 {
-    crate::solver::misfit(op, y, x).sqrt()
 }
 
 /// Whether at least [`SMOOTH_FRACTION`] of the lit pixels of `depth` have a lit 4-neighbour

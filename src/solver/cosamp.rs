@@ -9,7 +9,7 @@ use crate::linalg::{dot, norm2};
 use crate::operator::LinearOperator;
 use crate::real::Real;
 
-use super::iteration::{fit_scratch, solve, Iteration, Progress, StoppingRecord};
+use super::iteration::{fit_scratch, refresh_residual, solve, Iteration, Progress, StoppingRecord};
 use super::{
     cgls, check_problem, check_sparsity, check_tolerance, hard_threshold, largest_indices,
     relative_change, support, CglsParams, Observer, Report, Stopping, Termination,
@@ -189,22 +189,9 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
         let same_support = new_supp == self.supp;
         x.copy_from_slice(&self.xn);
         self.supp = new_supp;
-        for ((ri, &yi), &ai) in self.r.iter_mut().zip(y).zip(&self.ax) {
-            *ri = yi - ai;
-        }
-        let rr = dot(&self.r, &self.r);
-        if !rr.is_finite() {
-            return Err(Error::Breakdown {
-                solver: Self::NAME,
-                reason: format!("non-finite residual at iteration {it}"),
-            });
-        }
-        Ok(Progress {
-            residual: rr.sqrt() / self.ynorm,
-            objective: 0.5 * rr,
-            change,
-            converged: same_support && change <= self.fixed_point_tol,
-        })
+        let rr = refresh_residual(Self::NAME, it, y, &self.ax, &mut self.r)?;
+        let converged = same_support && change <= self.fixed_point_tol;
+        Ok(Progress::least_squares(rr, self.ynorm, change, converged))
     }
 
     fn objective(&self) -> f64 {

@@ -28,6 +28,44 @@ pub struct Progress {
     pub converged: bool,
 }
 
+impl Progress {
+    /// The progress of an iteration whose objective is ½‖r‖² for the residual r with
+    /// ‖r‖² = `rr`, relative to ‖y‖ = `ynorm`.
+    pub fn least_squares(rr: f64, ynorm: f64, change: f64, converged: bool) -> Self {
+        Progress {
+            residual: rr.sqrt() / ynorm,
+            objective: 0.5 * rr,
+            change,
+            converged,
+        }
+    }
+}
+
+/// Sets r = y − Ax from Ax and returns ‖r‖² (in `f64`).
+///
+/// # Errors
+/// [`Error::Breakdown`](crate::Error::Breakdown) naming `solver` and the iteration when the
+/// residual is not finite.
+pub(super) fn refresh_residual<T: Real>(
+    solver: &'static str,
+    it: usize,
+    y: &[T],
+    ax: &[T],
+    r: &mut [T],
+) -> Result<f64> {
+    for ((ri, &yi), &ai) in r.iter_mut().zip(y).zip(ax) {
+        *ri = yi - ai;
+    }
+    let rr = crate::linalg::norm2_sq(r);
+    if !rr.is_finite() {
+        return Err(crate::Error::Breakdown {
+            solver,
+            reason: format!("non-finite residual at iteration {it}"),
+        });
+    }
+    Ok(rr)
+}
+
 /// A solver's state between iterations: the protocol every iterative solver of this module
 /// implements.
 pub trait Iteration<T: Real>: Sized {

@@ -367,7 +367,7 @@ pub(crate) fn check_problem<T: Real>(
 }
 
 /// ‖y − Ax‖², accumulated in `f64` (one forward application).
-pub(crate) fn misfit<T: Real, A: crate::operator::LinearOperator<T> + ?Sized>(
+pub(crate) fn residual_norm_sq<T: Real, A: crate::operator::LinearOperator<T> + ?Sized>(
     op: &A,
     y: &[T],
     x: &[T],

@@ -413,47 +413,37 @@ pub fn run_demo(
     observer: &mut dyn ExperimentObserver,
     stop: &AtomicBool,
 ) -> Result<Outcome> {
-    let start = Instant::now();
-    config.validate()?;
-    prepare_output_dir(&config.out, force)?;
-    let mut partial = PartialFiles::create(&config.out)?;
-    let sweep = sweep(config, &DEMO_COLUMNS, true, observer, stop, &mut |r| {
-        partial.append(r)
-    })?;
-    let mut files = Vec::new();
-    write_tables("demo", config, &sweep, &DEMO_COLUMNS, &mut files)?;
-    let several = config.seeds > 1 || config.snr_db.len() > 1;
-    for d in &sweep.depths {
-        let mut name = format!("depth_kp{}", d.case.pulse_len);
-        if several {
-            name += &format!("_seed{}", d.case.seed);
-            if let Some(s) = d.case.snr_db {
-                name += &format!("_snr{s}db");
+    let run = Run {
+        name: "demo",
+        columns: &DEMO_COLUMNS,
+        keep_depths: true,
+    };
+    run.execute(config, force, observer, stop, |sweep, files| {
+        let several = config.seeds > 1 || config.snr_db.len() > 1;
+        for d in &sweep.depths {
+            let mut name = format!("depth_kp{}", d.case.pulse_len);
+            if several {
+                name += &format!("_seed{}", d.case.seed);
+                if let Some(s) = d.case.snr_db {
+                    name += &format!("_snr{s}db");
+                }
             }
+            let path = config.out.join(name + ".png");
+            let rows: Vec<&Row> = sweep
+                .rows
+                .iter()
+                .filter(|r| r.pulse_len == d.case.pulse_len && r.seed == d.case.seed)
+                .filter(|r| r.snr_db == d.case.snr_db)
+                .collect();
+            depth_figure(config, d, &rows)?.save_png(&path)?;
+            files.push(path);
         }
-        let path = config.out.join(name + ".png");
-        let rows: Vec<&Row> = sweep
-            .rows
-            .iter()
-            .filter(|r| r.pulse_len == d.case.pulse_len && r.seed == d.case.seed)
-            .filter(|r| r.snr_db == d.case.snr_db)
-            .collect();
-        depth_figure(config, d, &rows)?.save_png(&path)?;
-        files.push(path);
-    }
-    if !sweep.rows.is_empty() {
-        let path = config.out.join("error_vs_time.png");
-        error_vs_time(config, &sweep.rows)?.save_png(&path)?;
-        files.push(path);
-    }
-    partial.remove();
-    Ok(Outcome {
-        rows: sweep.rows,
-        interrupted: sweep.interrupted,
-        planned: sweep.planned,
-        files,
-        elapsed: sweep.elapsed,
-        total: start.elapsed(),
+        if !sweep.rows.is_empty() {
+            let path = config.out.join("error_vs_time.png");
+            error_vs_time(config, &sweep.rows)?.save_png(&path)?;
+            files.push(path);
+        }
+        Ok(())
     })
 }
 
@@ -473,50 +463,84 @@ pub fn run_compare(
     observer: &mut dyn ExperimentObserver,
     stop: &AtomicBool,
 ) -> Result<Outcome> {
-    let start = Instant::now();
-    config.validate()?;
-    prepare_output_dir(&config.out, force)?;
-    let mut partial = PartialFiles::create(&config.out)?;
-    let sweep = sweep(config, &COMPARE_COLUMNS, false, observer, stop, &mut |r| {
-        partial.append(r)
-    })?;
-    let mut files = Vec::new();
-    write_tables("compare", config, &sweep, &COMPARE_COLUMNS, &mut files)?;
-    let path = config.out.join("summary.md");
-    crate::io::write_bytes_atomic(&path, summary_markdown(config, &sweep.rows).as_bytes())?;
-    files.push(path);
-    if !sweep.rows.is_empty() {
-        let path = config.out.join("pareto.png");
-        pareto_chart(config, &sweep.rows)?.save_png(&path)?;
+    let run = Run {
+        name: "compare",
+        columns: &COMPARE_COLUMNS,
+        keep_depths: false,
+    };
+    run.execute(config, force, observer, stop, |sweep, files| {
+        let path = config.out.join("summary.md");
+        crate::io::write_bytes_atomic(&path, summary_markdown(config, &sweep.rows).as_bytes())?;
         files.push(path);
-        for &level in &config.snr_db {
-            let rows: Vec<Row> = sweep
-                .rows
-                .iter()
-                .filter(|r| r.snr_db == level)
-                .cloned()
-                .collect();
-            if rows.is_empty() {
-                continue;
-            }
-            let name = match level {
-                None => "phase_noise-free.png".to_string(),
-                Some(s) => format!("phase_{s}db.png"),
-            };
-            let path = config.out.join(name);
-            phase_chart(config, level, &rows)?.save_png(&path)?;
+        if !sweep.rows.is_empty() {
+            let path = config.out.join("pareto.png");
+            pareto_chart(config, &sweep.rows)?.save_png(&path)?;
             files.push(path);
+            for &level in &config.snr_db {
+                let rows: Vec<Row> = sweep
+                    .rows
+                    .iter()
+                    .filter(|r| r.snr_db == level)
+                    .cloned()
+                    .collect();
+                if rows.is_empty() {
+                    continue;
+                }
+                let name = match level {
+                    None => "phase_noise-free.png".to_string(),
+                    Some(s) => format!("phase_{s}db.png"),
+                };
+                let path = config.out.join(name);
+                phase_chart(config, level, &rows)?.save_png(&path)?;
+                files.push(path);
+            }
         }
-    }
-    partial.remove();
-    Ok(Outcome {
-        rows: sweep.rows,
-        interrupted: sweep.interrupted,
-        planned: sweep.planned,
-        files,
-        elapsed: sweep.elapsed,
-        total: start.elapsed(),
+        Ok(())
     })
+}
+
+/// What the two experiments share: the sweep with rows streamed to partial files, the tables,
+/// then the experiment's own files.
+struct Run {
+    name: &'static str,
+    columns: &'static [Column],
+    keep_depths: bool,
+}
+
+impl Run {
+    fn execute(
+        &self,
+        config: &ExperimentConfig,
+        force: bool,
+        observer: &mut dyn ExperimentObserver,
+        stop: &AtomicBool,
+        figures: impl FnOnce(&Sweep, &mut Vec<PathBuf>) -> Result<()>,
+    ) -> Result<Outcome> {
+        let start = Instant::now();
+        config.validate()?;
+        prepare_output_dir(&config.out, force)?;
+        let mut partial = PartialFiles::create(&config.out)?;
+        let sweep = sweep(
+            config,
+            self.columns,
+            self.keep_depths,
+            observer,
+            stop,
+            &mut |r| partial.append(r),
+        )?;
+        let mut files = Vec::new();
+        write_tables(self.name, config, &sweep, self.columns, &mut files)?;
+        figures(&sweep, &mut files)?;
+        partial.remove();
+        Ok(Outcome {
+            rows: sweep.rows,
+            interrupted: sweep.interrupted,
+            planned: sweep.planned,
+            files,
+            elapsed: sweep.elapsed,
+            total: start.elapsed(),
+        })
+    }
 }
 
 #[cfg(test)]

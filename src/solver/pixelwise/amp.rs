@@ -16,6 +16,8 @@ use crate::linalg::dot;
 use crate::operator::Counted;
 use crate::real::Real;
 
+use super::PixelConstraints;
+
 use crate::operator::{check_pixels, VoxelOperator};
 use crate::solver::{check_problem, Monitor, Observer, Report, Stopping, Termination};
 
@@ -325,35 +327,18 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    reflector_amp_in(op, y, x, params, None, observer)
+    reflector_amp_constrained(op, y, x, params, PixelConstraints::default(), observer)
+        .map(|(r, _)| r)
 }
 
-/// [`reflector_amp`] with each pixel's depth restricted to a window `lo..=hi`.
-pub(crate) fn reflector_amp_in<T, A, O>(
+/// [`reflector_amp`] under per-pixel constraints (depth windows, priors); also returns the
+/// posteriors of the best iterate.
+pub(crate) fn reflector_amp_constrained<T, A, O>(
     op: &A,
     y: &[T],
     x: &mut [T],
     params: &ReflectorAmpParams,
-    windows: Option<&[(usize, usize)]>,
-    observer: &mut O,
-) -> Result<Report>
-where
-    T: Real,
-    A: VoxelOperator<T> + ?Sized,
-    O: Observer<T> + ?Sized,
-{
-    reflector_amp_run(op, y, x, params, windows, None, observer).map(|(r, _)| r)
-}
-
-/// [`reflector_amp_in`] with optional per-pixel priors; also returns the posteriors of the
-/// best iterate.
-pub(crate) fn reflector_amp_run<T, A, O>(
-    op: &A,
-    y: &[T],
-    x: &mut [T],
-    params: &ReflectorAmpParams,
-    windows: Option<&[(usize, usize)]>,
-    priors: Option<&PixelPriors>,
+    constraints: PixelConstraints<'_>,
     observer: &mut O,
 ) -> Result<(Report, Posteriors)>
 where
@@ -361,6 +346,7 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
+    let PixelConstraints { windows, priors } = constraints;
     const NAME: &str = "reflector-amp";
     params.validate()?;
     let (m, n) = (op.nrows(), op.ncols());

@@ -8,7 +8,8 @@ use crate::linalg::dot;
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 
-use super::amp::{reflector_amp_in, ReflectorAmpParams};
+use super::amp::{reflector_amp_constrained, ReflectorAmpParams};
+use super::PixelConstraints;
 use crate::operator::{check_pixels, VoxelOperator};
 use crate::solver::{cgls, check_problem, check_tolerance, CglsParams, Monitor, Observer, Report};
 use crate::solver::{Stopping, Termination};
@@ -121,7 +122,7 @@ struct Applies {
 }
 
 /// y − A_S b for the restriction `restricted` of the operator to a support.
-fn residual_of<T: Real>(restricted: &dyn LinearOperator<T>, y: &[T], b: &[T]) -> Vec<T> {
+fn support_residual<T: Real>(restricted: &dyn LinearOperator<T>, y: &[T], b: &[T]) -> Vec<T> {
     let mut r = vec![T::zero(); y.len()];
     if !b.is_empty() {
         restricted.apply(b, &mut r);
@@ -159,7 +160,7 @@ where
         applies.forward += rep.forward_applies + 1;
         applies.adjoint += rep.adjoint_applies;
     }
-    Ok(residual_of(restricted.as_ref(), y, b))
+    Ok(support_residual(restricted.as_ref(), y, b))
 }
 
 /// y − A_S b.
@@ -175,7 +176,7 @@ where
     A: VoxelOperator<T> + ?Sized,
 {
     applies.forward += usize::from(!voxels.is_empty());
-    Ok(residual_of(
+    Ok(support_residual(
         op.restrict_columns(voxels.to_vec())?.as_ref(),
         y,
         b,
@@ -236,12 +237,12 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    model_based_in(op, y, x, params, None, observer)
+    model_based_windowed(op, y, x, params, None, observer)
 }
 
 /// [`model_based`] with each pixel's depth restricted to a window `lo..=hi` of its depths
 /// (`windows[p] = (lo, hi)`), as the TV-on-depth solver uses it.
-pub(crate) fn model_based_in<T, A, O>(
+pub(crate) fn model_based_windowed<T, A, O>(
     op: &A,
     y: &[T],
     x: &mut [T],
@@ -275,7 +276,11 @@ where
     let mut explore_iterations = params.explore_iterations;
     if let Some(amp_params) = &params.amp {
         if x.iter().all(|v| *v == T::zero()) {
-            let rep = reflector_amp_in(op, y, x, amp_params, windows, &mut ())?;
+            let constraints = PixelConstraints {
+                windows,
+                priors: None,
+            };
+            let (rep, _) = reflector_amp_constrained(op, y, x, amp_params, constraints, &mut ())?;
             applies.forward += rep.forward_applies;
             applies.adjoint += rep.adjoint_applies;
             explore_iterations = 0;

@@ -9,11 +9,12 @@ use crate::real::Real;
 
 use rayon::prelude::*;
 
-use super::amp::{reflector_amp_run, PixelPriors, Posteriors};
-use super::model_based::model_based_in;
+use super::amp::{reflector_amp_constrained, PixelPriors, Posteriors};
+use super::model_based::model_based_windowed;
+use super::PixelConstraints;
 use crate::operator::VoxelOperator;
 use crate::solver::{
-    misfit, tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping,
+    residual_norm_sq, tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping,
     Termination, TvParams,
 };
 
@@ -303,7 +304,8 @@ where
         .filter(|_| params.neighbour_rounds > 0)
     {
         if x.iter().all(|v| *v == T::zero()) {
-            let (mut rep, mut post) = reflector_amp_run(op, y, x, amp, None, None, &mut ())?;
+            let (mut rep, mut post) =
+                reflector_amp_constrained(op, y, x, amp, PixelConstraints::default(), &mut ())?;
             let (mean, var) = post.amplitude_moments();
             let hood = Neighbourhood {
                 radius: params.neighbour_radius,
@@ -325,7 +327,17 @@ where
                     break;
                 }
                 let priors = neighbour_priors(&post, grid, ks, &hood);
-                let (more, p) = reflector_amp_run(op, y, x, &capped, None, Some(&priors), &mut ())?;
+                let (more, p) = reflector_amp_constrained(
+                    op,
+                    y,
+                    x,
+                    &capped,
+                    PixelConstraints {
+                        windows: None,
+                        priors: Some(&priors),
+                    },
+                    &mut (),
+                )?;
                 rep.absorb(more);
                 post = p;
                 if changed_fraction(x, &last, ks) <= params.neighbour_change {
@@ -336,7 +348,7 @@ where
             start = Some(rep);
         }
     }
-    let mut report = model_based_in(op, y, x, &params.model, None, observer)?;
+    let mut report = model_based_windowed(op, y, x, &params.model, None, observer)?;
     if let Some(mut first) = start {
         first.absorb(report);
         report = first;
@@ -351,7 +363,7 @@ where
         ..params.model
     };
     let mut before = x.to_vec();
-    let mut fit_before = misfit(op, y, x);
+    let mut fit_before = residual_norm_sq(op, y, x);
     report.forward_applies += 1;
     for _ in 0..params.rounds {
         let found = column_peaks(x, ks, PeakRule::LargestPositive);
@@ -397,12 +409,12 @@ where
                 }
             }
         }
-        let r = model_based_in(op, y, x, &windowed, Some(&windows), observer)?;
+        let r = model_based_windowed(op, y, x, &windowed, Some(&windows), observer)?;
         report.absorb(r);
         // The windows are a heuristic: a windowed fit that lost what the previous one had found
         // (more than doubling the squared residual) is undone. Smaller increases are expected
         // in noise, where dropping false detections leaves more of the noise unexplained.
-        let fit = misfit(op, y, x);
+        let fit = residual_norm_sq(op, y, x);
         report.forward_applies += 1;
         if fit > 2.0 * fit_before {
             x.copy_from_slice(&before);
