@@ -5,16 +5,17 @@
 
 use crate::real::Real;
 
-/// ⟨a, b⟩ accumulated in `f64`.
+/// Σ f(aᵢ, bᵢ) accumulated in `f64` with four independent accumulators, so that the loop
+/// vectorizes.
 ///
 /// # Panics
 /// If the slices have different lengths.
 #[inline]
-pub fn dot<T: Real>(a: &[T], b: &[T]) -> f64 {
+fn sum_pairs<T: Real>(what: &str, a: &[T], b: &[T], f: impl Fn(f64, f64) -> f64) -> f64 {
     assert_eq!(
         a.len(),
         b.len(),
-        "dot: lengths {} and {} differ",
+        "{what}: lengths {} and {} differ",
         a.len(),
         b.len()
     );
@@ -23,14 +24,23 @@ pub fn dot<T: Real>(a: &[T], b: &[T]) -> f64 {
     let mut cb = b.chunks_exact(4);
     for (x, y) in (&mut ca).zip(&mut cb) {
         for l in 0..4 {
-            acc[l] += x[l].as_f64() * y[l].as_f64();
+            acc[l] += f(x[l].as_f64(), y[l].as_f64());
         }
     }
     let mut tail = 0.0;
     for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
-        tail += x.as_f64() * y.as_f64();
+        tail += f(x.as_f64(), y.as_f64());
     }
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// ⟨a, b⟩ accumulated in `f64`.
+///
+/// # Panics
+/// If the slices have different lengths.
+#[inline]
+pub fn dot<T: Real>(a: &[T], b: &[T]) -> f64 {
+    sum_pairs("dot", a, b, |x, y| x * y)
 }
 
 /// ‖a‖² accumulated in `f64`.
@@ -95,28 +105,7 @@ pub fn all_finite<T: Real>(a: &[T]) -> bool {
 /// If the slices have different lengths.
 #[inline]
 pub fn dist2_sq<T: Real>(a: &[T], b: &[T]) -> f64 {
-    assert_eq!(
-        a.len(),
-        b.len(),
-        "dist2_sq: lengths {} and {} differ",
-        a.len(),
-        b.len()
-    );
-    let mut acc = [0.0f64; 4];
-    let mut ca = a.chunks_exact(4);
-    let mut cb = b.chunks_exact(4);
-    for (x, y) in (&mut ca).zip(&mut cb) {
-        for l in 0..4 {
-            let d = x[l].as_f64() - y[l].as_f64();
-            acc[l] += d * d;
-        }
-    }
-    let mut tail = 0.0;
-    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
-        let d = x.as_f64() - y.as_f64();
-        tail += d * d;
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+    sum_pairs("dist2_sq", a, b, |x, y| (x - y) * (x - y))
 }
 
 /// The median of `v` (the mean of the two middle values for an even length; NaN for an empty

@@ -110,53 +110,6 @@ impl<I> Driver<I> {
         }
     }
 
-    fn init<'a, T, A>(
-        &mut self,
-        params: Option<&I::Params>,
-        problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
-        mut state: ArgminState<T>,
-    ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error>
-    where
-        T: Real,
-        A: LinearOperator<T> + ?Sized,
-        I: Iteration<T>,
-    {
-        let mut x = state.take_param().ok_or_else(|| {
-            Error::param(
-                "param",
-                format!("{} needs an initial x (configure `param`)", I::NAME),
-            )
-        })?;
-        let (op, y) = operands(problem)?;
-        let params = params.ok_or_else(|| {
-            Error::param(
-                "params",
-                "the parameters are not serialized: a deserialized solver can only resume a run",
-            )
-        })?;
-        let op = Counted::new(op);
-        let started = I::start(&op, y, &mut x, params);
-        let cost = match started {
-            Ok(ControlFlow::Continue(mut iteration)) => {
-                // The work before the first update, unless the executor allows no iteration.
-                self.prepared = state.get_iter() < state.get_max_iters();
-                self.converged = self.prepared && iteration.prepare(&op);
-                let cost = iteration.objective();
-                self.iteration = Some(iteration);
-                Ok(cost)
-            }
-            // Zero measurements or a zero operator: x is a solution and Ax = 0, so the objective
-            // is ½‖y‖².
-            Ok(ControlFlow::Break(_)) => {
-                self.converged = true;
-                Ok(0.5 * norm2_sq(y))
-            }
-            Err(e) => Err(e),
-        };
-        count_applies(problem, op.forward_count(), op.adjoint_count());
-        Ok((state.param(x).cost(cost?), None))
-    }
-
     /// Iteration `iter + 1` (the executor has completed `iter`), updating `x`. `None` when the
     /// work before the update shows that x is a solution already, which can only happen when a
     /// run continues past the iteration limit it was prepared for (the work is then done here,
@@ -190,37 +143,6 @@ impl<I> Driver<I> {
             self.converged = iteration.prepare(op);
         }
         Ok(Some(p))
-    }
-
-    fn next_iter<'a, T, A>(
-        &mut self,
-        problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
-        mut state: ArgminState<T>,
-    ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error>
-    where
-        T: Real,
-        A: LinearOperator<T> + ?Sized,
-        I: Iteration<T>,
-    {
-        let mut x = state
-            .take_param()
-            .ok_or_else(|| Error::param("param", "no current x"))?;
-        let (op, y) = operands(problem)?;
-        let op = Counted::new(op);
-        let advanced = self.advance(&op, y, &mut x, state.get_iter(), state.get_max_iters());
-        count_applies(problem, op.forward_count(), op.adjoint_count());
-        match advanced? {
-            Some(p) => {
-                let kv = argmin::kv!("residual" => p.residual; "change" => p.change;);
-                Ok((state.param(x).cost(p.objective), Some(kv)))
-            }
-            None => Ok((
-                state
-                    .param(x)
-                    .terminate_with(TerminationReason::SolverConverged),
-                None,
-            )),
-        }
     }
 
     fn terminate(&self) -> TerminationStatus {
@@ -311,17 +233,70 @@ where
     fn init(
         &mut self,
         problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
-        state: ArgminState<T>,
+        mut state: ArgminState<T>,
     ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error> {
-        self.driver.init(self.params.as_ref(), problem, state)
+        let mut x = state.take_param().ok_or_else(|| {
+            Error::param(
+                "param",
+                format!("{} needs an initial x (configure `param`)", I::NAME),
+            )
+        })?;
+        let (op, y) = operands(problem)?;
+        let params = self.params.as_ref().ok_or_else(|| {
+            Error::param(
+                "params",
+                "the parameters are not serialized: a deserialized solver can only resume a run",
+            )
+        })?;
+        let op = Counted::new(op);
+        let started = I::start(&op, y, &mut x, params);
+        let cost = match started {
+            Ok(ControlFlow::Continue(mut iteration)) => {
+                // The work before the first update, unless the executor allows no iteration.
+                self.driver.prepared = state.get_iter() < state.get_max_iters();
+                self.driver.converged = self.driver.prepared && iteration.prepare(&op);
+                let cost = iteration.objective();
+                self.driver.iteration = Some(iteration);
+                Ok(cost)
+            }
+            // Zero measurements or a zero operator: x is a solution and Ax = 0, so the objective
+            // is ½‖y‖².
+            Ok(ControlFlow::Break(_)) => {
+                self.driver.converged = true;
+                Ok(0.5 * norm2_sq(y))
+            }
+            Err(e) => Err(e),
+        };
+        count_applies(problem, op.forward_count(), op.adjoint_count());
+        Ok((state.param(x).cost(cost?), None))
     }
 
     fn next_iter(
         &mut self,
         problem: &mut Problem<LinearLeastSquares<'a, T, A>>,
-        state: ArgminState<T>,
+        mut state: ArgminState<T>,
     ) -> Result<(ArgminState<T>, Option<KV>), argmin::core::Error> {
-        self.driver.next_iter(problem, state)
+        let mut x = state
+            .take_param()
+            .ok_or_else(|| Error::param("param", "no current x"))?;
+        let (op, y) = operands(problem)?;
+        let op = Counted::new(op);
+        let advanced = self
+            .driver
+            .advance(&op, y, &mut x, state.get_iter(), state.get_max_iters());
+        count_applies(problem, op.forward_count(), op.adjoint_count());
+        match advanced? {
+            Some(p) => {
+                let kv = argmin::kv!("residual" => p.residual; "change" => p.change;);
+                Ok((state.param(x).cost(p.objective), Some(kv)))
+            }
+            None => Ok((
+                state
+                    .param(x)
+                    .terminate_with(TerminationReason::SolverConverged),
+                None,
+            )),
+        }
     }
 
     fn terminate(&mut self, _state: &ArgminState<T>) -> TerminationStatus {

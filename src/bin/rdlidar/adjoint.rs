@@ -8,7 +8,7 @@ use rdlidar::lidar::{zero_mean, Scene, TileSize};
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, parse_positive, parse_tile, with_precision, CliResult, Globals,
+    check_out_file, npy_dtype, parse_tile, with_precision, CliResult, Globals, MeasurementFiles,
 };
 use crate::layout::{architecture_of, expectation, read_measurements, Layout};
 
@@ -25,18 +25,8 @@ use crate::layout::{architecture_of, expectation, read_measurements, Layout};
 /// Example: `rdlidar adjoint --pulse run0/pulse.npy --codes run0/codes.npy --meas run0/meas.npy --depth-bins 40 --out xt.npy --debiased`
 #[derive(clap::Args, Debug)]
 pub struct AdjointArgs {
-    /// Pulse file (K_p,), float32 or float64, ≥ 0.
-    #[arg(long, value_name = "P")]
-    pub pulse: PathBuf,
-    /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
-    #[arg(long, value_name = "S")]
-    pub codes: PathBuf,
-    /// Measurements file (K,), or (ADCs, K) for several ADCs; float32 or float64.
-    #[arg(long, value_name = "Y")]
-    pub meas: PathBuf,
-    /// Depth bins K_s of the scene.
-    #[arg(long, value_name = "KS", value_parser = parse_positive)]
-    pub depth_bins: usize,
+    #[command(flatten)]
+    pub files: MeasurementFiles,
     /// Output file (M, N, K_s).
     #[arg(long, value_name = "XT")]
     pub out: PathBuf,
@@ -51,16 +41,19 @@ pub struct AdjointArgs {
 /// Runs `adjoint`.
 pub fn run(a: &AdjointArgs, globals: &Globals) -> CliResult {
     check_out_file(&a.out)?;
-    with_precision!(globals.precision_of(&[&a.meas, &a.pulse])?, adjoint(a))
+    with_precision!(
+        globals.precision_of(&[&a.files.meas, &a.files.pulse])?,
+        adjoint(a)
+    )
 }
 
 fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
     let out = &a.out;
-    let p = io::read_pulse::<T>(&a.pulse)?;
-    let expect = expectation(p.len(), a.depth_bins)?;
-    let (arch, codes_shape) = architecture_of(&a.codes, a.tiles)?;
-    let y = read_measurements::<T>(&a.meas, &a.codes, arch, &codes_shape, &expect)?;
-    let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins)?;
+    let p = io::read_pulse::<T>(&a.files.pulse)?;
+    let expect = expectation(p.len(), a.files.depth_bins)?;
+    let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
+    let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
+    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins)?;
     let g = layout.geometry;
     let pulse = if a.debiased {
         zero_mean(p.as_slice())
@@ -84,7 +77,7 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
         if a.debiased { "debiased " } else { "" },
         g.m,
         g.n,
-        a.depth_bins,
+        a.files.depth_bins,
         npy_dtype::<T>(),
         layout.note()
     );

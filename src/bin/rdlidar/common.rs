@@ -38,6 +38,23 @@ pub enum Precision {
     F64,
 }
 
+/// The files of a measured acquisition and the depth bins of its scene.
+#[derive(clap::Args, Debug)]
+pub struct MeasurementFiles {
+    /// Pulse file (K_p,), float32 or float64, ≥ 0.
+    #[arg(long, value_name = "P")]
+    pub pulse: PathBuf,
+    /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
+    #[arg(long, value_name = "S")]
+    pub codes: PathBuf,
+    /// Measurements file (K,), or (ADCs, K) for several ADCs; float32 or float64.
+    #[arg(long, value_name = "Y")]
+    pub meas: PathBuf,
+    /// Depth bins K_s of the scene.
+    #[arg(long, value_name = "KS", value_parser = parse_positive)]
+    pub depth_bins: usize,
+}
+
 /// The global flags, as every subcommand sees them.
 #[derive(Debug, Clone, Copy)]
 pub struct Globals {

@@ -10,7 +10,7 @@ use rdlidar::recon::{compare, reconstruct, Method, ReconstructOptions};
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, parse_positive, with_precision, CliResult, Globals,
+    check_out_file, npy_dtype, parse_positive, with_precision, CliResult, Globals, MeasurementFiles,
 };
 
 /// Reconstruct the scene from measurements: a depth map and a one-return-per-pixel scene.
@@ -34,18 +34,8 @@ use crate::common::{
 /// Example: `rdlidar reconstruct --pulse run0/pulse.npy --codes run0/codes.npy --meas run0/meas.npy --depth-bins 40 --solver auto --out-depth d.npy --out-scene xh.npy --png d.png --truth run0/scene.npy`
 #[derive(clap::Args, Debug)]
 pub struct ReconstructArgs {
-    /// Pulse file (K_p,), float32 or float64, ≥ 0.
-    #[arg(long, value_name = "P")]
-    pub pulse: PathBuf,
-    /// Codes file (M, N, K), int8 (or float) in {-1, 0, 1}.
-    #[arg(long, value_name = "S")]
-    pub codes: PathBuf,
-    /// Measurements file (K,), float32 or float64.
-    #[arg(long, value_name = "Y")]
-    pub meas: PathBuf,
-    /// Depth bins K_s of the scene.
-    #[arg(long, value_name = "KS", value_parser = parse_positive)]
-    pub depth_bins: usize,
+    #[command(flatten)]
+    pub files: MeasurementFiles,
     /// Reconstruction method.
     #[arg(long, value_name = "NAME", value_parser = parse_method)]
     pub solver: Method,
@@ -85,7 +75,7 @@ pub fn run(a: &ReconstructArgs, globals: &Globals) -> CliResult {
     }
     check_distinct_outputs(a)?;
     with_precision!(
-        globals.precision_of(&[&a.meas, &a.pulse])?,
+        globals.precision_of(&[&a.files.meas, &a.files.pulse])?,
         reconstruct_files(a, globals)
     )
 }
@@ -94,29 +84,29 @@ fn reconstruct_files<T: Real + WritableElement>(
     a: &ReconstructArgs,
     globals: &Globals,
 ) -> CliResult {
-    let p = io::read_pulse::<T>(&a.pulse)?;
+    let p = io::read_pulse::<T>(&a.files.pulse)?;
     let kp = p.len();
-    if kp.checked_add(a.depth_bins).is_none() {
-        return Err(format!("--depth-bins {} is too large", a.depth_bins).into());
+    if kp.checked_add(a.files.depth_bins).is_none() {
+        return Err(format!("--depth-bins {} is too large", a.files.depth_bins).into());
     }
     let expect = ShapeExpectation {
         pulse_len: kp,
-        depth_bins: a.depth_bins,
+        depth_bins: a.files.depth_bins,
         grid: None,
     };
-    let y = io::read_measurements::<T>(&a.meas, Some(&expect))?;
-    let h = io::read_header(&a.codes)?;
+    let y = io::read_measurements::<T>(&a.files.meas, Some(&expect))?;
+    let h = io::read_header(&a.files.codes)?;
     if h.shape.len() == 4 {
         return Err(format!(
             "{}: codes of shape {} are {} code sets; reconstruct needs one code set (M, N, K)",
-            a.codes.display(),
+            a.files.codes.display(),
             io::shape_text(&h.shape),
             h.shape[0]
         )
         .into());
     }
-    let ((m, n), codes) = io::read_codes(&a.codes, &expect)?;
-    let g = Geometry::new(m, n, a.depth_bins).map_err(|e| format!("--depth-bins: {e}"))?;
+    let ((m, n), codes) = io::read_codes(&a.files.codes, &expect)?;
+    let g = Geometry::new(m, n, a.files.depth_bins).map_err(|e| format!("--depth-bins: {e}"))?;
     let truth = match &a.truth {
         Some(path) => {
             let t = io::read_scene::<T>(path)?;

@@ -193,6 +193,20 @@ fn retain_rows<U: Copy>(v: &mut Vec<U>, keep: &[bool], width: usize) {
         .collect();
 }
 
+/// Keeps the supported voxels marked in `keep`, with their amplitudes and their rows of
+/// `ks` self-correlations.
+fn retain_support<T: Copy>(
+    keep: &[bool],
+    voxels: &mut Vec<usize>,
+    amp: &mut Vec<T>,
+    own: &mut Vec<f64>,
+    ks: usize,
+) {
+    retain_rows(voxels, keep, 1);
+    retain_rows(amp, keep, 1);
+    retain_rows(own, keep, ks);
+}
+
 /// Recovers a scene with at most one nonzero per pixel (a pixel is `column_len` consecutive
 /// unknowns: one reflector per lidar pixel, empty pixels allowed) from y ≈ Ax, starting from `x`.
 ///
@@ -375,9 +389,7 @@ where
             // Drop the pixels whose amplitude came out non-positive; their depth is re-judged
             // at the next iteration against the residual without them.
             let keep: Vec<bool> = new_amp.iter().map(|a| *a > T::zero()).collect();
-            retain_rows(&mut new_voxels, &keep, 1);
-            retain_rows(&mut new_amp, &keep, 1);
-            retain_rows(&mut new_own, &keep, ks);
+            retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
             r = residual(op, &new_voxels, y, &new_amp, &mut applies)?;
         }
         let rel = (dot(&r, &r)).sqrt() / ynorm;
@@ -394,9 +406,7 @@ where
                 .map(|(a, c)| score(a.as_f64()) * c >= params.amplitude_z * sigma_r)
                 .collect();
             if keep.iter().any(|k| !k) {
-                retain_rows(&mut new_voxels, &keep, 1);
-                retain_rows(&mut new_amp, &keep, 1);
-                retain_rows(&mut new_own, &keep, ks);
+                retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
                 r = fit(
                     op,
                     &new_voxels,
