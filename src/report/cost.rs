@@ -143,14 +143,10 @@ pub struct Throughput {
 const CALIBRATION_CAP: (usize, usize, usize) = (64, 64, 16_384);
 
 impl Throughput {
-    /// The rates measured on the reference machine (2 cores of an AMD EPYC with AVX-512, 2
-    /// threads) at 100×100×40, K_p = 30 000, with the paper scene for the sparse forward, in one
-    /// `cargo bench` run documented in docs/lidar.md: f32 forward 72.5 ms, adjoint 66.7 ms and
-    /// sparse forward of 5 547 voxels 9.7 ms, f64 forward 122.8 ms, adjoint 120.0 ms and sparse
-    /// forward 16.9 ms, per application (criterion medians). The machine is shared and its speed
-    /// varies between runs (a second run the same hour gave an f32 forward of 78.0 ms and sparse
-    /// forward of 12.3 ms); a loaded or different machine can be several times slower, which
-    /// [`Throughput::calibrate`] measures.
+    /// The documented rates: those of one `cargo bench --bench lidar` run at 100×100×40,
+    /// K_p = 30 000 with the paper scene for the sparse forward, on the two-core machine whose
+    /// figures docs/lidar.md lists (criterion medians). Another or a loaded machine differs;
+    /// [`Throughput::calibrate`] measures the one at hand.
     pub fn documented() -> Self {
         let flops = 2.0 * 10_000.0 * 30_039.0 * 40.0;
         let voxel_samples = 5_547.0 * 30_000.0;

@@ -29,7 +29,7 @@ where
 }
 
 /// Writes any array as a C-order `.npy` file under a temporary name and syncs it, without
-/// renaming it into place: [`StagedFile::commit`] (or [`super::commit_all`] for a set of files)
+/// renaming it into place: [`StagedFile::commit`] (or [`commit_all`](crate::io::commit_all) for a set of files)
 /// does that, and dropping the result removes it.
 ///
 /// # Errors

@@ -117,13 +117,12 @@ impl ExperimentConfig {
         }
     }
 
-    /// The demo's iteration budgets, chosen so that the whole demo runs in under three minutes
-    /// on the shared two-core machine: CGLS 15, FISTA 15 (and IHT 15, if added), CoSaMP 1 (each
+    /// The demo's iteration budgets: CGLS 15, FISTA 15 (and IHT 15, if added), CoSaMP 1 (each
     /// of its iterations solves a least-squares problem on the merged support), model-based 6
     /// and, for TV and auto, 4 (the limit of each of their model-based fits; TV's neighbourhood
-    /// rounds of message passing have their own limits). The
-    /// backprojections have no iterations. With [`ExperimentConfig::demo`]'s 30 power
-    /// iterations for FISTA's step.
+    /// rounds of message passing have their own limits). The backprojections have no
+    /// iterations. They keep the demo to a few minutes on two cores (docs/experiments.md has the
+    /// timings).
     pub fn demo_budgets() -> IterationBudgets {
         IterationBudgets::from_pairs(&[
             (Method::Cgls, 15),

@@ -238,8 +238,9 @@ fn sweep_precision<T: Real>(
 /// row as it finishes; stops between runs once `stop` is set.
 ///
 /// # Errors
-/// [`Error::InvalidParameter`] for an invalid configuration; errors of the simulation and of
-/// `on_row`. A solver's own failure is recorded in its row instead.
+/// [`Error::InvalidParameter`](crate::Error::InvalidParameter) for an invalid configuration;
+/// errors of the simulation and of `on_row`. A solver's own failure is recorded in its row
+/// instead.
 pub fn sweep(
     config: &ExperimentConfig,
     columns: &[Column],

@@ -1,0 +1,349 @@
+//! The method registry: every reconstruction method with its lidar defaults, and [`run`] of one
+//! concrete method on the lidar operator.
+
+use std::str::FromStr;
+
+use crate::error::{Error, Result};
+use crate::lidar::{RdOperator, NO_RETURN};
+use crate::operator::{LinearOperator, PowerIteration};
+use crate::real::Real;
+use crate::solver::{
+    cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, CglsParams, CosampParams,
+    FistaParams, IhtParams, Lambda, ModelBasedParams, ReflectorAmpParams, Report, Restart,
+    StepRule, Stopping, TvDepthParams,
+};
+
+use super::peaks::backproject;
+
+/// λ of [`Method::Fista`] as a fraction of ‖Aᵀy‖∞.
+const FISTA_LAMBDA_FRACTION: f64 = 0.05;
+
+/// Default iteration limits.
+const CGLS_MAX_ITER: usize = 300;
+const FISTA_MAX_ITER: usize = 200;
+const GREEDY_MAX_ITER: usize = 100;
+/// CGLS iterations of CoSaMP's least squares on the merged support, warm-started from the previous
+/// estimate (the trade-off between time and accuracy is measured in docs/solvers.md).
+const COSAMP_INNER_ITER: usize = 10;
+
+/// A reconstruction method, named on the command line as [`Method::name`] gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// The paper's method: plain backprojection Aᵀy normalized by ‖p‖², per-pixel peak, robust
+    /// threshold ([`Threshold::Auto`](crate::solver::Threshold::Auto) with k = 3).
+    Backprojection,
+    /// Backprojection with the zero-mean pulse, normalized by Σ(p − mean p)·p (≈ K_p/4 for a 0/1
+    /// pulse) so that peaks estimate amplitudes; per-pixel peak, robust threshold.
+    BackprojectionDebiased,
+    /// Least squares by CGLS (at most 300 iterations or a relative normal-equation residual of
+    /// 1e-8), then per-pixel peaks.
+    Cgls,
+    /// Nonnegative lasso by FISTA (λ = 0.05·‖Aᵀy‖∞, power-iteration step, function restart, at
+    /// most 200 iterations), then per-pixel peaks.
+    Fista,
+    /// Iterative hard thresholding (at most 100 iterations) with the sparsity estimated from the
+    /// debiased backprojection, then per-pixel peaks.
+    Iht,
+    /// CoSaMP (at most 100 iterations; least squares on the merged support by at most 10
+    /// warm-started CGLS iterations on the support operator) with the sparsity estimated from the
+    /// debiased backprojection, then per-pixel peaks.
+    Cosamp,
+    /// Message passing with the one-reflector-per-pixel prior alone
+    /// ([`ReflectorAmpParams::default`](crate::solver::ReflectorAmpParams)): the most probable
+    /// scene, without the least-squares refinement of [`Method::ModelBased`].
+    Amp,
+    /// Model-based recovery, at most one reflector per pixel ([`ModelBasedParams::default`]):
+    /// started by message passing, refined by least squares on the support.
+    ModelBased,
+    /// Total variation on the depth map ([`TvDepthParams::default`]).
+    Tv,
+    /// Chosen from the regime of the pulse length; see [`reconstruct`](super::reconstruct).
+    Auto,
+}
+
+impl Method {
+    /// Every method, in the order of the command-line help.
+    pub const ALL: [Method; 10] = [
+        Method::Backprojection,
+        Method::BackprojectionDebiased,
+        Method::Cgls,
+        Method::Fista,
+        Method::Iht,
+        Method::Cosamp,
+        Method::Amp,
+        Method::ModelBased,
+        Method::Tv,
+        Method::Auto,
+    ];
+
+    /// The command-line names of [`Method::ALL`].
+    pub const NAMES: [&'static str; 10] = [
+        "backprojection",
+        "backprojection-debiased",
+        "cgls",
+        "fista",
+        "iht",
+        "cosamp",
+        "amp",
+        "model-based",
+        "tv",
+        "auto",
+    ];
+
+    /// The command-line name (`"model-based"`, …).
+    pub fn name(self) -> &'static str {
+        let i = Method::ALL
+            .iter()
+            .position(|&m| m == self)
+            .expect("ALL lists every method");
+        Method::NAMES[i]
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = Error;
+
+    /// Parses a command-line name (exactly as [`Method::name`] writes it).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`method`) listing the valid names.
+    fn from_str(s: &str) -> Result<Self> {
+        Method::NAMES
+            .iter()
+            .position(|&n| n == s)
+            .map(|i| Method::ALL[i])
+            .ok_or_else(|| {
+                Error::param(
+                    "method",
+                    format!(
+                        "unknown method {s:?}; expected one of {}",
+                        Method::NAMES.join(", ")
+                    ),
+                )
+            })
+    }
+}
+
+/// Settings of [`reconstruct`](super::reconstruct) shared by every method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ReconstructOptions {
+    /// Overrides the method's iteration limit (ignored by the backprojections).
+    pub max_iter: Option<usize>,
+    /// Shows a progress bar on stderr (when it is a terminal) during iterative solves.
+    pub progress: bool,
+    /// Seed of the randomized parts (the power iteration behind FISTA's step).
+    pub seed: u64,
+    /// Overrides the number of power iterations that estimate ‖A‖² for [`Method::Fista`]'s step
+    /// (by default up to 200, until the estimate changes by less than 10⁻⁶; at 100×100×40 these
+    /// cost more than 200 FISTA iterations' worth of applications). Fewer iterations
+    /// underestimate ‖A‖² a little (about 2% after 30 iterations at 100×100×40), so the step's
+    /// safety margin grows from 1.01 to 1.05 when this is set.
+    pub power_iterations: Option<usize>,
+}
+
+#[cfg(feature = "progress")]
+pub(super) fn progress_bar(
+    max_iter: usize,
+    options: &ReconstructOptions,
+) -> crate::solver::ProgressObserver {
+    crate::solver::ProgressObserver::new(max_iter).quiet(!options.progress)
+}
+
+/// Without the `progress` feature nothing is drawn.
+#[cfg(not(feature = "progress"))]
+pub(super) fn progress_bar(_max_iter: usize, _options: &ReconstructOptions) -> NoProgress {
+    NoProgress
+}
+
+/// The observer of a solve when progress bars are not compiled in.
+#[cfg(not(feature = "progress"))]
+pub(super) struct NoProgress;
+
+#[cfg(not(feature = "progress"))]
+impl NoProgress {
+    pub(super) fn finish(&self) {}
+}
+
+#[cfg(not(feature = "progress"))]
+impl<T> crate::solver::Observer<T> for NoProgress {
+    fn observe(&mut self, _: &crate::solver::IterationInfo<'_, T>) -> crate::solver::Control {
+        crate::solver::Control::Continue
+    }
+}
+
+fn stopping(default: Stopping, options: &ReconstructOptions) -> Stopping {
+    Stopping {
+        max_iter: options.max_iter.unwrap_or(default.max_iter),
+        ..default
+    }
+}
+
+pub(super) fn model_params(options: &ReconstructOptions) -> ModelBasedParams {
+    let d = ModelBasedParams::default();
+    ModelBasedParams {
+        stopping: stopping(d.stopping, options),
+        ..d
+    }
+}
+
+/// Runs one concrete method (not [`Method::Auto`]); returns the estimate and the solver's report.
+/// The backprojections' estimates have one return per pixel at most; the iterative ones still
+/// need [`pixel_peaks`].
+pub(super) fn run<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    method: Method,
+    options: &ReconstructOptions,
+) -> Result<(Vec<T>, Option<Report>)> {
+    let g = op.geometry();
+    let n = g.voxels();
+    let mut x = vec![T::zero(); n];
+    let report = match method {
+        Method::Backprojection | Method::BackprojectionDebiased => {
+            let bp = backproject(op, y, method == Method::BackprojectionDebiased)?;
+            return Ok((bp.x, None));
+        }
+        Method::Cgls => {
+            let params = CglsParams {
+                damp: 0.0,
+                stopping: stopping(
+                    Stopping {
+                        max_iter: CGLS_MAX_ITER,
+                        rel_residual: Some(1e-8),
+                        ..Stopping::default()
+                    },
+                    options,
+                ),
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = cgls(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Fista => {
+            let params = FistaParams {
+                lambda: Lambda::Fraction(FISTA_LAMBDA_FRACTION),
+                nonnegative: true,
+                step: StepRule::PowerIteration {
+                    settings: PowerIteration {
+                        seed: options.seed,
+                        max_iter: options
+                            .power_iterations
+                            .unwrap_or(PowerIteration::default().max_iter),
+                        ..PowerIteration::default()
+                    },
+                    margin: if options.power_iterations.is_some() {
+                        1.05
+                    } else {
+                        1.01
+                    },
+                },
+                restart: Restart::Function,
+                stopping: stopping(
+                    Stopping {
+                        max_iter: FISTA_MAX_ITER,
+                        rel_residual: Some(1e-6),
+                        rel_change: Some(1e-6),
+                        ..Stopping::default()
+                    },
+                    options,
+                ),
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = fista(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Iht => {
+            let s = estimate_sparsity(op, y)?;
+            let d = IhtParams::new(s);
+            let params = IhtParams {
+                stopping: stopping(
+                    Stopping {
+                        max_iter: GREEDY_MAX_ITER,
+                        ..d.stopping
+                    },
+                    options,
+                ),
+                ..d
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = iht(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Cosamp => {
+            let s = estimate_sparsity(op, y)?;
+            let d = CosampParams::new(s);
+            let params = CosampParams {
+                stopping: stopping(
+                    Stopping {
+                        max_iter: GREEDY_MAX_ITER,
+                        ..d.stopping
+                    },
+                    options,
+                ),
+                inner: CglsParams {
+                    stopping: Stopping {
+                        max_iter: COSAMP_INNER_ITER,
+                        ..d.inner.stopping
+                    },
+                    ..d.inner
+                },
+                ..d
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = cosamp(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Amp => {
+            let d = ReflectorAmpParams::default();
+            let params = ReflectorAmpParams {
+                stopping: stopping(d.stopping, options),
+                ..d
+            };
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = reflector_amp(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::ModelBased => {
+            let params = model_params(options);
+            let mut progress = progress_bar(params.stopping.max_iter, options);
+            let r = model_based(op, y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Tv => {
+            let params = TvDepthParams {
+                model: model_params(options),
+                ..TvDepthParams::default()
+            };
+            let mut progress = progress_bar(params.model.stopping.max_iter, options);
+            let r = tv_depth(op, (g.m, g.n), y, &mut x, &params, &mut progress)?;
+            progress.finish();
+            r
+        }
+        Method::Auto => unreachable!("Auto is resolved before run"),
+    };
+    Ok((x, Some(report)))
+}
+
+/// The sparsity for IHT and CoSaMP: twice the number of pixels the debiased backprojection
+/// detects (cross-talk hides weak returns from it, and too small a sparsity cannot be recovered
+/// from, whereas a larger one only costs some accuracy), clamped to [1, min(M·N, K/3)]: one
+/// return per pixel at most, and K/3 keeps CoSaMP's least squares on up to 3s columns
+/// overdetermined.
+fn estimate_sparsity<T: Real>(op: &RdOperator<T>, y: &[T]) -> Result<usize> {
+    let bp = backproject(op, y, true)?;
+    let found = bp.peaks.iter().filter(|&&p| p != NO_RETURN).count();
+    let cap = (op.nrows() / 3).min(op.geometry().pixels()).max(1);
+    Ok((2 * found).clamp(1, cap))
+}
