@@ -57,7 +57,7 @@ pub use config::{
 };
 pub use console::Console;
 pub use figures::{depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR};
-pub use sweep::{sweep, CaseDepths, Sweep};
+pub use sweep::{CaseDepths, Sweep};
 pub use table::{
     csv_header, csv_line, markdown_header, markdown_row, markdown_table, summary_markdown, Column,
     PartialFiles, CSV_COLUMNS,
@@ -504,6 +504,7 @@ pub fn run_compare(
 struct Run {
     name: &'static str,
     columns: &'static [Column],
+    /// Whether the sweep keeps each problem's depth maps (for the depth figures).
     keep_depths: bool,
 }
 
@@ -520,14 +521,11 @@ impl Run {
         config.validate()?;
         prepare_output_dir(&config.out, force)?;
         let mut partial = PartialFiles::create(&config.out)?;
-        let sweep = sweep(
-            config,
-            self.columns,
-            self.keep_depths,
-            observer,
-            stop,
-            &mut |r| partial.append(r),
-        )?;
+        let mut on_row = |r: &Row| partial.append(r);
+        let sweep = match config.precision {
+            Precision::F32 => sweep::sweep::<f32>(config, self, observer, stop, &mut on_row)?,
+            Precision::F64 => sweep::sweep::<f64>(config, self, observer, stop, &mut on_row)?,
+        };
         let mut files = Vec::new();
         write_tables(self.name, config, &sweep, self.columns, &mut files)?;
         figures(&sweep, &mut files)?;

@@ -12,8 +12,8 @@ use crate::real::Real;
 use crate::recon::{compare, reconstruct, Method, ReconstructOptions};
 
 use super::{
-    estimated_work, snake_case, Case, Column, Event, ExperimentConfig, ExperimentObserver,
-    Precision, Row, SceneKind,
+    estimated_work, snake_case, Case, Event, ExperimentConfig, ExperimentObserver, Row, Run,
+    SceneKind,
 };
 
 /// The truth, the operator and the measurements of one [`Case`].
@@ -144,10 +144,15 @@ pub struct Sweep {
     pub elapsed: Duration,
 }
 
-fn sweep_precision<T: Real>(
+/// Runs the sweep of `config` in precision `T`, calling `on_row` with each row as it finishes;
+/// stops between runs once `stop` is set.
+///
+/// # Errors
+/// Errors of the simulation and of `on_row`. A solver's own failure is recorded in its row
+/// instead.
+pub(super) fn sweep<T: Real>(
     config: &ExperimentConfig,
-    columns: &[Column],
-    keep_depths: bool,
+    run: &Run,
     observer: &mut dyn ExperimentObserver,
     stop: &AtomicBool,
     on_row: &mut dyn FnMut(&Row) -> Result<()>,
@@ -168,7 +173,7 @@ fn sweep_precision<T: Real>(
         problems: cases.len(),
         runs,
         work,
-        columns,
+        columns: run.columns,
     });
     let mut sweep = Sweep {
         rows: Vec::with_capacity(runs),
@@ -195,7 +200,7 @@ fn sweep_precision<T: Real>(
         for &method in &config.solvers {
             if stop.load(Ordering::SeqCst) {
                 sweep.interrupted = true;
-                if keep_depths {
+                if run.keep_depths {
                     sweep.depths.push(depths);
                 }
                 break 'cases;
@@ -215,12 +220,12 @@ fn sweep_precision<T: Real>(
                 row: &row,
                 work: work_of(method, case.pulse_len),
             });
-            if let (true, Some(d)) = (keep_depths, depth) {
+            if let (true, Some(d)) = (run.keep_depths, depth) {
                 depths.estimates.push((method, d));
             }
             sweep.rows.push(row);
         }
-        if keep_depths {
+        if run.keep_depths {
             sweep.depths.push(depths);
         }
     }
@@ -232,30 +237,4 @@ fn sweep_precision<T: Real>(
     }
     sweep.elapsed = start.elapsed();
     Ok(sweep)
-}
-
-/// Runs the sweep of `config` (validated first) in its precision, calling `on_row` with each
-/// row as it finishes; stops between runs once `stop` is set.
-///
-/// # Errors
-/// [`Error::InvalidParameter`](crate::Error::InvalidParameter) for an invalid configuration;
-/// errors of the simulation and of `on_row`. A solver's own failure is recorded in its row
-/// instead.
-pub fn sweep(
-    config: &ExperimentConfig,
-    columns: &[Column],
-    keep_depths: bool,
-    observer: &mut dyn ExperimentObserver,
-    stop: &AtomicBool,
-    on_row: &mut dyn FnMut(&Row) -> Result<()>,
-) -> Result<Sweep> {
-    config.validate()?;
-    match config.precision {
-        Precision::F32 => {
-            sweep_precision::<f32>(config, columns, keep_depths, observer, stop, on_row)
-        }
-        Precision::F64 => {
-            sweep_precision::<f64>(config, columns, keep_depths, observer, stop, on_row)
-        }
-    }
 }

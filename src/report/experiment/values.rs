@@ -224,11 +224,7 @@ pub(super) fn parse_method(name: &str, key: &'static str) -> Result<Method> {
 /// # Errors
 /// [`Error::InvalidParameter`] (`solvers`) for an unknown name or an empty list.
 pub fn parse_solvers(text: &str) -> Result<Vec<Method>> {
-    let names: Vec<&str> = text
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .collect();
+    let names = list_items(text);
     if names == ["all"] {
         return Ok(DEFAULT_SOLVERS.to_vec());
     }
@@ -277,11 +273,7 @@ pub(super) fn noise_level(v: f64) -> std::result::Result<NoiseLevel, String> {
 /// # Errors
 /// As [`parse_noise_level`], and for an empty list.
 pub fn parse_noise_levels(text: &str) -> Result<Vec<NoiseLevel>> {
-    let items: Vec<&str> = text
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .collect();
+    let items = list_items(text);
     if items.is_empty() {
         return Err(Error::param("snr_db", "the list of noise levels is empty"));
     }
@@ -294,11 +286,7 @@ pub fn parse_noise_levels(text: &str) -> Result<Vec<NoiseLevel>> {
 /// [`Error::InvalidParameter`] (`pulse_lens`) for an entry that is not a positive integer, or an
 /// empty list.
 pub fn parse_pulse_lens(text: &str) -> Result<Vec<usize>> {
-    let items: Vec<&str> = text
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .collect();
+    let items = list_items(text);
     if items.is_empty() {
         return Err(Error::param(
             "pulse_lens",
@@ -337,3 +325,11 @@ pub const DEFAULT_SOLVERS: [Method; 9] = [
     Method::Tv,
     Method::Auto,
 ];
+
+/// The non-empty, trimmed items of a comma-separated list.
+fn list_items(text: &str) -> Vec<&str> {
+    text.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .collect()
+}
