@@ -59,8 +59,6 @@ pub mod lapack;
 pub mod lidar;
 pub mod linalg;
 pub mod operator;
-#[cfg(feature = "report")]
-pub mod plot;
 pub mod real;
 pub mod recon;
 #[cfg(feature = "report")]

@@ -142,14 +142,14 @@ fn reconstruct_files<T: Real + WritableElement>(
     ];
     if let Some(png) = &a.png {
         let bin_m = depth_bin_m(DEFAULT_TAU_S)?;
-        let options = rdlidar::plot::DepthOptions::new(bin_m, "m")
+        let options = rdlidar::report::plot::DepthOptions::new(bin_m, "m")
             .title(format!("{} ({})", r.method_used, g));
         let truth_depth = truth.as_ref().map(|t| t.depth_map().depth);
         let panels: Vec<(&str, &ndarray::Array2<i32>)> = match &truth_depth {
             Some(d) => vec![("truth", d), ("estimate", &r.depth.depth)],
             None => vec![("estimate", &r.depth.depth)],
         };
-        let fig = rdlidar::plot::depth_panels(&panels, &options)
+        let fig = rdlidar::report::plot::depth_panels(&panels, &options)
             .map_err(|e| format!("{}: {e}", png.display()))?;
         staged.push(io::stage_bytes(png, &fig.encode_png())?);
     }

@@ -17,7 +17,7 @@ pub use super::values::*;
 pub const MAX_VOXELS: usize = 1 << 26;
 
 /// Largest number of pixel rows or columns of an experiment's scene, so that depth figures with
-/// several panels side by side stay within the limits of [`crate::plot`].
+/// several panels side by side stay within the limits of [`crate::report::plot`].
 pub const MAX_SIDE: usize = 1024;
 
 /// Largest size of the bit-packed codes, M·N·K bits, of one problem (2 GiB).

@@ -3,7 +3,7 @@
 
 use crate::error::Result;
 use crate::lidar::{depth_bin_m, DEFAULT_TAU_S};
-use crate::plot::{
+use crate::report::plot::{
     depth_panels, line_plot, scatter_plot, Chart, ChartFigure, DepthFigure, DepthOptions,
     LegendPosition, Marker, Rgb, Series, SeriesStyle,
 };
@@ -55,7 +55,7 @@ pub fn depth_figure(
         .map(|(d, t)| (t.as_str(), d))
         .collect();
     let title = format!(
-        "{}, K_p = {} ({}), {}, seed {}: depth maps",
+        "{}, Kₚ = {} ({}), {}, seed {}: depth maps",
         describe(config),
         c.pulse_len,
         g.regime(c.pulse_len),
@@ -122,15 +122,15 @@ pub fn error_vs_time(config: &ExperimentConfig, rows: &[Row]) -> Result<ChartFig
         });
     let log_y = hi > 10.0 * lo;
     let mut chart = Chart::new(format!(
-        "Error against run time: {}, K_p = {}",
+        "Error against run time: {}, Kₚ = {}",
         describe(config),
         kps.join(", ")
     ))
     .x_label("wall time (s), log scale")
     .y_label(if log_y {
-        "relative error |X - X^|/|X| (floor 1e-12), log scale"
+        "relative error ‖X − X̂‖/‖X‖ (floor 10⁻¹²), log scale"
     } else {
-        "relative error |X - X^|/|X|"
+        "relative error ‖X − X̂‖/‖X‖"
     })
     .log_x(true)
     .log_y(log_y)
@@ -172,7 +172,7 @@ pub fn pareto_chart(config: &ExperimentConfig, rows: &[Row]) -> Result<ChartFigu
         config.seeds,
         config.snr_db.len()
     ))
-    .x_label("relative error |X - X^|/|X| (floor 1e-12), log scale")
+    .x_label("relative error ‖X − X̂‖/‖X‖ (floor 10⁻¹²), log scale")
     .y_label("wall time (s)")
     .log_x(true)
     .log_y(true)
@@ -209,18 +209,18 @@ pub fn phase_chart(
     let mut kps = config.pulse_lens.clone();
     kps.sort_unstable();
     let mut chart = Chart::new(format!(
-        "Error against K_p: {}, {}, median of {} seed(s)",
+        "Error against Kₚ: {}, {}, median of {} seed(s)",
         describe(config),
         noise_text(level),
         config.seeds
     ))
-    .x_label("pulse length K_p, log scale")
-    .y_label("relative error |X - X^|/|X| (floor 1e-12)")
+    .x_label("pulse length Kₚ, log scale")
+    .y_label("relative error ‖X − X̂‖/‖X‖ (floor 10⁻¹²)")
     .log_x(true)
     .log_y(true)
     .size(1100, 620)
     .legend(LegendPosition::Outside)
-    .vline(critical as f64, format!("critical K_p = {critical}"));
+    .vline(critical as f64, format!("critical Kₚ = {critical}"));
     for m in &config.solvers {
         let pts: Vec<(f64, f64)> = kps
             .iter()
