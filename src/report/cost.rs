@@ -308,7 +308,7 @@ pub struct Cost {
 }
 
 impl Cost {
-    /// The budget of a grid with a pulse of `pulse_len` samples at sampling period `tau_s`
+    /// The cost of a grid with a pulse of `pulse_len` samples at sampling period `tau_s`
     /// seconds, the operator's memory counted for `threads` worker threads, times estimated
     /// with `throughput`.
     ///

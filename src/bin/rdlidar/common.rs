@@ -44,10 +44,12 @@ pub struct MeasurementFiles {
     /// Pulse file (K_p,), float32 or float64, ≥ 0.
     #[arg(long, value_name = "P")]
     pub pulse: PathBuf,
-    /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
+    /// Codes file (M, N, K), int8 (or float) in {-1, 0, 1}; `adjoint` also reads G code sets
+    /// (G, M, N, K).
     #[arg(long, value_name = "S")]
     pub codes: PathBuf,
-    /// Measurements file (K,), or (ADCs, K) for several ADCs; float32 or float64.
+    /// Measurements file (K,), float32 or float64; `adjoint` also reads one row per ADC
+    /// (ADCs, K).
     #[arg(long, value_name = "Y")]
     pub meas: PathBuf,
     /// Depth bins K_s of the scene.

@@ -48,7 +48,7 @@ pub struct ExperimentArgs {
     #[arg(long, value_name = "LIST", value_parser = parse_pulse_lens)]
     pub pulse_lens: Option<PulseLens>,
     /// Solvers, comma-separated, or `all` (every solver but iht): backprojection,
-    /// backprojection-debiased, cgls, fista, iht, cosamp, model-based, tv, auto.
+    /// backprojection-debiased, cgls, fista, iht, cosamp, amp, model-based, tv, auto.
     #[arg(long, value_name = "LIST", value_parser = parse_solver_list)]
     pub solvers: Option<Solvers>,
     /// Noise levels in dB SNR, comma-separated; `none` for noise-free.

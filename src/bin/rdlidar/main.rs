@@ -36,8 +36,9 @@ struct Cli {
     threads: Option<usize>,
 
     /// Base seed of every random draw (default 0). simulate, bench, demo and compare draw the
-    /// pulse from SEED, the codes from SEED+1, the noise from SEED+2 and random scenes from
-    /// SEED+3; selfcheck and dottest seed their test vectors with it, reconstruct the solvers'
+    /// pulse from SEED, code set g from SEED+1+1000·g (the codes of one ADC from SEED+1), the
+    /// noise from SEED+2, random scenes from SEED+3 and a coded aperture from SEED+4;
+    /// selfcheck and dottest seed their test vectors with it, reconstruct the solvers'
     /// randomized parts.
     #[arg(long, global = true)]
     seed: Option<u64>,
@@ -68,7 +69,7 @@ enum Command {
     ///
     /// The paper scene (100x100x40, three extended reflectors) acquired with K_p = 10000,
     /// 20000 and 30000 (noise-free, seed --seed) and reconstructed by every solver
-    /// (backprojection plain and debiased, cgls, fista, cosamp, model-based, tv, auto) within
+    /// (backprojection plain and debiased, cgls, fista, cosamp, amp, model-based, tv, auto) within
     /// iteration budgets that keep the whole demo under three minutes on two cores: cgls 15,
     /// fista 15 (its step from 30 power iterations), cosamp 1, model-based 6, tv and auto 4
     /// (each of their model-based fits); change them with --max-iter or a config file.

@@ -22,8 +22,8 @@ use crate::common::{
 ///
 /// Solvers: backprojection (the paper's: adjoint, per-pixel peak, robust threshold),
 /// backprojection-debiased (zero-mean pulse), cgls (least squares), fista (nonnegative
-/// lasso), iht and cosamp (sparsity estimated from the debiased backprojection), model-based
-/// (one reflector per pixel), tv (TV on the depth map) and auto: debiased backprojection in
+/// lasso), iht and cosamp (sparsity estimated from the debiased backprojection), amp (message
+/// passing with the one-reflector prior), model-based (one reflector per pixel), tv (TV on the depth map) and auto: debiased backprojection in
 /// the redundant regime, cgls in the critical one, model-based in the compressive one,
 /// followed by tv (from scratch) when the model-based fit does not explain the data, keeping
 /// tv's scene when it fits about as well.

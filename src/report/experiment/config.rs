@@ -93,7 +93,7 @@ fn noise_levels<S: Serializer>(v: &[NoiseLevel], s: S) -> std::result::Result<S:
 
 impl ExperimentConfig {
     /// The main job (`rdlidar demo`): the paper's scene 100×100×40, K_p = 10000, 20000, 30000,
-    /// noise-free, one seed, the eight methods of [`DEFAULT_SOLVERS`] in f32 with the demo's
+    /// noise-free, one seed, the nine methods of [`DEFAULT_SOLVERS`] in f32 with the demo's
     /// budgets ([`ExperimentConfig::demo_budgets`]) and FISTA's step from 30 power iterations,
     /// written to `out/`.
     pub fn demo() -> Self {
@@ -148,7 +148,7 @@ impl ExperimentConfig {
 
     /// The full sweep (`rdlidar compare`): the paper scene 16×16×16 (critical K_p 4081), K_p
     /// from 256 to 32768 (compressive, critical, redundant), 3 seeds, noise-free and 20 and
-    /// 10 dB SNR, the eight methods with their default iteration limits, in f64, written to
+    /// 10 dB SNR, the nine methods with their default iteration limits, in f64, written to
     /// `out-compare/`.
     pub fn compare() -> Self {
         ExperimentConfig {
