@@ -21,6 +21,7 @@ use crate::report::units::{bytes, frames_per_second, metres, seconds, si};
 use crate::lidar::sampling::check_tau;
 use crate::lidar::{
     depth_bin_m, random_opaque_scene, CodeAlphabet, Codes, Geometry, Pulse, RdOperator, Regime,
+    Seeds,
 };
 
 /// One value for each precision of the operator.
@@ -221,10 +222,12 @@ fn measure<T: Real>(
     repeats: usize,
 ) -> Result<(OperatorRates, &'static str)> {
     let k = g.samples(kp);
-    let pulse = Pulse::<T>::bernoulli(kp, 0)?;
-    let codes = Codes::random_binary(g.pixels(), k, 1)?;
+    // The draws of a simulation with base seed 0.
+    let seeds = Seeds::new(0);
+    let pulse = Pulse::<T>::bernoulli(kp, seeds.pulse())?;
+    let codes = Codes::random_binary(g.pixels(), k, seeds.code_set(0))?;
     let op = RdOperator::new(g, pulse.into_inner(), Arc::new(codes))?;
-    let scene = random_opaque_scene::<T>(g, 1.0, 3)?;
+    let scene = random_opaque_scene::<T>(g, 1.0, seeds.scene())?;
     let t = time_operator(&op, scene.as_slice(), repeats);
     // At least 1 ns, so that the rates stay finite.
     let [forward, adjoint, sparse] =
