@@ -376,15 +376,11 @@ where
                 }
             })
             .collect();
-        r = fit(
-            op,
-            &new_voxels,
-            y,
-            &mut new_amp,
-            &params.inner,
-            &mut applies,
-            it,
-        )?;
+        // Least squares on the support, warm-started from `amp`, giving the residual.
+        let refit = |voxels: &[usize], amp: &mut [T], applies: &mut Applies| {
+            fit(op, voxels, y, amp, &params.inner, applies, it)
+        };
+        r = refit(&new_voxels, &mut new_amp, &mut applies)?;
         if params.nonnegative && new_amp.iter().any(|a| *a <= T::zero()) {
             // Drop the pixels whose amplitude came out non-positive; their depth is re-judged
             // at the next iteration against the residual without them.
@@ -407,15 +403,7 @@ where
                 .collect();
             if keep.iter().any(|k| !k) {
                 retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
-                r = fit(
-                    op,
-                    &new_voxels,
-                    y,
-                    &mut new_amp,
-                    &params.inner,
-                    &mut applies,
-                    it,
-                )?;
+                r = refit(&new_voxels, &mut new_amp, &mut applies)?;
             }
         }
 
