@@ -47,6 +47,52 @@ pub(crate) fn file_error(path: &Path, reason: impl Into<String>) -> Error {
     }
 }
 
+/// The folder a path's file lives in (`.` for a bare file name).
+pub fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Checks, before any work, that outputs can be written into the folder `dir`: an existing
+/// folder must be empty unless `force` (`replaced` names what `--force` would replace), a new one
+/// needs an existing parent. Nothing is created.
+///
+/// # Errors
+/// [`Error::File`] naming `dir`: it is not a folder, it is not empty (without `force`), it cannot
+/// be read, or its parent does not exist.
+pub fn check_output_dir(dir: &Path, force: bool, replaced: &str) -> Result<()> {
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(file_error(dir, "exists and is not a folder (--out)"));
+        }
+        let mut entries = std::fs::read_dir(dir)
+            .map_err(|e| file_error(dir, format!("cannot read the folder: {e}")))?;
+        if entries.next().is_some() && !force {
+            return Err(file_error(
+                dir,
+                format!(
+                    "the output folder exists and is not empty; pass --force to replace \
+                     {replaced}, or --out DIR to write elsewhere"
+                ),
+            ));
+        }
+        return Ok(());
+    }
+    let parent = parent_dir(dir);
+    if !parent.is_dir() {
+        return Err(file_error(
+            dir,
+            format!(
+                "the parent folder {} does not exist (--out)",
+                parent.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Distinguishes the temporary files of one process.
 static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
 

@@ -129,20 +129,12 @@ pub fn npy_dtype<T: Real>() -> &'static str {
     }
 }
 
-/// The directory a path's file lives in (`.` for a bare file name).
-pub fn parent_dir(path: &Path) -> PathBuf {
-    match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    }
-}
-
 /// Checks, before any work, that an output file can be created where asked.
 pub fn check_out_file(out: &Path) -> CliResult {
     if out.is_dir() {
         return Err(format!("{}: is a directory, expected a file name", out.display()).into());
     }
-    let dir = parent_dir(out);
+    let dir = io::parent_dir(out);
     if !dir.is_dir() {
         return Err(format!(
             "{}: directory {} does not exist",
@@ -150,37 +142,6 @@ pub fn check_out_file(out: &Path) -> CliResult {
             dir.display()
         )
         .into());
-    }
-    Ok(())
-}
-
-/// Checks, before any work, that an output folder can be written: an existing folder must be
-/// empty unless `force` (`replaced` names what would be replaced), a new one needs its parent.
-pub fn check_out_dir(dir: &Path, force: bool, flag: &str, replaced: &str) -> CliResult {
-    if dir.exists() {
-        if !dir.is_dir() {
-            return Err(format!("{}: exists and is not a folder ({flag})", dir.display()).into());
-        }
-        let mut entries = std::fs::read_dir(dir)
-            .map_err(|e| format!("{}: cannot read the folder: {e}", dir.display()))?;
-        if entries.next().is_some() && !force {
-            return Err(format!(
-                "{}: the output folder exists and is not empty; pass --force to replace \
-                 {replaced}, or {flag} DIR to write elsewhere",
-                dir.display()
-            )
-            .into());
-        }
-    } else {
-        let parent = parent_dir(dir);
-        if !parent.is_dir() {
-            return Err(format!(
-                "{}: the parent folder {} does not exist ({flag})",
-                dir.display(),
-                parent.display()
-            )
-            .into());
-        }
     }
     Ok(())
 }

@@ -10,9 +10,7 @@ use rdlidar::report::experiment::{
     SceneKind as ExpSceneKind,
 };
 
-use crate::common::{
-    check_out_dir, parse_positive, parse_size, set_threads, CliResult, Globals, Precision,
-};
+use crate::common::{parse_positive, parse_size, set_threads, CliResult, Globals, Precision};
 
 /// The options of `demo` (and of the command with no subcommand) and `compare`.
 ///
@@ -211,7 +209,7 @@ pub fn run(
     globals: &Globals,
 ) -> CliResult<ExitCode> {
     let (config, threads, quiet) = experiment_config(which, a, quick, globals)?;
-    check_out_dir(&config.out, a.force, "--out", "the results in it")?;
+    rdlidar::io::check_output_dir(&config.out, a.force, "the results in it")?;
     set_threads(threads, "threads")?;
     let out = config.out.display().to_string();
     ctrlc::set_handler(move || {

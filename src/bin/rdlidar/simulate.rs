@@ -10,8 +10,8 @@ use rdlidar::lidar::{simulate, Architecture, Geometry, SceneSpec, SimulationSpec
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_dir, npy_dtype, parse_positive, parse_size, parse_tile, with_precision, CliResult,
-    Globals, Precision,
+    npy_dtype, parse_positive, parse_size, parse_tile, with_precision, CliResult, Globals,
+    Precision,
 };
 
 /// The scenes `simulate` generates.
@@ -199,10 +199,9 @@ fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
 /// Runs `simulate` (in f64 unless --precision says otherwise).
 pub fn run(a: &SimulateArgs, globals: &Globals) -> CliResult {
     let spec = spec_of(a, globals.seed())?;
-    check_out_dir(
+    io::check_output_dir(
         &a.out,
         a.force,
-        "--out",
         &format!("its {}", SIMULATION_FILES.join(", ")),
     )?;
     let precision = globals.precision.unwrap_or(Precision::F64);

@@ -261,36 +261,14 @@ pub fn estimated_work(method: Method, budget: Option<usize>, pulse_len: usize) -
 /// [`Error::File`] naming the folder: it exists and is not empty (without `force`), it is not a
 /// folder, its parent does not exist, or it cannot be created or read.
 pub fn prepare_output_dir(dir: &Path, force: bool) -> Result<()> {
-    let err = |reason: String| Error::File {
-        path: dir.display().to_string(),
-        reason,
-    };
+    crate::io::check_output_dir(dir, force, "the results in it")?;
     if dir.exists() {
-        if !dir.is_dir() {
-            return Err(err("exists and is not a folder".into()));
-        }
-        let mut entries =
-            std::fs::read_dir(dir).map_err(|e| err(format!("cannot read the folder: {e}")))?;
-        if entries.next().is_some() && !force {
-            return Err(err(
-                "the output folder exists and is not empty; use --force to overwrite the \
-                 results in it, or --out to choose another folder"
-                    .into(),
-            ));
-        }
         return Ok(());
     }
-    let parent = match dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    if !parent.is_dir() {
-        return Err(err(format!(
-            "the parent folder {} does not exist",
-            parent.display()
-        )));
-    }
-    std::fs::create_dir(dir).map_err(|e| err(format!("cannot create the folder: {e}")))
+    std::fs::create_dir(dir).map_err(|e| Error::File {
+        path: dir.display().to_string(),
+        reason: format!("cannot create the folder: {e}"),
+    })
 }
 
 /// What [`run_demo`] and [`run_compare`] did.
