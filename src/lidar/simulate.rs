@@ -251,8 +251,12 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
             .and_then(|v| v.checked_mul(g.pixels()))
             .is_none()
         {
+            let name = match arch {
+                Architecture::Tiles(_) => "tiles",
+                _ => "adcs",
+            };
             return Err(Error::param(
-                "adcs",
+                name,
                 format!("{r} ADCs of {k} samples are too many"),
             ));
         }

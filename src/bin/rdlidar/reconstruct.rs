@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use ndarray_npy::WritableElement;
-use rdlidar::io::{self, ShapeExpectation, StagedFile};
+use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{depth_bin_m, Geometry, RdOperator, DEFAULT_TAU_S};
 use rdlidar::recon::{compare, reconstruct, Method, ReconstructOptions};
 use rdlidar::Real;
@@ -12,6 +12,7 @@ use rdlidar::Real;
 use crate::common::{
     check_out_file, npy_dtype, parse_positive, with_precision, CliResult, Globals, MeasurementFiles,
 };
+use crate::layout::expectation;
 
 /// Reconstruct the scene from measurements: a depth map and a one-return-per-pixel scene.
 ///
@@ -86,14 +87,7 @@ fn reconstruct_files<T: Real + WritableElement>(
 ) -> CliResult {
     let p = io::read_pulse::<T>(&a.files.pulse)?;
     let kp = p.len();
-    if kp.checked_add(a.files.depth_bins).is_none() {
-        return Err(format!("--depth-bins {} is too large", a.files.depth_bins).into());
-    }
-    let expect = ShapeExpectation {
-        pulse_len: kp,
-        depth_bins: a.files.depth_bins,
-        grid: None,
-    };
+    let expect = expectation(kp, a.files.depth_bins)?;
     let y = io::read_measurements::<T>(&a.files.meas, Some(&expect))?;
     let h = io::read_header(&a.files.codes)?;
     if h.shape.len() == 4 {

@@ -163,23 +163,6 @@ fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
         (1, _, _) => Architecture::Single,
         (n, _, _) => Architecture::MultiAdc(n),
     };
-    let g = a.size;
-    let kp = a.pulse_len;
-    let k = kp
-        .checked_add(g.ks - 1)
-        .ok_or_else(|| format!("--pulse-len {kp} is too large"))?;
-    if let Some(r) = architecture.rows(g.m, g.n) {
-        if r.checked_mul(k)
-            .and_then(|v| v.checked_mul(g.pixels()))
-            .is_none()
-        {
-            let flag = match architecture {
-                Architecture::Tiles(t) => format!("--tiles {t}"),
-                _ => format!("--adcs {r}"),
-            };
-            return Err(format!("{flag}: {r} ADCs of {k} samples are too many").into());
-        }
-    }
     let scene = match a.scene {
         SceneKind::Paper => SceneSpec::Paper,
         SceneKind::Random => SceneSpec::Random {
@@ -192,7 +175,7 @@ fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
         ternary_zero_prob: a.ternary_zero_prob,
         architecture,
         snr_db: a.snr_db,
-        ..SimulationSpec::new(g, kp, seed)
+        ..SimulationSpec::new(a.size, a.pulse_len, seed)
     })
 }
 
