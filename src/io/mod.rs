@@ -39,11 +39,12 @@ pub use npy::{
 #[cfg(feature = "images")]
 pub use png::scene_from_pngs;
 
-/// An [`Error::File`] for `path`.
+/// An [`Error::File`] for `path`, on one line: control and non-printable characters of the path
+/// and of the reason (which may quote the file) are escaped.
 pub(crate) fn file_error(path: &Path, reason: impl Into<String>) -> Error {
     Error::File {
-        path: path.display().to_string(),
-        reason: reason.into(),
+        path: npy::escape_all(&path.display().to_string()),
+        reason: npy::escape_all(&reason.into()),
     }
 }
 

@@ -26,20 +26,22 @@
 //! [`Error::File`] whose message starts with the path.
 
 use std::fs::File;
-use std::io::{BufReader, Seek};
+use std::io::{BufReader, Read};
 use std::path::Path;
 
-use ndarray::{ArrayD, Dimension};
-use ndarray_npy::npy::header::{Header, Layout, ParseHeaderError, ReadHeaderError};
-use ndarray_npy::{ReadNpyError, ReadNpyExt, ReadableElement};
+use ndarray::{ArrayD, Dimension, IxDyn, ShapeBuilder};
 
 use crate::error::{Error, Result};
 use crate::real::Real;
 
 use super::file_error;
 
+mod header;
 mod read;
 mod write;
+
+use header::HeaderError;
+pub use header::{escape_all, MAX_HEADER_BYTES, MAX_NESTING};
 
 pub use read::{
     read_code_sets, read_codes, read_depth, read_measurement_rows, read_measurements, read_pulse,
@@ -66,14 +68,24 @@ pub enum NpyDtype {
 }
 
 impl NpyDtype {
-    fn from_descr(descr: &str) -> Self {
-        match descr {
-            "<f4" | ">f4" => NpyDtype::Float32,
-            "<f8" | ">f8" => NpyDtype::Float64,
-            "|i1" | "i1" | "b" => NpyDtype::Int8,
-            "<i4" | ">i4" => NpyDtype::Int32,
-            other => NpyDtype::Other(describe_descr(other)),
-        }
+    /// The dtype of a `descr` string and whether its data are little-endian (`=` and no
+    /// prefix mean this machine's order; one-byte types have none).
+    fn from_descr(descr: &str) -> (Self, bool) {
+        let native = cfg!(target_endian = "little");
+        let (order, body) = match descr.chars().next() {
+            Some('<') => (true, &descr[1..]),
+            Some('>') => (false, &descr[1..]),
+            Some('=') | Some('|') => (native, &descr[1..]),
+            _ => (native, descr),
+        };
+        let dtype = match body {
+            "f4" => NpyDtype::Float32,
+            "f8" => NpyDtype::Float64,
+            "i1" | "b" => NpyDtype::Int8,
+            "i4" => NpyDtype::Int32,
+            _ => NpyDtype::Other(describe_descr(descr)),
+        };
+        (dtype, order)
     }
 
     /// NumPy's name of the type: `"float32"`, `"float64"`, `"int8"`, `"int32"`, or the
@@ -120,6 +132,7 @@ fn describe_descr(descr: &str) -> String {
         (Some('O'), _) => Some("object".to_string()),
         _ => None,
     };
+    let descr = header::escape_quoted(descr);
     match name {
         Some(n) => format!("{n} ('{descr}')"),
         None => format!("'{descr}'"),
@@ -188,9 +201,11 @@ fn first_bad<A: Copy>(a: &ArrayD<A>, ok: impl Fn(A) -> bool) -> Option<(Vec<usiz
     Some((idx, v))
 }
 
-/// An open `.npy` file with its parsed header, positioned at the start of the file.
+/// An open `.npy` file with its parsed header, positioned at the start of the data.
 struct Opened {
     header: NpyHeader,
+    /// Little-endian data (`false` for big-endian files).
+    little_endian: bool,
     reader: BufReader<File>,
 }
 
@@ -209,36 +224,30 @@ fn open_npy(path: &Path) -> Result<Opened> {
         return Err(file_error(path, "is a directory, expected a .npy file"));
     }
     let file_len = meta.len();
-    let mut reader = BufReader::with_capacity(1 << 20, file);
-    let header = Header::from_reader(&mut reader).map_err(|e| match e {
-        ReadHeaderError::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
-            if file_len < 6 {
-                file_error(
-                    path,
-                    format!("not a .npy file: only {file_len} bytes, too short for a header"),
-                )
-            } else {
-                file_error(path, "truncated .npy file: the file ends inside the header")
-            }
+    let mut reader = BufReader::with_capacity(1 << 16, file);
+    let raw = header::read_header(&mut reader).map_err(|e| match e {
+        HeaderError::Truncated if file_len < 10 => file_error(
+            path,
+            format!("not a .npy file: only {file_len} bytes, too short for a header"),
+        ),
+        HeaderError::Truncated => {
+            file_error(path, "truncated .npy file: the file ends inside the header")
         }
-        ReadHeaderError::Io(e) => file_error(path, format!("cannot read: {e}")),
-        ReadHeaderError::Parse(ParseHeaderError::MagicString) => file_error(
+        HeaderError::NotNpy => file_error(
             path,
             "not a .npy file: it does not start with the NumPy magic string \\x93NUMPY",
         ),
-        ReadHeaderError::Parse(e) => file_error(path, format!("invalid .npy header: {e}")),
+        HeaderError::Invalid(reason) => file_error(path, reason),
+        HeaderError::Io(e) => file_error(path, format!("cannot read: {e}")),
     })?;
-    let header_len = reader
-        .stream_position()
-        .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
-    let dtype = match header.type_descriptor.as_string() {
+    let (dtype, little_endian) = match &raw.descr {
         Some(s) => NpyDtype::from_descr(s),
-        None => NpyDtype::Other(format!("structured dtype {}", header.type_descriptor)),
+        None => (NpyDtype::Other(raw.structured.clone()), true),
     };
     let info = NpyHeader {
         dtype,
-        shape: header.shape.clone(),
-        fortran_order: matches!(header.layout, Layout::Fortran),
+        shape: raw.shape,
+        fortran_order: raw.fortran_order,
     };
     // The data must be exactly what the shape needs: reject truncated files and trailing bytes
     // here, before allocating anything for the data.
@@ -249,7 +258,7 @@ fn open_npy(path: &Path) -> Result<Opened> {
             .iter()
             .try_fold(item as u64, |acc, &d| acc.checked_mul(d as u64))
             .ok_or_else(|| file_error(path, format!("shape {shape} is too large")))?;
-        let have = file_len.saturating_sub(header_len);
+        let have = file_len.saturating_sub(raw.data_offset);
         if have < needed {
             return Err(file_error(
                 path,
@@ -274,11 +283,9 @@ fn open_npy(path: &Path) -> Result<Opened> {
             return Err(file_error(path, format!("shape {shape} is too large")));
         }
     }
-    reader
-        .rewind()
-        .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
     Ok(Opened {
         header: info,
+        little_endian,
         reader,
     })
 }
@@ -286,25 +293,77 @@ fn open_npy(path: &Path) -> Result<Opened> {
 /// Reads the header of a `.npy` file (dtype, shape, order) without reading the data.
 ///
 /// # Errors
-/// [`Error::File`] naming `path` if it cannot be opened, is not a `.npy` file, or its size does
-/// not match the header's shape and dtype (a truncated file or trailing bytes).
+/// [`Error::File`] naming `path` if it cannot be opened, is not a `.npy` file, its header is
+/// malformed (see [`MAX_HEADER_BYTES`] and [`MAX_NESTING`] for the bounds), or its size does not
+/// match the header's shape and dtype (a truncated file or trailing bytes).
 pub fn read_header(path: impl AsRef<Path>) -> Result<NpyHeader> {
     open_npy(path.as_ref()).map(|o| o.header)
 }
 
-fn read_error(path: &Path, e: ReadNpyError) -> Error {
-    let reason = match e {
-        ReadNpyError::MissingData => "truncated .npy file: the data ends early".to_string(),
-        ReadNpyError::ExtraBytes(n) => format!("{n} unexpected bytes after the data"),
-        ReadNpyError::Io(e) => format!("cannot read: {e}"),
-        other => format!("invalid .npy file: {other}"),
-    };
-    file_error(path, reason)
+/// An element type of the data section, decoded from its bytes.
+trait Element: Copy + Default {
+    const SIZE: usize;
+    fn decode(bytes: &[u8], little_endian: bool) -> Self;
 }
 
-/// Reads the data of an opened file as elements `E` (the dtype has been checked), in C order.
-fn read_data<E: ReadableElement + Clone>(path: &Path, opened: Opened) -> Result<ArrayD<E>> {
-    let a = ArrayD::<E>::read_npy(opened.reader).map_err(|e| read_error(path, e))?;
+macro_rules! element {
+    ($t:ty) => {
+        impl Element for $t {
+            const SIZE: usize = std::mem::size_of::<$t>();
+            fn decode(bytes: &[u8], little_endian: bool) -> Self {
+                let mut b = [0u8; std::mem::size_of::<$t>()];
+                b.copy_from_slice(bytes);
+                if little_endian {
+                    <$t>::from_le_bytes(b)
+                } else {
+                    <$t>::from_be_bytes(b)
+                }
+            }
+        }
+    };
+}
+element!(f32);
+element!(f64);
+element!(i8);
+element!(i32);
+
+/// Reads the data of an opened file as elements `E` (the dtype and the file's length have been
+/// checked), in C order. The data are decoded in blocks, so no second copy of the file is held.
+fn read_data<E: Element>(path: &Path, mut opened: Opened) -> Result<ArrayD<E>> {
+    let shape = opened.header.shape.clone();
+    let len: usize = shape.iter().product();
+    let mut values: Vec<E> = Vec::new();
+    values
+        .try_reserve_exact(len)
+        .map_err(|_| file_error(path, format!("not enough memory for {} values", len)))?;
+    let mut block = vec![0u8; (1 << 16) * E::SIZE];
+    let mut left = len;
+    while left > 0 {
+        let n = left.min(1 << 16);
+        let bytes = &mut block[..n * E::SIZE];
+        opened
+            .reader
+            .read_exact(bytes)
+            .map_err(|e| match e.kind() {
+                std::io::ErrorKind::UnexpectedEof => {
+                    file_error(path, "truncated .npy file: the data ends early")
+                }
+                _ => file_error(path, format!("cannot read: {e}")),
+            })?;
+        values.extend(
+            bytes
+                .chunks_exact(E::SIZE)
+                .map(|b| E::decode(b, opened.little_endian)),
+        );
+        left -= n;
+    }
+    let dim = IxDyn(&shape);
+    let a = if opened.header.fortran_order {
+        ArrayD::from_shape_vec(dim.f(), values)
+    } else {
+        ArrayD::from_shape_vec(dim, values)
+    }
+    .map_err(|e| file_error(path, format!("cannot shape the data: {e}")))?;
     Ok(if a.is_standard_layout() {
         a
     } else {
