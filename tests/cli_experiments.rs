@@ -2,9 +2,10 @@
 //! would in their tiny modes: output files, table contents, existing folders, config files, bad
 //! flags and Ctrl-C.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
+
+use crate::cli_support::{listing, rdlidar, s, stderr, stdout, TempDir};
 
 fn rdlidar_in(dir: Option<&Path>, args: &[&str]) -> Output {
     let mut c = Command::new(env!("CARGO_BIN_EXE_rdlidar"));
@@ -13,48 +14,6 @@ fn rdlidar_in(dir: Option<&Path>, args: &[&str]) -> Output {
         c.current_dir(d);
     }
     c.output().expect("the binary runs")
-}
-
-fn rdlidar(args: &[&str]) -> Output {
-    rdlidar_in(None, args)
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn stdout(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-/// A fresh directory under the system temporary directory, removed when dropped.
-struct TempDir(PathBuf);
-
-static DIRS: AtomicUsize = AtomicUsize::new(0);
-
-impl TempDir {
-    fn new(tag: &str) -> Self {
-        let n = DIRS.fetch_add(1, Ordering::Relaxed);
-        let p =
-            std::env::temp_dir().join(format!("rdlidar-cli-exp-{}-{tag}-{n}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).unwrap();
-        TempDir(p)
-    }
-
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("temporary paths are UTF-8")
 }
 
 /// The CSV as a header and rows of fields (no field of these runs is quoted).
@@ -323,11 +282,9 @@ fn a_config_file_describes_the_experiment_and_flags_override_it() {
     assert_eq!(strip(&rows), strip(&rows2));
 }
 
-#[test]
-fn an_interrupted_sweep_keeps_its_finished_rows() {
-    let dir = TempDir::new("ctrlc");
-    let out = dir.path("cmp");
-    // A long tiny sweep: 2 pulse lengths x 200 seeds x 2 solvers.
+/// Starts a long tiny sweep (2 pulse lengths x 200 seeds x 2 solvers) into `out` and waits
+/// until its staging folder holds a few finished rows.
+fn start_long_sweep(dir: &TempDir, out: &Path) -> std::process::Child {
     let child = Command::new(env!("CARGO_BIN_EXE_rdlidar"))
         .args([
             "compare",
@@ -341,13 +298,15 @@ fn an_interrupted_sweep_keeps_its_finished_rows() {
             "--solvers",
             "cgls,model-based",
             "--out",
-            s(&out),
+            s(out),
         ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let partial = out.join("results.csv.partial");
+    let partial = dir
+        .path(&format!(".cmp.staging-{}", child.id()))
+        .join("results.csv.partial");
     let start = std::time::Instant::now();
     loop {
         let lines = std::fs::read_to_string(&partial).map_or(0, |t| t.lines().count());
@@ -360,11 +319,23 @@ fn an_interrupted_sweep_keeps_its_finished_rows() {
         );
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
+    child
+}
+
+fn interrupt(child: &std::process::Child) {
     let status = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
         .unwrap();
     assert!(status.success());
+}
+
+#[test]
+fn an_interrupted_sweep_keeps_its_finished_rows() {
+    let dir = TempDir::new("ctrlc");
+    let out = dir.path("cmp");
+    let child = start_long_sweep(&dir, &out);
+    interrupt(&child);
     let res = child.wait_with_output().unwrap();
     assert_eq!(res.status.code(), Some(130), "{}", stderr(&res));
     let err = stderr(&res);
@@ -377,7 +348,31 @@ fn an_interrupted_sweep_keeps_its_finished_rows() {
     assert_eq!(json["planned_runs"], 800);
     assert_eq!(json["rows"].as_array().unwrap().len(), rows.len());
     assert!(is_png(&out.join("pareto.png")));
-    assert!(!partial.exists());
+    // The complete set, and nothing else: no partial files, no staging folder.
+    assert_eq!(dir.listing(), vec!["cmp"]);
+    assert!(!listing(&out)
+        .iter()
+        .any(|f| f.contains("partial") || f.contains("tmp")));
+}
+
+#[test]
+fn a_second_interrupt_leaves_nothing_new() {
+    for trial in 0..3 {
+        let dir = TempDir::new("ctrlc2");
+        let out = dir.path("cmp");
+        let child = start_long_sweep(&dir, &out);
+        interrupt(&child);
+        std::thread::sleep(std::time::Duration::from_millis(5 * trial));
+        interrupt(&child);
+        let res = child.wait_with_output().unwrap();
+        assert_eq!(res.status.code(), Some(130), "{}", stderr(&res));
+        let left = dir.listing();
+        // Either the set was already complete when the second interrupt came, or nothing.
+        assert!(
+            left.is_empty() || (left == vec!["cmp"] && out.join("results.json").is_file()),
+            "trial {trial}: {left:?}"
+        );
+    }
 }
 
 #[test]

@@ -56,6 +56,27 @@ pub fn parent_dir(path: &Path) -> PathBuf {
     }
 }
 
+/// Whether `a` and `b` name the same existing file: after symbolic links and, on Unix, through
+/// hard links (the same device and inode). A path that does not exist names no file.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) else {
+        return false;
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        ma.dev() == mb.dev() && ma.ino() == mb.ino()
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (ma, mb);
+        match (a.canonicalize(), b.canonicalize()) {
+            (Ok(ca), Ok(cb)) => ca == cb,
+            _ => false,
+        }
+    }
+}
+
 /// Checks, before any work, that outputs can be written into the folder `dir`: an existing
 /// folder must be empty unless `force` (`replaced` names what `--force` would replace), a new one
 /// needs an existing parent. Nothing is created.

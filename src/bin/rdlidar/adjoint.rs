@@ -8,7 +8,8 @@ use rdlidar::lidar::{zero_mean, Scene, TileSize};
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, parse_tile, with_precision, CliResult, Globals, MeasurementFiles,
+    check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
+    MeasurementFiles,
 };
 use crate::layout::{architecture_of, expectation, read_measurements, Layout};
 
@@ -40,7 +41,7 @@ pub struct AdjointArgs {
 
 /// Runs `adjoint`.
 pub fn run(a: &AdjointArgs, globals: &Globals) -> CliResult {
-    check_out_file(&a.out)?;
+    check_out_file(&a.out, "--out", &a.files.inputs())?;
     with_precision!(
         globals.precision_of(&[&a.files.meas, &a.files.pulse])?,
         adjoint(a)
@@ -71,7 +72,7 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
         )
     })?;
     io::write_scene(out, &xt)?;
-    println!(
+    outln!(
         "wrote {}: {}backprojection ({}, {}, {}) {}{}",
         out.display(),
         if a.debiased { "debiased " } else { "" },

@@ -7,7 +7,9 @@ use rdlidar::report::timing::{time_operator, Timing};
 use rdlidar::Real;
 use serde::Serialize;
 
-use crate::common::{parse_positive, parse_size, with_precision, CliResult, Globals, Precision};
+use crate::common::{
+    outln, parse_positive, parse_size, with_precision, CliResult, Globals, Precision,
+};
 
 /// Time the forward, adjoint and sparse forward operators on a generated problem.
 ///
@@ -91,34 +93,39 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
     if a.json {
         let text = serde_json::to_string(&report)
             .map_err(|e| format!("cannot format the report as JSON: {e}"))?;
-        println!("{text}");
+        outln!("{text}");
         return Ok(());
     }
-    print_table(&report, g);
-    Ok(())
+    print_table(&report, g)
 }
 
-fn print_table(report: &BenchReport, g: Geometry) {
+fn print_table(report: &BenchReport, g: Geometry) -> CliResult {
     // The equivalent dense matrix product costs 2·M·N·K·K_s flops (DESIGN.md §5).
     let flops = 2.0 * g.pixels() as f64 * report.samples as f64 * g.ks as f64;
-    println!(
+    outln!(
         "rdlidar bench: paper scene {g} ({} nonzero voxels), K_p {}, K {}, {}, binary codes",
-        report.nonzeros, report.pulse_len, report.samples, report.precision
+        report.nonzeros,
+        report.pulse_len,
+        report.samples,
+        report.precision
     );
-    println!(
+    outln!(
         "threads {}, kernels {}, operator memory {:.1} MB ({} bytes)",
         report.threads,
         report.isa,
         report.memory_bytes as f64 / 1e6,
         report.memory_bytes
     );
-    println!(
+    outln!(
         "one warm-up run, then {} timed runs per operation",
         report.repeats
     );
-    println!(
+    outln!(
         "{:<16} {:>12} {:>12} {:>22}",
-        "operation", "median (s)", "min (s)", "GEMM-equiv. GFLOP/s"
+        "operation",
+        "median (s)",
+        "min (s)",
+        "GEMM-equiv. GFLOP/s"
     );
     for (name, t, dense) in [
         ("forward", report.forward, true),
@@ -130,9 +137,11 @@ fn print_table(report: &BenchReport, g: Geometry) {
         } else {
             "-".to_string()
         };
-        println!(
+        outln!(
             "{name:<16} {:>12.6} {:>12.6} {rate:>22}",
-            t.median_s, t.min_s
+            t.median_s,
+            t.min_s
         );
     }
+    Ok(())
 }

@@ -8,21 +8,69 @@ use rdlidar::io::{self, NpyDtype};
 use rdlidar::lidar::{Geometry, TileSize};
 use rdlidar::Real;
 
-/// A command-line failure: the one-line message printed after `error: `.
+/// A command-line failure.
 #[derive(Debug)]
-pub struct Failure(pub String);
+pub enum Failure {
+    /// The one-line message printed after `error: `; exit status 1.
+    Message(String),
+    /// Standard output is a pipe whose reader has gone: the command ends quietly with status 141
+    /// (128 + SIGPIPE), what a shell reports for a standard tool ended by a broken pipe.
+    BrokenPipe,
+}
 
 impl From<rdlidar::Error> for Failure {
     fn from(e: rdlidar::Error) -> Self {
-        Failure(e.to_string())
+        Failure::Message(e.to_string())
     }
 }
 
 impl From<String> for Failure {
     fn from(msg: String) -> Self {
-        Failure(msg)
+        Failure::Message(msg)
     }
 }
+
+/// Writes one line to standard output. A broken pipe becomes [`Failure::BrokenPipe`], any other
+/// write error (a full device, a closed descriptor) a one-line failure; never a panic.
+pub fn write_stdout(line: std::fmt::Arguments<'_>) -> CliResult {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}")
+        .and_then(|()| out.flush())
+        .map_err(stdout_failure)
+}
+
+/// The failure of a write to standard output.
+pub fn stdout_failure(e: std::io::Error) -> Failure {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        Failure::BrokenPipe
+    } else {
+        Failure::Message(format!("cannot write to standard output: {e}"))
+    }
+}
+
+/// Writes one line to standard error, ignoring failure: diagnostics must never stop a command
+/// (nor panic, as `eprintln!` does when standard error is closed or full).
+pub fn write_stderr(line: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
+}
+
+/// `println!` that returns a [`Failure`] from the enclosing function instead of panicking.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::common::write_stdout(format_args!($($arg)*))?
+    };
+}
+pub(crate) use outln;
+
+/// `eprintln!` that never panics.
+macro_rules! errln {
+    ($($arg:tt)*) => {
+        $crate::common::write_stderr(format_args!($($arg)*))
+    };
+}
+pub(crate) use errln;
 
 /// The result of a subcommand.
 pub type CliResult<T = ()> = Result<T, Failure>;
@@ -55,6 +103,17 @@ pub struct MeasurementFiles {
     /// Depth bins K_s of the scene.
     #[arg(long, value_name = "KS", value_parser = parse_positive)]
     pub depth_bins: usize,
+}
+
+impl MeasurementFiles {
+    /// The three input files with their flags.
+    pub fn inputs(&self) -> [Input<'_>; 3] {
+        [
+            (&self.pulse, "--pulse"),
+            (&self.codes, "--codes"),
+            (&self.meas, "--meas"),
+        ]
+    }
 }
 
 /// The global flags, as every subcommand sees them.
@@ -129,21 +188,41 @@ pub fn npy_dtype<T: Real>() -> &'static str {
     }
 }
 
-/// Checks, before any work, that an output file can be created where asked.
-pub fn check_out_file(out: &Path) -> CliResult {
+/// An input file of a subcommand and the flag that named it.
+pub type Input<'a> = (&'a Path, &'a str);
+
+/// Checks, before any work, that an output file (given by `flag`) can be created where asked and
+/// is none of the `inputs` (the same file after symbolic links, hard links included).
+pub fn check_out_file(out: &Path, flag: &str, inputs: &[Input<'_>]) -> CliResult {
     if out.is_dir() {
-        return Err(format!("{}: is a directory, expected a file name", out.display()).into());
+        return Err(format!(
+            "{}: {flag} is a directory, expected a file name",
+            out.display()
+        )
+        .into());
     }
     let dir = io::parent_dir(out);
     if !dir.is_dir() {
         return Err(format!(
-            "{}: directory {} does not exist",
+            "{}: directory {} does not exist ({flag})",
             out.display(),
             dir.display()
         )
         .into());
     }
-    Ok(())
+    check_not_input(out, flag, inputs)
+}
+
+/// Refuses an output path that names one of the `inputs`.
+pub fn check_not_input(out: &Path, flag: &str, inputs: &[Input<'_>]) -> CliResult {
+    match inputs.iter().find(|(input, _)| io::same_file(out, input)) {
+        Some((_, input_flag)) => Err(format!(
+            "{}: {flag} names the same file as {input_flag}; refusing to overwrite an input",
+            out.display()
+        )
+        .into()),
+        None => Ok(()),
+    }
 }
 
 /// Sets the size of the global thread pool; `source` names where the count came from.

@@ -7,7 +7,7 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, TileSize};
 use rdlidar::operator::DotTest;
 
-use crate::common::{parse_positive, parse_tile, CliResult, Globals};
+use crate::common::{errln, outln, parse_positive, parse_tile, CliResult, Globals};
 use crate::layout::{architecture_of, expectation, Layout};
 
 /// Check the adjoint identity <Ax, y> = <x, A*y> of the operator built from files.
@@ -59,7 +59,7 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
             test.measure(&layout.operator(zero_mean(&p64))?),
         ),
     ];
-    println!(
+    outln!(
         "dot test |<Ax,y> - <x,A*y>| / max(|Ax||y|, |x||A*y|): {}, K_p {}, K {}, {} \
          codes{}, seed {seed}",
         layout.geometry,
@@ -68,17 +68,21 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
         layout.alphabet(),
         layout.note()
     );
-    println!(
+    outln!(
         "{:<16} {:<9} {:>10} {:>10}",
-        "pulse", "precision", "gap", "tolerance"
+        "pulse",
+        "precision",
+        "gap",
+        "tolerance"
     );
     let mut failed = Vec::new();
     for (name, r32, r64) in rows {
         for (prec, r) in [("f32", r32), ("f64", r64)] {
             let flag = if r.passed() { "ok" } else { "FAILED" };
-            println!(
+            outln!(
                 "{name:<16} {prec:<9} {:>10.2e} {:>10.0e}  {flag}",
-                r.gap, r.tolerance
+                r.gap,
+                r.tolerance
             );
             if !r.passed() {
                 failed.push(format!(
@@ -91,7 +95,7 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
     if failed.is_empty() {
         Ok(ExitCode::SUCCESS)
     } else {
-        eprintln!("error: dot test failed: {}", failed.join("; "));
+        errln!("error: dot test failed: {}", failed.join("; "));
         Ok(ExitCode::FAILURE)
     }
 }

@@ -10,7 +10,10 @@ use rdlidar::report::experiment::{
     SceneKind as ExpSceneKind,
 };
 
-use crate::common::{parse_positive, parse_size, set_threads, CliResult, Globals, Precision};
+use crate::common::{
+    check_not_input, errln, outln, parse_positive, parse_size, set_threads, CliResult, Failure,
+    Globals, Precision,
+};
 
 /// The options of `demo` (and of the command with no subcommand) and `compare`.
 ///
@@ -201,6 +204,15 @@ fn experiment_config(
     Ok((config, threads, quiet))
 }
 
+/// The files of an experiment that a --config file could be.
+const TABLES: [&str; 5] = [
+    "config.toml",
+    "results.csv",
+    "results.json",
+    "results.md",
+    "summary.md",
+];
+
 /// `demo` (also the command with no subcommand) and `compare`.
 pub fn run(
     which: Experiment,
@@ -210,16 +222,19 @@ pub fn run(
 ) -> CliResult<ExitCode> {
     let (config, threads, quiet) = experiment_config(which, a, quick, globals)?;
     rdlidar::io::check_output_dir(&config.out, a.force, "the results in it")?;
+    if let Some(file) = &a.config {
+        // With --force the tables replace files of the same name in the folder.
+        for name in TABLES {
+            check_not_input(&config.out.join(name), "--out", &[(file, "--config")])?;
+        }
+    }
     set_threads(threads, "threads")?;
-    let out = config.out.display().to_string();
     ctrlc::set_handler(move || {
         if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
-            eprintln!(
-                "\ninterrupted again: quitting; finished rows are in {out}/results.csv.partial"
-            );
-            std::process::exit(130);
+            errln!("\ninterrupted again: quitting without writing results");
+            experiment::abandon_staged_and_exit(130);
         }
-        eprintln!("\nCtrl-C: stopping after the current run (Ctrl-C again to quit at once)");
+        errln!("\nCtrl-C: stopping after the current run (Ctrl-C again to quit at once)");
     })
     .map_err(|e| format!("cannot handle Ctrl-C: {e}"))?;
 
@@ -229,7 +244,7 @@ pub fn run(
         .iter()
         .map(|l| experiment::noise_text(*l))
         .collect();
-    println!(
+    outln!(
         "rdlidar {}: {} scene {} (critical K_p {}), K_p {}, {}, {} seed(s) from {}, {}, {} \
          threads; {} runs",
         which.name(),
@@ -244,20 +259,24 @@ pub fn run(
         rayon::current_num_threads(),
         config.runs()
     );
-    println!(
+    outln!(
         "iteration budgets: {}; FISTA step from {} power iterations",
         config.max_iter,
         config
             .power_iterations
             .map_or_else(|| "up to 200".to_string(), |n| n.to_string())
     );
-    let mut console = Console::new(quiet);
+    let mut console = Console::new(quiet).stopping_on_closed_stdout(&STOP);
     let outcome = match which {
         Experiment::Demo => experiment::run_demo(&config, a.force, &mut console, &STOP),
         Experiment::Compare => experiment::run_compare(&config, a.force, &mut console, &STOP),
     };
     console.finish();
     let outcome = outcome?;
+    if console.stdout_closed() {
+        // The reader of the table has gone: the finished runs are written; end as a broken pipe.
+        return Err(Failure::BrokenPipe);
+    }
     let names: Vec<String> = outcome
         .files
         .iter()
@@ -267,7 +286,7 @@ pub fn run(
         })
         .collect();
     let failed = outcome.rows.iter().filter(|r| r.error.is_some()).count();
-    println!(
+    outln!(
         "{} of {} runs finished{} in {:.1} s (total {:.1} s with tables and figures); wrote {}: {}",
         outcome.rows.len(),
         outcome.planned,
@@ -282,7 +301,7 @@ pub fn run(
         names.join(", ")
     );
     if outcome.interrupted {
-        eprintln!(
+        errln!(
             "interrupted: the tables and figures hold the {} finished runs",
             outcome.rows.len()
         );

@@ -7,7 +7,9 @@ use rdlidar::io::{self, ShapeExpectation};
 use rdlidar::lidar::TileSize;
 use rdlidar::Real;
 
-use crate::common::{check_out_file, npy_dtype, parse_tile, with_precision, CliResult, Globals};
+use crate::common::{
+    check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
+};
 use crate::layout::{architecture_of, Layout};
 
 /// Apply the measurement operator: y = A x.
@@ -41,7 +43,15 @@ pub struct ForwardArgs {
 
 /// Runs `forward`.
 pub fn run(a: &ForwardArgs, globals: &Globals) -> CliResult {
-    check_out_file(&a.out)?;
+    check_out_file(
+        &a.out,
+        "--out",
+        &[
+            (&a.pulse, "--pulse"),
+            (&a.codes, "--codes"),
+            (&a.scene, "--scene"),
+        ],
+    )?;
     with_precision!(globals.precision_of(&[&a.scene, &a.pulse])?, forward(a))
 }
 
@@ -63,7 +73,7 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
     match layout.rows() {
         None => {
             io::write_measurements(out, &y)?;
-            println!(
+            outln!(
                 "wrote {}: measurements ({},) {}",
                 out.display(),
                 y.len(),
@@ -75,7 +85,7 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
             let y2 = ndarray::ArrayView2::from_shape((rows, k), &y[..])
                 .map_err(|e| format!("cannot shape the measurements: {e}"))?;
             io::write_array(out, &y2)?;
-            println!(
+            outln!(
                 "wrote {}: measurements ({rows}, {k}) {}, one row per ADC{}",
                 out.display(),
                 npy_dtype::<T>(),

@@ -1,5 +1,6 @@
 //! `rdlidar info`: what a configuration costs, from `rdlidar::report::cost::Cost`.
 
+use crate::common::outln;
 use rdlidar::lidar::{parse_tau, Geometry, DEFAULT_TAU_S};
 use rdlidar::report::cost::{Cost, Throughput};
 
@@ -88,9 +89,9 @@ pub fn run(a: &InfoArgs) -> crate::common::CliResult {
     if a.json {
         let text = serde_json::to_string(&budget)
             .map_err(|e| format!("cannot format the budget as JSON: {e}"))?;
-        println!("{text}");
+        outln!("{text}");
     } else {
-        println!("{budget}");
+        outln!("{budget}");
     }
     Ok(())
 }

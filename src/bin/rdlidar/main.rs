@@ -16,7 +16,7 @@ mod reconstruct;
 mod selfcheck;
 mod simulate;
 
-use common::{parse_positive, set_threads, CliResult, Failure, Globals, Precision};
+use common::{errln, parse_positive, set_threads, CliResult, Failure, Globals, Precision};
 use experiment::{CompareArgs, Experiment, ExperimentArgs};
 
 /// Compressive time-of-flight lidar by random demodulation.
@@ -169,9 +169,10 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(code) => code,
-        Err(Failure(msg)) => {
-            eprintln!("error: {msg}");
+        Err(Failure::Message(msg)) => {
+            errln!("error: {msg}");
             ExitCode::FAILURE
         }
+        Err(Failure::BrokenPipe) => ExitCode::from(141),
     }
 }

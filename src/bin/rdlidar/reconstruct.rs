@@ -10,7 +10,8 @@ use rdlidar::recon::{compare, reconstruct, Method, ReconstructOptions};
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, parse_positive, with_precision, CliResult, Globals, MeasurementFiles,
+    check_out_file, npy_dtype, outln, parse_positive, with_precision, CliResult, Globals,
+    MeasurementFiles,
 };
 use crate::layout::expectation;
 
@@ -69,10 +70,14 @@ fn parse_method(text: &str) -> Result<Method, String> {
 
 /// Runs `reconstruct`.
 pub fn run(a: &ReconstructArgs, globals: &Globals) -> CliResult {
-    check_out_file(&a.out_depth)?;
-    check_out_file(&a.out_scene)?;
+    let mut inputs = a.files.inputs().to_vec();
+    if let Some(t) = &a.truth {
+        inputs.push((t, "--truth"));
+    }
+    check_out_file(&a.out_depth, "--out-depth", &inputs)?;
+    check_out_file(&a.out_scene, "--out-scene", &inputs)?;
     if let Some(png) = &a.png {
-        check_out_file(png)?;
+        check_out_file(png, "--png", &inputs)?;
     }
     check_distinct_outputs(a)?;
     with_precision!(
@@ -167,7 +172,7 @@ fn reconstruct_files<T: Real + WritableElement>(
         None => "one adjoint application".to_string(),
     };
     let files: Vec<String> = written.iter().map(|f| f.display().to_string()).collect();
-    println!(
+    outln!(
         "reconstruct {g} from K = {}: solver {chosen}; {iterations}; {:.3} s; {} of {} pixels \
          with a return; wrote {} (depth int32, scene {}).",
         y.len(),
@@ -178,7 +183,7 @@ fn reconstruct_files<T: Real + WritableElement>(
         npy_dtype::<T>()
     );
     if let Some(m) = metrics {
-        println!("versus the truth: {m}");
+        outln!("versus the truth: {m}");
     }
     Ok(())
 }

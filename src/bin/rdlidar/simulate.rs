@@ -10,7 +10,7 @@ use rdlidar::lidar::{simulate, Architecture, Geometry, SceneSpec, SimulationSpec
 use rdlidar::Real;
 
 use crate::common::{
-    npy_dtype, parse_positive, parse_size, parse_tile, with_precision, CliResult, Globals,
+    npy_dtype, outln, parse_positive, parse_size, parse_tile, with_precision, CliResult, Globals,
     Precision,
 };
 
@@ -253,7 +253,7 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         return Err(e.into());
     }
     let dt = npy_dtype::<T>();
-    println!(
+    outln!(
         "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, codes.npy {} int8, \
          meas.npy {} {dt}, meta.json",
         dir.display(),
@@ -263,7 +263,7 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         io::shape_text(&codes_shape),
         io::shape_text(&meas_shape),
     );
-    println!(
+    outln!(
         "{} scene, {} lit pixels; {} codes; {} regime (critical K_p = {}); {}",
         a.scene.name(),
         meta.scene.lit_pixels,
@@ -276,7 +276,7 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         }
     );
     if let Some(note) = architecture_note(&meta, g) {
-        println!("architecture: {note}");
+        outln!("architecture: {note}");
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! Progress and the table on the terminal, as an [`ExperimentObserver`].
 
 use std::io::{IsTerminal, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -30,6 +31,10 @@ pub struct Console {
     columns: Vec<Column>,
     done: f64,
     started: Instant,
+    /// Set when a write to stdout failed because its reader has gone.
+    closed: AtomicBool,
+    /// Raised when stdout closes, so that the sweep stops after the current run.
+    stop: Option<&'static AtomicBool>,
 }
 
 impl Console {
@@ -42,15 +47,39 @@ impl Console {
             columns: Vec::new(),
             done: 0.0,
             started: Instant::now(),
+            closed: AtomicBool::new(false),
+            stop: None,
         }
+    }
+
+    /// Raises `stop` (the experiment's stop flag) when stdout turns out to be a broken pipe, so
+    /// that the sweep ends after the current run as it does on Ctrl-C.
+    pub fn stopping_on_closed_stdout(mut self, stop: &'static AtomicBool) -> Self {
+        self.stop = Some(stop);
+        self
+    }
+
+    /// Whether a write to stdout failed because its reader has gone (a broken pipe).
+    pub fn stdout_closed(&self) -> bool {
+        self.closed.load(Ordering::SeqCst)
     }
 
     /// Prints a line on stdout without breaking the bar.
     fn print(&self, text: &str) {
         let out = || {
+            if self.stdout_closed() {
+                return;
+            }
             let mut o = std::io::stdout().lock();
-            let _ = o.write_all(text.as_bytes());
-            let _ = o.flush();
+            let written = o.write_all(text.as_bytes()).and_then(|()| o.flush());
+            if let Err(e) = written {
+                if e.kind() == std::io::ErrorKind::BrokenPipe {
+                    self.closed.store(true, Ordering::SeqCst);
+                    if let Some(stop) = self.stop {
+                        stop.store(true, Ordering::SeqCst);
+                    }
+                }
+            }
         };
         match &self.bar {
             Some(b) => b.suspend(out),
@@ -61,7 +90,11 @@ impl Console {
     /// A progress line on stderr (non-terminal runs).
     fn log(&self, text: &str) {
         if self.lines {
-            eprintln!("[{:>7.1} s] {text}", self.started.elapsed().as_secs_f64());
+            let _ = writeln!(
+                std::io::stderr().lock(),
+                "[{:>7.1} s] {text}",
+                self.started.elapsed().as_secs_f64()
+            );
         }
     }
 
@@ -138,7 +171,10 @@ impl ExperimentObserver for Console {
             Event::Interrupted { finished, runs } => {
                 self.finish();
                 if !self.quiet {
-                    eprintln!("interrupted: {finished} of {runs} runs finished");
+                    let _ = writeln!(
+                        std::io::stderr().lock(),
+                        "interrupted: {finished} of {runs} runs finished"
+                    );
                 }
             }
         }

@@ -10,11 +10,14 @@
 //! pixels recovered at the exact depth, false detections, the depth RMSE, ‖X − X̂‖/‖X‖, the
 //! wall time, iterations and why the solver stopped.
 //!
-//! Rows are appended to `results.csv.partial` and `results.jsonl.partial` in the output folder
-//! as each run finishes (flushed, so that nothing finished is lost if the process is killed).
-//! When the sweep ends — or is stopped through the `stop` flag, which is checked between runs —
-//! the tables (`results.csv`, `results.json`, `results.md`), the resolved `config.toml` and the
-//! figures are written atomically, and the partial files removed.
+//! The output folder receives the complete set of files or nothing new ([`StagedDir`]): every
+//! file is written into a staging folder beside it, `.NAME.staging-PID`, and moved into place at
+//! the end. Rows are appended there to `results.csv.partial` and `results.jsonl.partial` as each
+//! run finishes (flushed, so that a process killed outright leaves its finished rows in the
+//! staging folder). When the sweep ends — or is stopped through the `stop` flag, which is checked
+//! between runs — the tables (`results.csv`, `results.json`, `results.md`), the resolved
+//! `config.toml` and the figures are written, the partial files removed and the set moved into
+//! the output folder. Any error on the way (a full disk, say) removes the staging folder.
 //!
 //! ```
 //! use std::sync::atomic::AtomicBool;
@@ -40,6 +43,7 @@
 mod config;
 mod console;
 mod figures;
+mod staging;
 mod sweep;
 mod table;
 mod values;
@@ -57,6 +61,7 @@ pub use config::{
 };
 pub use console::Console;
 pub use figures::{depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR};
+pub use staging::{abandon_staged_and_exit, StagedDir};
 pub use sweep::{CaseDepths, Sweep};
 pub use table::{
     csv_header, csv_line, markdown_header, markdown_row, markdown_table, summary_markdown, Column,
@@ -254,23 +259,6 @@ pub fn estimated_work(method: Method, budget: Option<usize>, pulse_len: usize) -
     applies * pulse_len.max(1) as f64 / 1000.0
 }
 
-/// Creates the output folder `dir` (its parent must exist), or checks that an existing one may be
-/// written to: an existing folder that is not empty is refused unless `force`.
-///
-/// # Errors
-/// [`Error::File`] naming the folder: it exists and is not empty (without `force`), it is not a
-/// folder, its parent does not exist, or it cannot be created or read.
-pub fn prepare_output_dir(dir: &Path, force: bool) -> Result<()> {
-    crate::io::check_output_dir(dir, force, "the results in it")?;
-    if dir.exists() {
-        return Ok(());
-    }
-    std::fs::create_dir(dir).map_err(|e| Error::File {
-        path: dir.display().to_string(),
-        reason: format!("cannot create the folder: {e}"),
-    })
-}
-
 /// What [`run_demo`] and [`run_compare`] did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Outcome {
@@ -307,9 +295,9 @@ fn write_tables(
     config: &ExperimentConfig,
     sweep: &Sweep,
     columns: &[Column],
+    dir: &Path,
     files: &mut Vec<PathBuf>,
 ) -> Result<()> {
-    let dir = &config.out;
     let mut csv = csv_header();
     for r in &sweep.rows {
         csv.push_str(&csv_line(r));
@@ -396,7 +384,7 @@ pub fn run_demo(
         columns: &DEMO_COLUMNS,
         keep_depths: true,
     };
-    run.execute(config, force, observer, stop, |sweep, files| {
+    run.execute(config, force, observer, stop, |sweep, dir, files| {
         let several = config.seeds > 1 || config.snr_db.len() > 1;
         for d in &sweep.depths {
             let mut name = format!("depth_kp{}", d.case.pulse_len);
@@ -406,7 +394,7 @@ pub fn run_demo(
                     name += &format!("_snr{s}db");
                 }
             }
-            let path = config.out.join(name + ".png");
+            let path = dir.join(name + ".png");
             let rows: Vec<&Row> = sweep
                 .rows
                 .iter()
@@ -417,7 +405,7 @@ pub fn run_demo(
             files.push(path);
         }
         if !sweep.rows.is_empty() {
-            let path = config.out.join("error_vs_time.png");
+            let path = dir.join("error_vs_time.png");
             error_vs_time(config, &sweep.rows)?.save_png(&path)?;
             files.push(path);
         }
@@ -446,12 +434,12 @@ pub fn run_compare(
         columns: &COMPARE_COLUMNS,
         keep_depths: false,
     };
-    run.execute(config, force, observer, stop, |sweep, files| {
-        let path = config.out.join("summary.md");
+    run.execute(config, force, observer, stop, |sweep, dir, files| {
+        let path = dir.join("summary.md");
         crate::io::write_bytes_atomic(&path, summary_markdown(config, &sweep.rows).as_bytes())?;
         files.push(path);
         if !sweep.rows.is_empty() {
-            let path = config.out.join("pareto.png");
+            let path = dir.join("pareto.png");
             pareto_chart(config, &sweep.rows)?.save_png(&path)?;
             files.push(path);
             for &level in &config.snr_db {
@@ -468,7 +456,7 @@ pub fn run_compare(
                     None => "phase_noise-free.png".to_string(),
                     Some(s) => format!("phase_{s}db.png"),
                 };
-                let path = config.out.join(name);
+                let path = dir.join(name);
                 phase_chart(config, level, &rows)?.save_png(&path)?;
                 files.push(path);
             }
@@ -493,21 +481,38 @@ impl Run {
         force: bool,
         observer: &mut dyn ExperimentObserver,
         stop: &AtomicBool,
-        figures: impl FnOnce(&Sweep, &mut Vec<PathBuf>) -> Result<()>,
+        figures: impl FnOnce(&Sweep, &Path, &mut Vec<PathBuf>) -> Result<()>,
     ) -> Result<Outcome> {
         let start = Instant::now();
         config.validate()?;
-        prepare_output_dir(&config.out, force)?;
-        let mut partial = PartialFiles::create(&config.out)?;
-        let mut on_row = |r: &Row| partial.append(r);
-        let sweep = match config.precision {
-            Precision::F32 => sweep::sweep::<f32>(config, self, observer, stop, &mut on_row)?,
-            Precision::F64 => sweep::sweep::<f64>(config, self, observer, stop, &mut on_row)?,
-        };
-        let mut files = Vec::new();
-        write_tables(self.name, config, &sweep, self.columns, &mut files)?;
-        figures(&sweep, &mut files)?;
-        partial.remove();
+        let staged = StagedDir::create(&config.out, force)?;
+        let filled = (|| -> Result<(Sweep, Vec<PathBuf>)> {
+            let mut partial = PartialFiles::create(staged.dir())?;
+            let mut on_row = |r: &Row| partial.append(r);
+            let sweep = match config.precision {
+                Precision::F32 => sweep::sweep::<f32>(config, self, observer, stop, &mut on_row)?,
+                Precision::F64 => sweep::sweep::<f64>(config, self, observer, stop, &mut on_row)?,
+            };
+            let mut files = Vec::new();
+            write_tables(
+                self.name,
+                config,
+                &sweep,
+                self.columns,
+                staged.dir(),
+                &mut files,
+            )?;
+            figures(&sweep, staged.dir(), &mut files)?;
+            partial.remove();
+            Ok((sweep, files))
+        })();
+        let (sweep, files) = filled.map_err(|e| staged.explain(e))?;
+        staged.commit()?;
+        let files = files
+            .iter()
+            .filter_map(|f| f.file_name())
+            .map(|name| config.out.join(name))
+            .collect();
         Ok(Outcome {
             rows: sweep.rows,
             interrupted: sweep.interrupted,
