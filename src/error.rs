@@ -67,6 +67,25 @@ pub enum Error {
         /// What happened.
         reason: String,
     },
+    /// A request needs more memory than the machine has available (see [`crate::limits`]).
+    #[error(
+        "{request}: needs {} ({needed} bytes: {parts}), more than the {} of memory available; \
+         {change}",
+        crate::limits::bytes_text(*needed),
+        crate::limits::bytes_text(*available)
+    )]
+    TooLarge {
+        /// What was asked, with its flags, e.g. `"--size 100000x100000x100 --pulse-len 10"`.
+        request: String,
+        /// The bytes it needs.
+        needed: u128,
+        /// Those bytes part by part, e.g. `"scene 8.0 TB, codes 125 GB"`.
+        parts: String,
+        /// The bytes available.
+        available: u128,
+        /// What to change, e.g. `"lower --size or --pulse-len"`.
+        change: String,
+    },
     /// The adjoint identity ⟨Ax, y⟩ = ⟨x, A*y⟩ does not hold within tolerance.
     #[error("dot test failed: relative gap {gap:.3e} above tolerance {tolerance:.3e}")]
     DotTestFailed {

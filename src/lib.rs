@@ -57,6 +57,7 @@ pub mod io;
 #[cfg(feature = "lapack")]
 pub mod lapack;
 pub mod lidar;
+pub mod limits;
 pub mod linalg;
 pub mod operator;
 pub mod real;

@@ -221,6 +221,17 @@ impl Architecture {
         }
     }
 
+    /// The architecture in a few words for messages: `""` for one ADC, `", 4 ADCs"`,
+    /// `", tiles 8x8"`, `", aperture 0.5"`.
+    pub fn describe_suffix(&self) -> String {
+        match self {
+            Architecture::Single => String::new(),
+            Architecture::MultiAdc(g) => format!(", {g} ADCs"),
+            Architecture::Tiles(t) => format!(", tiles {t}"),
+            Architecture::Aperture(f) => format!(", aperture {f}"),
+        }
+    }
+
     /// Rows of the measurements of an `m`×`n` array: `None` for the (K,) vector of one ADC,
     /// `Some(R)` for the (R, K) array of R ADCs.
     pub fn rows(&self, m: usize, n: usize) -> Option<usize> {

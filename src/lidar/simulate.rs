@@ -19,12 +19,13 @@
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
+use crate::limits::{self, MemoryPlan};
 use crate::operator::{BoxedOperator, LinearOperator, OperatorExt};
 use crate::real::Real;
 
 use super::architectures::{aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles};
 use super::{
-    paper_scene, random_opaque_scene, semi_transparent_scene, Architecture, Codes, Geometry,
+    codes::CodeAlphabet, paper_scene, random_opaque_scene, semi_transparent_scene, Architecture, Codes, Geometry,
     NoiseModel, NoiseReport, NoiseStage, Pulse, RdOperator, Scene,
 };
 
@@ -157,6 +158,40 @@ impl SimulationSpec {
         Seeds::new(self.seed)
     }
 
+    /// Checks the request against [`crate::limits`] (grid, pulse length, ADCs) and returns the
+    /// memory simulating it in `T` needs: the scene, each code set with its operator's
+    /// buffers, the measurements and their noise.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the setting beyond its bound (`size`, `pulse_len`,
+    /// `adcs`).
+    pub fn memory_plan<T: Real>(&self) -> Result<MemoryPlan> {
+        let g = self.geometry;
+        limits::check_geometry(g)?;
+        limits::check_count("pulse_len", self.pulse_len, limits::MAX_PULSE_LEN)?;
+        let sets = self.architecture.code_sets();
+        limits::check_count("adcs", sets, limits::MAX_ADCS)?;
+        let k = self.samples()?;
+        let rows = self.architecture.rows(g.m, g.n).unwrap_or(1);
+        let alphabet = match self.ternary_zero_prob {
+            None => CodeAlphabet::Binary,
+            Some(_) => CodeAlphabet::Ternary,
+        };
+        let size = std::mem::size_of::<T>();
+        let operator = RdOperator::<T>::estimated_memory_bytes(
+            g,
+            self.pulse_len,
+            alphabet,
+            rayon::current_num_threads(),
+        )
+        .map_or(u128::MAX, |b| b as u128);
+        let samples = (rows as u128).saturating_mul(k as u128);
+        Ok(MemoryPlan::new()
+            .add("scene", g.voxels() as u128, size)
+            .add("codes and operator", operator.saturating_mul(sets as u128), 1)
+            .add("measurements", samples.saturating_mul(2), size))
+    }
+
     /// Number of measurements per ADC, K = K_p + K_s − 1.
     ///
     /// # Errors
@@ -246,21 +281,14 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
     let k = spec.samples()?;
     let seeds = spec.seeds();
     let arch = spec.architecture;
-    if let Some(r) = arch.rows(g.m, g.n) {
-        if r.checked_mul(k)
-            .and_then(|v| v.checked_mul(g.pixels()))
-            .is_none()
-        {
-            let name = match arch {
-                Architecture::Tiles(_) => "tiles",
-                _ => "adcs",
-            };
-            return Err(Error::param(
-                name,
-                format!("{r} ADCs of {k} samples are too many"),
-            ));
-        }
-    }
+    spec.memory_plan::<T>()?.check(
+        &format!(
+            "simulating {g} with K_p = {}{}",
+            spec.pulse_len,
+            arch.describe_suffix()
+        ),
+        "lower --size, --pulse-len or --adcs",
+    )?;
     let groups = match arch {
         Architecture::Tiles(t) => Some(tiles(g, t.m, t.n)?),
         _ => None,

@@ -62,6 +62,17 @@ pub struct Metrics {
 
 impl std::fmt::Display for Metrics {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.lit == 0 {
+            // No lit pixel: there is no depth to match and no relative error; the error is
+            // the estimate's norm.
+            return write!(
+                f,
+                "the true scene has no lit pixel: false {} ({:.2}% of all), ‖X̂‖ = {:.4}",
+                self.false_detections,
+                100.0 * self.false_fraction_all,
+                self.relative_error
+            );
+        }
         write!(
             f,
             "exact depth {:.1}% of {} lit pixels, depth RMSE {:.3} bins ({:.4} m) over {}, \
@@ -172,11 +183,36 @@ fn relative(diff_sq: f64, truth_sq: f64, what: &str) -> Result<f64> {
 /// [`Error::NonFinite`] if a value or the result is NaN or infinite.
 pub fn relative_error<T: Real>(truth: &Scene<T>, estimate: &Scene<T>) -> Result<f64> {
     check_scenes(truth, estimate)?;
+    // Sums of squares of values scaled by the largest magnitude, so that scenes near the ends
+    // of the floating-point range neither overflow nor underflow.
+    let pairs = || truth.as_slice().iter().zip(estimate.as_slice());
+    let scale = pairs().fold(0.0f64, |m, (&x, &e)| {
+        m.max(x.as_f64().abs()).max(e.as_f64().abs())
+    });
+    if !scale.is_finite() {
+        return Err(Error::NonFinite {
+            what: "scenes compared".to_string(),
+        });
+    }
+    if scale == 0.0 {
+        return Ok(0.0);
+    }
     let (mut diff_sq, mut truth_sq) = (0.0f64, 0.0f64);
-    for (&x, &e) in truth.as_slice().iter().zip(estimate.as_slice()) {
-        let (x, e) = (x.as_f64(), e.as_f64());
+    for (&x, &e) in pairs() {
+        let (x, e) = (x.as_f64() / scale, e.as_f64() / scale);
         diff_sq += (x - e) * (x - e);
         truth_sq += x * x;
+    }
+    if truth_sq == 0.0 {
+        // The truth is all zero: the error is ‖X̂‖ itself.
+        let norm = diff_sq.sqrt() * scale;
+        return if norm.is_finite() {
+            Ok(norm)
+        } else {
+            Err(Error::NonFinite {
+                what: "the norm of the estimate".to_string(),
+            })
+        };
     }
     relative(diff_sq, truth_sq, "scenes")
 }

@@ -8,7 +8,7 @@ use rdlidar::lidar::{zero_mean, Scene, TileSize};
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
+    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
     MeasurementFiles,
 };
 use crate::layout::{architecture_of, expectation, read_measurements, Layout};
@@ -64,6 +64,7 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
     let op = layout.operator(pulse)?;
     let mut x = vec![T::zero(); g.voxels()];
     op.apply_adjoint(&y, &mut x);
+    check_finite_result(&x, "backprojection", &a.files.meas, "--meas")?;
     let xt = Scene::from_vec(g, x).map_err(|e| {
         format!(
             "{}: the backprojection overflows {}: {e}",

@@ -2,13 +2,14 @@
 
 use std::sync::Arc;
 
-use rdlidar::lidar::{paper_scene, Codes, Geometry, Pulse, RdOperator, Seeds};
+use rdlidar::lidar::{paper_scene, CodeAlphabet, Codes, Geometry, Pulse, RdOperator, Seeds};
+use rdlidar::limits::MemoryPlan;
 use rdlidar::report::timing::{time_operator, Timing};
 use rdlidar::Real;
 use serde::Serialize;
 
 use crate::common::{
-    outln, parse_positive, parse_size, with_precision, CliResult, Globals, Precision,
+    outln, parse_pulse_len, parse_repeats, parse_size, with_precision, CliResult, Globals, Precision,
 };
 
 /// Time the forward, adjoint and sparse forward operators on a generated problem.
@@ -29,13 +30,13 @@ pub struct BenchArgs {
     #[arg(long, value_parser = parse_size, default_value = "100x100x40")]
     pub size: Geometry,
     /// Pulse length K_p.
-    #[arg(long, value_parser = parse_positive, default_value_t = 30000)]
+    #[arg(long, value_parser = parse_pulse_len, default_value_t = 30000)]
     pub pulse_len: usize,
     /// Print the timings as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Timed runs of each operation, after one warm-up run.
-    #[arg(long, value_parser = parse_positive, default_value_t = 7)]
+    /// Timed runs of each operation, after one warm-up run (1 … 10000).
+    #[arg(long, value_parser = parse_repeats, default_value_t = 7)]
     pub repeats: usize,
 }
 
@@ -68,6 +69,21 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
     let k = kp
         .checked_add(g.ks - 1)
         .ok_or_else(|| format!("--pulse-len {kp} is too large"))?;
+    let operator = RdOperator::<T>::estimated_memory_bytes(
+        g,
+        kp,
+        CodeAlphabet::Binary,
+        rayon::current_num_threads(),
+    )
+    .map_or(u128::MAX, |b| b as u128);
+    MemoryPlan::new()
+        .add("scene (dense and sparse)", g.voxels() as u128, 3 * std::mem::size_of::<T>())
+        .add("codes and operator", operator, 1)
+        .add("measurements", k as u128, 2 * std::mem::size_of::<T>())
+        .check(
+            &format!("bench --size {g} --pulse-len {kp}"),
+            "lower --size or --pulse-len",
+        )?;
     let seeds = Seeds::new(seed);
     let scene = paper_scene::<T>(g).map_err(|e| format!("--size: {e}"))?;
     let pulse =

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use clap::ValueEnum;
 use rdlidar::io::{self, NpyDtype};
 use rdlidar::lidar::{Geometry, TileSize};
-use rdlidar::Real;
+use rdlidar::{limits, Real};
 
 /// A command-line failure.
 #[derive(Debug)]
@@ -100,8 +100,8 @@ pub struct MeasurementFiles {
     /// (ADCs, K).
     #[arg(long, value_name = "Y")]
     pub meas: PathBuf,
-    /// Depth bins K_s of the scene.
-    #[arg(long, value_name = "KS", value_parser = parse_positive)]
+    /// Depth bins K_s of the scene (at most 65536).
+    #[arg(long, value_name = "KS", value_parser = parse_depth_bins)]
     pub depth_bins: usize,
 }
 
@@ -170,9 +170,48 @@ pub fn parse_positive(text: &str) -> Result<usize, String> {
     }
 }
 
-/// A grid `MxNxKS`.
+/// A positive integer flag value of at most `bound` (one of [`rdlidar::limits`]' bounds).
+fn parse_bounded(text: &str, bound: usize) -> Result<usize, String> {
+    let v = parse_positive(text)?;
+    if v > bound {
+        return Err(format!("{v} is more than the limit of {bound}"));
+    }
+    Ok(v)
+}
+
+/// A thread count, 1 … [`limits::MAX_THREADS`].
+pub fn parse_threads(text: &str) -> Result<usize, String> {
+    parse_bounded(text, limits::MAX_THREADS)
+}
+
+/// A repeat count, 1 … [`limits::MAX_REPEATS`].
+pub fn parse_repeats(text: &str) -> Result<usize, String> {
+    parse_bounded(text, limits::MAX_REPEATS)
+}
+
+/// A pulse length, 1 … [`limits::MAX_PULSE_LEN`].
+pub fn parse_pulse_len(text: &str) -> Result<usize, String> {
+    parse_bounded(text, limits::MAX_PULSE_LEN)
+}
+
+/// A number of ADCs, 1 … [`limits::MAX_ADCS`].
+pub fn parse_adcs(text: &str) -> Result<usize, String> {
+    parse_bounded(text, limits::MAX_ADCS)
+}
+
+/// A number of depth bins, 1 … [`limits::MAX_DEPTH_BINS`].
+pub fn parse_depth_bins(text: &str) -> Result<usize, String> {
+    parse_bounded(text, limits::MAX_DEPTH_BINS)
+}
+
+/// A grid `MxNxKS` within [`limits::check_geometry`].
 pub fn parse_size(text: &str) -> Result<Geometry, String> {
-    Geometry::parse(text).map_err(|e| e.to_string())
+    let g = Geometry::parse(text).map_err(|e| e.to_string())?;
+    limits::check_geometry(g).map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { reason, .. } => reason,
+        other => other.to_string(),
+    })?;
+    Ok(g)
 }
 
 /// A tile size `AxB`.
@@ -185,6 +224,23 @@ pub fn npy_dtype<T: Real>() -> &'static str {
     match T::NAME {
         "f32" => "float32",
         _ => "float64",
+    }
+}
+
+/// Refuses a computed result holding a NaN or an infinite value: the finite values of the input
+/// (`flag`, file `input`) overflow `T` through the operator.
+pub fn check_finite_result<T: Real>(values: &[T], what: &str, input: &Path, flag: &str) -> CliResult {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(format!(
+            "{}: the {what} of these values ({flag}) overflow {} (entry {i} is {}); scale \
+             the input down{}",
+            input.display(),
+            T::NAME,
+            values[i],
+            if T::NAME == "f32" { " or use --precision f64" } else { "" }
+        )
+        .into()),
     }
 }
 
@@ -228,6 +284,8 @@ pub fn check_not_input(out: &Path, flag: &str, inputs: &[Input<'_>]) -> CliResul
 /// Sets the size of the global thread pool; `source` names where the count came from.
 pub fn set_threads(threads: Option<usize>, source: &str) -> CliResult {
     if let Some(n) = threads {
+        limits::check_count("threads", n, limits::MAX_THREADS)
+            .map_err(|_| format!("{source} {n}: outside 1 … {}", limits::MAX_THREADS))?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

@@ -7,7 +7,7 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, TileSize};
 use rdlidar::operator::DotTest;
 
-use crate::common::{errln, outln, parse_positive, parse_tile, CliResult, Globals};
+use crate::common::{errln, outln, parse_depth_bins, parse_tile, CliResult, Globals};
 use crate::layout::{architecture_of, expectation, Layout};
 
 /// Check the adjoint identity <Ax, y> = <x, A*y> of the operator built from files.
@@ -30,7 +30,7 @@ pub struct DottestArgs {
     #[arg(long, value_name = "S")]
     pub codes: PathBuf,
     /// Depth bins K_s of the scene.
-    #[arg(long, value_name = "KS", value_parser = parse_positive)]
+    #[arg(long, value_name = "KS", value_parser = parse_depth_bins)]
     pub depth_bins: usize,
     /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
     #[arg(long, value_name = "AxB", value_parser = parse_tile)]
@@ -46,6 +46,14 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
     let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins)?;
     let p64 = p.as_slice().to_vec();
     let p32: Vec<f32> = p.as_slice().iter().map(|&v| v as f32).collect();
+    if let Some(i) = p32.iter().position(|v| !v.is_finite()) {
+        return Err(format!(
+            "{}: pulse value {:e} at index {i} overflows f32, in which the dot test also runs",
+            a.pulse.display(),
+            p64[i]
+        )
+        .into());
+    }
     let test = DotTest::new().seed(seed);
     let rows = [
         (

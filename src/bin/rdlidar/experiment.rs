@@ -186,7 +186,11 @@ fn experiment_config(
         Some(Precision::F64) => experiment::Precision::F64,
         None => file.precision.unwrap_or(config.precision),
     };
-    if let Err(e) = config.validate() {
+    let checked = config.validate().and_then(|()| match which {
+        Experiment::Demo => experiment::check_depth_figure(&config),
+        Experiment::Compare => Ok(()),
+    });
+    if let Err(e) = checked {
         let msg = match e {
             rdlidar::Error::InvalidParameter { name, reason } => {
                 let place = match &a.config {

@@ -8,7 +8,7 @@ use rdlidar::lidar::TileSize;
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
+    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
 };
 use crate::layout::{architecture_of, Layout};
 
@@ -70,6 +70,7 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
     let op = layout.operator(p.into_inner())?;
     let mut y = vec![T::zero(); op.nrows()];
     op.apply(x.as_slice(), &mut y);
+    check_finite_result(&y, "measurements", &a.scene, "--scene")?;
     match layout.rows() {
         None => {
             io::write_measurements(out, &y)?;

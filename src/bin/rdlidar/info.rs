@@ -32,7 +32,7 @@ pub struct InfoArgs {
     #[arg(long, value_parser = crate::common::parse_size)]
     size: Geometry,
     /// Pulse length K_p.
-    #[arg(long, value_name = "KP", value_parser = crate::common::parse_positive)]
+    #[arg(long, value_name = "KP", value_parser = crate::common::parse_pulse_len)]
     pulse_len: usize,
     /// Sampling period τ with its unit: fs, ps, ns, us, ms or s (default 200ps).
     #[arg(

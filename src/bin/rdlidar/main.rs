@@ -16,7 +16,7 @@ mod reconstruct;
 mod selfcheck;
 mod simulate;
 
-use common::{errln, parse_positive, set_threads, CliResult, Failure, Globals, Precision};
+use common::{errln, parse_threads, set_threads, CliResult, Failure, Globals, Precision};
 use experiment::{CompareArgs, Experiment, ExperimentArgs};
 
 /// Compressive time-of-flight lidar by random demodulation.
@@ -31,8 +31,8 @@ use experiment::{CompareArgs, Experiment, ExperimentArgs};
 #[derive(Parser, Debug)]
 #[command(name = "rdlidar", version, about, long_about)]
 struct Cli {
-    /// Worker threads of the parallel kernels (default: one per core).
-    #[arg(long, global = true, value_parser = parse_positive)]
+    /// Worker threads of the parallel kernels, 1 … 1024 (default: one per core).
+    #[arg(long, global = true, value_parser = parse_threads)]
     threads: Option<usize>,
 
     /// Base seed of every random draw (default 0). simulate, bench, demo and compare draw the

@@ -128,10 +128,14 @@ fn reconstruct_files<T: Real + WritableElement>(
         seed: globals.seed(),
         power_iterations: None,
     };
-    let r = reconstruct(&op, &y, a.solver, &options)?;
-    let metrics = match &truth {
-        Some(t) => Some(compare(t, &r.scene, DEFAULT_TAU_S)?),
-        None => None,
+    let r = reconstruct(&op, &y, a.solver, &options)
+        .map_err(|e| format!("--solver {}: {e}", a.solver))?;
+    let metrics = match (&truth, &a.truth) {
+        (Some(t), Some(path)) => Some(
+            compare(t, &r.scene, DEFAULT_TAU_S)
+                .map_err(|e| format!("{} (--truth): {e}", path.display()))?,
+        ),
+        _ => None,
     };
     // Stage every output, then rename them into place together; on an error the staged files
     // are dropped, which removes them.

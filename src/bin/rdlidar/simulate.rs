@@ -10,7 +10,7 @@ use rdlidar::lidar::{simulate, Architecture, Geometry, SceneSpec, SimulationSpec
 use rdlidar::Real;
 
 use crate::common::{
-    npy_dtype, outln, parse_positive, parse_size, parse_tile, with_precision, CliResult, Globals,
+    npy_dtype, outln, parse_adcs, parse_pulse_len, parse_size, parse_tile, with_precision, CliResult, Globals,
     Precision,
 };
 
@@ -77,7 +77,7 @@ pub struct SimulateArgs {
     #[arg(long, value_parser = parse_size)]
     pub size: Geometry,
     /// Pulse length K_p (Bernoulli 0/1 samples).
-    #[arg(long, value_parser = parse_positive)]
+    #[arg(long, value_parser = parse_pulse_len)]
     pub pulse_len: usize,
     /// Output directory.
     #[arg(long, value_name = "DIR")]
@@ -95,9 +95,9 @@ pub struct SimulateArgs {
     /// Replace scene.npy, pulse.npy, codes.npy, meas.npy and meta.json in a non-empty DIR.
     #[arg(long)]
     pub force: bool,
-    /// Number of ADCs G ≥ 1, each with its own code set for every pixel (G > 1 writes codes.npy
+    /// Number of ADCs G (1 … 4096), each with its own code set for every pixel (G > 1 writes codes.npy
     /// (G, M, N, K) and meas.npy (G, K)).
-    #[arg(long, value_name = "G", value_parser = parse_positive, default_value_t = 1)]
+    #[arg(long, value_name = "G", value_parser = parse_adcs, default_value_t = 1)]
     pub adcs: usize,
     /// Split the array into tiles of AxB pixels with one ADC each (meas.npy (T, K) for T tiles).
     #[arg(long, value_name = "AxB", value_parser = parse_tile)]
@@ -198,6 +198,7 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         rdlidar::Error::InvalidParameter { name, reason } => {
             format!("--{}: {reason}", name.replace('_', "-"))
         }
+        e @ rdlidar::Error::TooLarge { .. } => e.to_string(),
         other => format!("--scene {}: {other}", a.scene.name()),
     })?;
     let meta = SimulationMeta::new(&sim);

@@ -332,6 +332,17 @@ element!(i32);
 fn read_data<E: Element>(path: &Path, mut opened: Opened) -> Result<ArrayD<E>> {
     let shape = opened.header.shape.clone();
     let len: usize = shape.iter().product();
+    // The data, and the converted copy the readers make of it, must fit in memory.
+    crate::limits::MemoryPlan::new()
+        .add("data and its conversion", len as u128, 2 * E::SIZE.max(4))
+        .check(
+            &format!(
+                "{}: reading an array of shape {}",
+                escape_all(&path.display().to_string()),
+                shape_text(&shape)
+            ),
+            "use a smaller file or free memory",
+        )?;
     let mut values: Vec<E> = Vec::new();
     values
         .try_reserve_exact(len)
@@ -429,6 +440,23 @@ fn to_real<T: Real, S: Copy + Into<f64>>(
             path,
             format!(
                 "{role} value {v:e} at index {} overflows {}",
+                index_text(&i),
+                T::NAME
+            ),
+        ));
+    }
+    let underflow = a.iter().zip(out.iter()).position(|(&s, &t)| {
+        let s: f64 = s.into();
+        s != 0.0 && t == T::zero()
+    });
+    if let Some(flat) = underflow {
+        let i = unravel(flat, a.shape());
+        let v: f64 = a[i.as_slice()].into();
+        return Err(file_error(
+            path,
+            format!(
+                "{role} value {v:e} at index {} underflows {} (it would read as 0); use \
+                 --precision f64",
                 index_text(&i),
                 T::NAME
             ),

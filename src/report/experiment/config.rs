@@ -12,16 +12,15 @@ use crate::recon::Method;
 
 pub use super::values::*;
 
-/// Largest number of voxels M·N·K_s of an experiment's scene (2²⁶: 256 MB per f32 cube; a sweep
-/// holds a few cubes per solver).
-pub const MAX_VOXELS: usize = 1 << 26;
+/// The most seeds of one sweep.
+pub const MAX_SEEDS: usize = 10_000;
 
-/// Largest number of pixel rows or columns of an experiment's scene, so that depth figures with
-/// several panels side by side stay within the limits of [`crate::report::plot`].
-pub const MAX_SIDE: usize = 1024;
+/// The most power iterations of FISTA's step estimate.
+pub const MAX_POWER_ITERATIONS: usize = 100_000;
 
-/// Largest size of the bit-packed codes, M·N·K bits, of one problem (2 GiB).
-pub const MAX_CODE_BYTES: usize = 1 << 31;
+/// Working copies of the scene a run holds besides the simulation (the estimate, the solver's
+/// iterates, gradients and the depth maps): what the memory check of an experiment counts.
+const SCENE_COPIES: u128 = 8;
 
 /// Seed of run `i` of a sweep with base seed `seed`: `seed + 10·i`, so that the derived seeds
 /// (pulse SEED, codes SEED+1, noise SEED+2, scene SEED+3) of different runs never coincide.
@@ -244,31 +243,15 @@ impl ExperimentConfig {
     /// # Errors
     /// [`Error::InvalidParameter`] naming the field: an empty or repeated list entry, a zero
     /// count, a non-finite SNR, a lit fraction outside [0, 1], or a problem too large for the
-    /// experiment limits ([`MAX_VOXELS`], [`MAX_SIDE`], [`MAX_CODE_BYTES`]).
+    /// limits of [`crate::limits`] and [`MAX_SEEDS`], or one whose largest problem needs more
+    /// memory than is available ([`Error::TooLarge`]).
     pub fn validate(&self) -> Result<()> {
         if self.out.as_os_str().is_empty() {
             return Err(Error::param("out", "the output folder name is empty"));
         }
         let g = self.size;
         Geometry::new(g.m, g.n, g.ks)?;
-        if g.m > MAX_SIDE || g.n > MAX_SIDE {
-            return Err(Error::param(
-                "size",
-                format!(
-                    "{g}: experiments draw at most {MAX_SIDE} pixel rows and columns; use \
-                     `simulate` and `reconstruct` for larger arrays"
-                ),
-            ));
-        }
-        if g.voxels() > MAX_VOXELS {
-            return Err(Error::param(
-                "size",
-                format!(
-                    "{g}: {} voxels are more than the {MAX_VOXELS} an experiment holds",
-                    g.voxels()
-                ),
-            ));
-        }
+        crate::limits::check_geometry(g)?;
         if g.ks > i32::MAX as usize {
             return Err(Error::param("size", format!("{g}: too many depth bins")));
         }
@@ -291,19 +274,29 @@ impl ExperimentConfig {
                     format!("K_p = {kp} is listed twice"),
                 ));
             }
-            let bits = kp
-                .checked_add(g.ks - 1)
-                .and_then(|k| k.checked_mul(g.pixels()));
-            if bits.is_none_or(|b| b / 8 > MAX_CODE_BYTES) {
-                return Err(Error::param(
-                    "pulse_lens",
-                    format!(
-                        "K_p = {kp} at {g}: the codes of {} pixels would take more than {} GiB",
-                        g.pixels(),
-                        MAX_CODE_BYTES >> 30
-                    ),
-                ));
+            crate::limits::check_count("pulse_lens", kp, crate::limits::MAX_PULSE_LEN)?;
+        }
+        // The largest problem must fit in memory: its simulation and a run's working copies.
+        let size = match self.precision {
+            Precision::F32 => 4,
+            Precision::F64 => 8,
+        };
+        if let Some(&kp) = self.pulse_lens.iter().max() {
+            let spec = crate::lidar::SimulationSpec::new(g, kp, self.seed);
+            let simulation = match self.precision {
+                Precision::F32 => spec.memory_plan::<f32>(),
+                Precision::F64 => spec.memory_plan::<f64>(),
             }
+            .map_err(|e| match e {
+                Error::InvalidParameter { reason, .. } => Error::param("size", reason),
+                other => other,
+            })?;
+            simulation
+                .add("solver working copies", SCENE_COPIES * g.voxels() as u128, size)
+                .check(
+                    &format!("an experiment on {g} with K_p up to {kp}"),
+                    "lower --size or --pulse-lens",
+                )?;
         }
         if self.solvers.is_empty() {
             return Err(Error::param("solvers", "the list of solvers is empty"));
@@ -332,17 +325,15 @@ impl ExperimentConfig {
                 ));
             }
         }
-        if self.seeds == 0 {
-            return Err(Error::param("seeds", "at least one seed is needed"));
-        }
+        crate::limits::check_count("seeds", self.seeds, MAX_SEEDS)?;
         if !(0.0..=1.0).contains(&self.lit_fraction) {
             return Err(Error::param(
                 "lit_fraction",
                 format!("must be in [0, 1], got {}", self.lit_fraction),
             ));
         }
-        if self.power_iterations == Some(0) {
-            return Err(Error::param("power_iterations", "must be at least 1"));
+        if let Some(n) = self.power_iterations {
+            crate::limits::check_count("power_iterations", n, MAX_POWER_ITERATIONS)?;
         }
         for (m, l) in self.max_iter.iter() {
             if l == 0 {

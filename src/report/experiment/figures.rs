@@ -19,6 +19,34 @@ pub const ERROR_FLOOR: f64 = 1e-12;
 /// Run times below this (seconds) are drawn at it.
 const TIME_FLOOR: f64 = 1e-4;
 
+/// Checks, before a sweep, that the demo's depth figure (the true map and one panel per solver
+/// side by side, at least one figure pixel per scene pixel) fits within the figure limits of
+/// [`crate::report::plot`]: about 16384 / (solvers + 1) pixel columns at most.
+///
+/// # Errors
+/// [`crate::Error::InvalidParameter`] `size` when it would not.
+pub fn check_depth_figure(config: &ExperimentConfig) -> Result<()> {
+    let panels = config.solvers.len() + 1;
+    let (m, n) = (config.size.m, config.size.n);
+    // Each panel is at least n pixels wide, with a gap of 24; the colour bar and margins take
+    // about 300 more. Rows: the panels' height, with the title and legend, about 200 more.
+    let width = panels.saturating_mul(n + 24).saturating_add(300);
+    if width > crate::report::plot::MAX_SIDE || m + 200 > crate::report::plot::MAX_SIDE {
+        return Err(crate::Error::param(
+            "size",
+            format!(
+                "{}: the demo's depth figure of {panels} maps side by side would be about \
+                 {width} x {} pixels, more than the {} a figure may have on a side; use fewer \
+                 solvers, a smaller size, or `compare` (which draws no depth maps)",
+                config.size,
+                m + 200,
+                crate::report::plot::MAX_SIDE
+            ),
+        ));
+    }
+    Ok(())
+}
+
 fn describe(config: &ExperimentConfig) -> String {
     format!("{} {}", config.scene.name(), config.size)
 }

@@ -57,10 +57,10 @@ use serde::Serialize;
 pub use config::{
     noise_text, parse_noise_level, parse_noise_levels, parse_pulse_lens, parse_solvers, run_seed,
     ConfigFile, ExperimentConfig, ExperimentPatch, IterationBudgets, NoiseLevel, Precision,
-    SceneKind, DEFAULT_SOLVERS, MAX_CODE_BYTES, MAX_SIDE, MAX_VOXELS,
+    SceneKind, DEFAULT_SOLVERS, MAX_POWER_ITERATIONS, MAX_SEEDS,
 };
 pub use console::Console;
-pub use figures::{depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR};
+pub use figures::{check_depth_figure, depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR};
 pub use staging::{abandon_staged_and_exit, StagedDir};
 pub use sweep::{CaseDepths, Sweep};
 pub use table::{
@@ -485,6 +485,9 @@ impl Run {
     ) -> Result<Outcome> {
         let start = Instant::now();
         config.validate()?;
+        if self.keep_depths {
+            figures::check_depth_figure(config)?;
+        }
         let staged = StagedDir::create(&config.out, force)?;
         let filled = (|| -> Result<(Sweep, Vec<PathBuf>)> {
             let mut partial = PartialFiles::create(staged.dir())?;
