@@ -83,8 +83,7 @@ impl MemoryPlan {
 
     /// Adds `count` elements of `size` bytes for `what` (computed without overflow).
     pub fn add(mut self, what: &'static str, count: u128, size: usize) -> Self {
-        self.parts
-            .push((what, count.saturating_mul(size as u128)));
+        self.parts.push((what, count.saturating_mul(size as u128)));
         self
     }
 

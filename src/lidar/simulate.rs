@@ -25,8 +25,8 @@ use crate::real::Real;
 
 use super::architectures::{aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles};
 use super::{
-    codes::CodeAlphabet, paper_scene, random_opaque_scene, semi_transparent_scene, Architecture, Codes, Geometry,
-    NoiseModel, NoiseReport, NoiseStage, Pulse, RdOperator, Scene,
+    codes::CodeAlphabet, paper_scene, random_opaque_scene, semi_transparent_scene, Architecture,
+    Codes, Geometry, NoiseModel, NoiseReport, NoiseStage, Pulse, RdOperator, Scene,
 };
 
 /// The seeds of a simulation, all derived from one base seed: the pulse from SEED, code set g
@@ -188,7 +188,11 @@ impl SimulationSpec {
         let samples = (rows as u128).saturating_mul(k as u128);
         Ok(MemoryPlan::new()
             .add("scene", g.voxels() as u128, size)
-            .add("codes and operator", operator.saturating_mul(sets as u128), 1)
+            .add(
+                "codes and operator",
+                operator.saturating_mul(sets as u128),
+                1,
+            )
             .add("measurements", samples.saturating_mul(2), size))
     }
 

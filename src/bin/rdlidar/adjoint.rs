@@ -8,8 +8,8 @@ use rdlidar::lidar::{zero_mean, Scene, TileSize};
 use rdlidar::Real;
 
 use crate::common::{
-    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
-    MeasurementFiles,
+    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
+    Globals, MeasurementFiles,
 };
 use crate::layout::{architecture_of, expectation, read_measurements, Layout};
 

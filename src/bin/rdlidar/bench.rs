@@ -9,7 +9,8 @@ use rdlidar::Real;
 use serde::Serialize;
 
 use crate::common::{
-    outln, parse_pulse_len, parse_repeats, parse_size, with_precision, CliResult, Globals, Precision,
+    outln, parse_pulse_len, parse_repeats, parse_size, with_precision, CliResult, Globals,
+    Precision,
 };
 
 /// Time the forward, adjoint and sparse forward operators on a generated problem.
@@ -77,7 +78,11 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
     )
     .map_or(u128::MAX, |b| b as u128);
     MemoryPlan::new()
-        .add("scene (dense and sparse)", g.voxels() as u128, 3 * std::mem::size_of::<T>())
+        .add(
+            "scene (dense and sparse)",
+            g.voxels() as u128,
+            3 * std::mem::size_of::<T>(),
+        )
         .add("codes and operator", operator, 1)
         .add("measurements", k as u128, 2 * std::mem::size_of::<T>())
         .check(

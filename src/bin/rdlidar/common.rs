@@ -229,16 +229,25 @@ pub fn npy_dtype<T: Real>() -> &'static str {
 
 /// Refuses a computed result holding a NaN or an infinite value: the finite values of the input
 /// (`flag`, file `input`) overflow `T` through the operator.
-pub fn check_finite_result<T: Real>(values: &[T], what: &str, input: &Path, flag: &str) -> CliResult {
+pub fn check_finite_result<T: Real>(
+    values: &[T],
+    what: &str,
+    input: &Path,
+    flag: &str,
+) -> CliResult {
     match values.iter().position(|v| !v.is_finite()) {
         None => Ok(()),
         Some(i) => Err(format!(
             "{}: the {what} of these values ({flag}) overflow {} (entry {i} is {}); scale \
              the input down{}",
             input.display(),
-            T::NAME,
+            npy_dtype::<T>(),
             values[i],
-            if T::NAME == "f32" { " or use --precision f64" } else { "" }
+            if T::NAME == "f32" {
+                " or use --precision f64"
+            } else {
+                ""
+            }
         )
         .into()),
     }

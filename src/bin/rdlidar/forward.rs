@@ -8,7 +8,8 @@ use rdlidar::lidar::TileSize;
 use rdlidar::Real;
 
 use crate::common::{
-    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult, Globals,
+    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
+    Globals,
 };
 use crate::layout::{architecture_of, Layout};
 

@@ -10,8 +10,8 @@ use rdlidar::lidar::{simulate, Architecture, Geometry, SceneSpec, SimulationSpec
 use rdlidar::Real;
 
 use crate::common::{
-    npy_dtype, outln, parse_adcs, parse_pulse_len, parse_size, parse_tile, with_precision, CliResult, Globals,
-    Precision,
+    npy_dtype, outln, parse_adcs, parse_pulse_len, parse_size, parse_tile, with_precision,
+    CliResult, Globals, Precision,
 };
 
 /// The scenes `simulate` generates.

@@ -292,7 +292,11 @@ impl ExperimentConfig {
                 other => other,
             })?;
             simulation
-                .add("solver working copies", SCENE_COPIES * g.voxels() as u128, size)
+                .add(
+                    "solver working copies",
+                    SCENE_COPIES * g.voxels() as u128,
+                    size,
+                )
                 .check(
                     &format!("an experiment on {g} with K_p up to {kp}"),
                     "lower --size or --pulse-lens",

@@ -60,7 +60,9 @@ pub use config::{
     SceneKind, DEFAULT_SOLVERS, MAX_POWER_ITERATIONS, MAX_SEEDS,
 };
 pub use console::Console;
-pub use figures::{check_depth_figure, depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR};
+pub use figures::{
+    check_depth_figure, depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR,
+};
 pub use staging::{abandon_staged_and_exit, StagedDir};
 pub use sweep::{CaseDepths, Sweep};
 pub use table::{
