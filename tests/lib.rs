@@ -25,6 +25,7 @@ mod metrics;
 mod model_based;
 mod noise;
 mod norm;
+mod npy_fuzz;
 mod operators;
 mod plot;
 mod rdop;
