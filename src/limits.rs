@@ -95,7 +95,7 @@ impl MemoryPlan {
     /// The parts, largest first, as `scene 1.2 GB, codes 300 MB`.
     pub fn describe(&self) -> String {
         let mut parts: Vec<_> = self.parts.iter().filter(|p| p.1 > 0).collect();
-        parts.sort_by(|a, b| b.1.cmp(&a.1));
+        parts.sort_by_key(|p| std::cmp::Reverse(p.1));
         parts
             .iter()
             .map(|(what, b)| format!("{what} {}", bytes_text(*b)))

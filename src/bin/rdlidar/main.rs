@@ -28,6 +28,9 @@ use experiment::{CompareArgs, Experiment, ExperimentArgs};
 /// (K_p,) float32/float64 ≥ 0, codes (M, N, K) int8 in {-1, 0, 1}, measurements (K,)
 /// float32/float64, with K = K_p + K_s − 1. Errors are printed as one line `error: ...` naming
 /// the file or flag; the exit status is 1 (2 for usage errors) and no output file is left behind.
+/// A closed pipe on stdout ends a command quietly with status 141. Sizes and counts have bounds
+/// and a request needing more memory than is available is refused before allocating
+/// (RDLIDAR_MEMORY_LIMIT=BYTES lowers the budget); see docs/reliability.md.
 #[derive(Parser, Debug)]
 #[command(name = "rdlidar", version, about, long_about)]
 struct Cli {
@@ -81,10 +84,12 @@ enum Command {
     /// depth_kp{K_p}.png per pulse length (true and reconstructed depth maps side by side, a
     /// colour bar in metres, pixels without a return in grey) and error_vs_time.png.
     ///
-    /// An existing non-empty output folder is refused unless --force. Rows are appended to
-    /// results.csv.partial and results.jsonl.partial as each run finishes; Ctrl-C stops after
-    /// the current run and still writes the tables and figures of the finished runs (exit
-    /// status 130); a second Ctrl-C quits at once, leaving the partial files.
+    /// An existing non-empty output folder is refused unless --force. Files are written into a
+    /// staging folder .OUT.staging-PID beside --out and moved into place together at the end
+    /// (rows are appended there to results.csv.partial and results.jsonl.partial as each run
+    /// finishes); Ctrl-C stops after the current run and still writes the tables and figures
+    /// of the finished runs (exit status 130); a second Ctrl-C quits at once, leaving nothing
+    /// new.
     ///
     /// Example: `rdlidar demo --pulse-lens 10000,30000 --solvers backprojection-debiased,model-based --out run1`
     Demo(ExperimentArgs),

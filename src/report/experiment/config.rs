@@ -654,23 +654,27 @@ mod tests {
     fn impossible_sizes_are_refused() {
         let mut c = ExperimentConfig::demo_tiny();
         c.size = Geometry {
-            m: 2000,
+            m: 5000,
             n: 8,
             ks: 8,
         };
-        assert!(c.validate().unwrap_err().to_string().contains("size"));
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("size") && e.contains("4096"), "{e}");
         c.size = Geometry {
-            m: 1000,
-            n: 1000,
-            ks: 100,
+            m: 4000,
+            n: 4000,
+            ks: 1000,
         };
-        assert!(c.validate().unwrap_err().to_string().contains("voxels"));
+        c.pulse_lens = vec![100_000];
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("more than the") && e.contains("bytes"), "{e}");
         c.size = Geometry {
             m: 100,
             n: 100,
             ks: 4,
         };
         c.pulse_lens = vec![usize::MAX / 2];
-        assert!(c.validate().unwrap_err().to_string().contains("GiB"));
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("pulse_lens"), "{e}");
     }
 }
