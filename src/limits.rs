@@ -60,10 +60,13 @@ pub fn check_geometry(g: Geometry) -> Result<()> {
 /// # Errors
 /// [`Error::InvalidParameter`] `name` if `value` is 0 or above `bound`.
 pub fn check_count(name: &'static str, value: usize, bound: usize) -> Result<()> {
-    if value == 0 || value > bound {
+    if value == 0 {
+        return Err(Error::param(name, "must be at least 1, got 0"));
+    }
+    if value > bound {
         return Err(Error::param(
             name,
-            format!("{value} is outside 1 … {bound}"),
+            format!("{value} is more than the limit of {bound}"),
         ));
     }
     Ok(())

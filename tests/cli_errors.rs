@@ -137,7 +137,7 @@ fn simulate_refuses_impossible_sizes_and_unknown_scenes() {
         "--out",
         s(&dir),
     ]);
-    assert_one_line_error(&out, &["--pulse-len", &max, "too large"]);
+    assert_usage_error(&out, &["--pulse-len", &max, "limit"]);
     assert!(listing(&tmp.0).is_empty(), "{:?}", listing(&tmp.0));
 }
 
@@ -153,9 +153,9 @@ fn bench_refuses_impossible_sizes() {
         &["--precision", "f16"],
     );
     let max = usize::MAX.to_string();
-    assert_one_line_error(
+    assert_usage_error(
         &rdlidar(&["bench", "--size", "4x4x4", "--pulse-len", &max]),
-        &["--pulse-len", "too large"],
+        &["--pulse-len", "limit"],
     );
 }
 
@@ -197,7 +197,7 @@ fn adjoint_and_dottest_refuse_impossible_depth_bins() {
         "--out",
         &f.out("xt.npy"),
     ]));
-    assert_one_line_error(&out, &["--depth-bins", "too large"]);
+    assert_usage_error(&out, &["--depth-bins", "limit"]);
     let out = run(&strings(&[
         "dottest",
         "--pulse",
@@ -207,7 +207,7 @@ fn adjoint_and_dottest_refuse_impossible_depth_bins() {
         "--depth-bins",
         &max,
     ]));
-    assert_one_line_error(&out, &["--depth-bins", "too large"]);
+    assert_usage_error(&out, &["--depth-bins", "limit"]);
     // Depth bins that do not match the codes' length name the codes file.
     let out = run(&strings(&[
         "dottest",

@@ -461,17 +461,26 @@ fn impossible_sizes_are_refused_before_any_work() {
     );
     let err = fails(&["demo", "--size", "8x8", "--out", s(&out)], 2, &dir);
     assert!(err.contains("MxNxKS"), "{err}");
-    let err = fails(&["demo", "--size", "2000x10x10", "--out", s(&out)], 1, &dir);
+    let err = fails(&["demo", "--size", "5000x10x10", "--out", s(&out)], 1, &dir);
     assert!(
-        err.contains("--size: 2000x10x10") && err.contains("1024"),
+        err.contains("--size: 5000x10x10") && err.contains("4096"),
         "{err}"
     );
     let err = fails(
-        &["compare", "--size", "1000x1000x100", "--out", s(&out)],
+        &["compare", "--size", "4000x4000x100", "--out", s(&out)],
         1,
         &dir,
     );
-    assert!(err.contains("--size") && err.contains("voxels"), "{err}");
+    assert!(
+        err.contains("--size") && err.contains("bytes") && err.contains("more than the"),
+        "{err}"
+    );
+    // The demo's depth figure must fit: 2000 columns by 10 maps do not.
+    let err = fails(&["demo", "--size", "10x2000x10", "--out", s(&out)], 1, &dir);
+    assert!(
+        err.contains("--size") && err.contains("depth figure"),
+        "{err}"
+    );
     let err = fails(
         &[
             "demo",
@@ -485,7 +494,10 @@ fn impossible_sizes_are_refused_before_any_work() {
         1,
         &dir,
     );
-    assert!(err.contains("--pulse-lens") && err.contains("GiB"), "{err}");
+    assert!(
+        err.contains("--pulse-lens") && err.contains("bytes"),
+        "{err}"
+    );
     let err = fails(&["demo", "--pulse-lens", "10,0", "--out", s(&out)], 2, &dir);
     assert!(err.contains("--pulse-lens"), "{err}");
     let err = fails(&["compare", "--seeds", "0", "--out", s(&out)], 2, &dir);
@@ -533,7 +545,7 @@ fn unreadable_or_invalid_config_files_are_named_in_the_error() {
     std::fs::write(&cfg, "[demo]\nseeds = 0\n").unwrap();
     let err = fails(&["demo", "--config", s(&cfg), "--out", s(&out)], 1, &dir);
     assert!(
-        err.contains("--seeds") && err.contains("`seeds` in") && err.contains("at least one"),
+        err.contains("--seeds") && err.contains("`seeds` in") && err.contains("at least 1"),
         "{err}"
     );
 }

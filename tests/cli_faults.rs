@@ -66,14 +66,15 @@ fn a_broken_pipe_ends_quietly_with_status_141() {
         &["selfcheck"][..],
         &["info", "--size", "100x100x40", "--pulse-len", "1000"],
     ] {
+        // A pipe whose reading end is closed before the command starts.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
         let mut child = Command::new(env!("CARGO_BIN_EXE_rdlidar"))
             .args(args)
-            .stdout(Stdio::piped())
+            .stdout(writer)
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        // Close the reading end before the command writes.
-        drop(child.stdout.take());
         let mut err = String::new();
         child
             .stderr

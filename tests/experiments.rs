@@ -63,7 +63,16 @@ fn a_stopped_sweep_writes_the_finished_rows_and_reports_it() {
     let mut rec = Recorder {
         stop: &stop,
         stop_after: 5,
-        partial: dir.join("results.csv.partial"),
+        // Rows go to the staging folder beside the output folder until the end.
+        partial: dir
+            .parent()
+            .unwrap()
+            .join(format!(
+                ".{}.staging-{}",
+                dir.file_name().unwrap().to_string_lossy(),
+                std::process::id()
+            ))
+            .join("results.csv.partial"),
         planned: None,
         started: 0,
         rows: Vec::new(),

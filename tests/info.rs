@@ -500,20 +500,15 @@ fn info_rejects_invalid_inputs_with_one_line() {
         all.extend(&args);
         assert_one_line_error(&info(&all), &needles);
     }
-    // K and the byte counts overflow.
+    // Beyond the limits shared by every subcommand.
     let max = usize::MAX.to_string();
-    assert_one_line_error(
+    assert_usage_error(
         &info(&["--size", "10x10x10", "--pulse-len", &max]),
-        &["--pulse-len", "overflows 64 bits"],
+        &["--pulse-len", "limit"],
     );
-    assert_one_line_error(
-        &info(&[
-            "--size",
-            "100000x100000x1",
-            "--pulse-len",
-            "1000000000000000",
-        ]),
-        &["--pulse-len", "codes", "overflows 64 bits"],
+    assert_usage_error(
+        &info(&["--size", "100000x100000x1", "--pulse-len", "1000"]),
+        &["--size", "4096"],
     );
 }
 

@@ -294,7 +294,7 @@ pub fn check_not_input(out: &Path, flag: &str, inputs: &[Input<'_>]) -> CliResul
 pub fn set_threads(threads: Option<usize>, source: &str) -> CliResult {
     if let Some(n) = threads {
         limits::check_count("threads", n, limits::MAX_THREADS)
-            .map_err(|_| format!("{source} {n}: outside 1 … {}", limits::MAX_THREADS))?;
+            .map_err(|e| format!("{source} {n}: {e}"))?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()
