@@ -15,6 +15,7 @@ mod layout;
 mod reconstruct;
 mod selfcheck;
 mod simulate;
+mod stress;
 
 use common::{errln, parse_positive, set_threads, CliResult, Failure, Globals, Precision};
 use experiment::{CompareArgs, Experiment, ExperimentArgs};
@@ -127,6 +128,8 @@ enum Command {
     Info(info::InfoArgs),
 
     Bench(bench::BenchArgs),
+
+    Stress(stress::StressArgs),
 }
 
 fn run(cli: Cli) -> CliResult<ExitCode> {
@@ -163,6 +166,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         Command::Reconstruct(a) => reconstruct::run(&a, &globals).map(done),
         Command::Info(a) => info::run(&a).map(done),
         Command::Bench(a) => bench::run(&a, &globals).map(done),
+        Command::Stress(a) => stress::run(&a, &globals),
     }
 }
 
