@@ -30,5 +30,6 @@ mod reconstruct;
 mod scenes;
 mod solvers;
 mod sparse_solvers;
+mod stress;
 mod tight_frame;
 mod tv;
