@@ -2,8 +2,10 @@
 
 use std::ops::ControlFlow;
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::time::Instant;
 
+use rdlidar::lidar::{Codes, Geometry, RdOperator};
 use rdlidar::report::stress::{
     failures, run_stress, table_header, table_line, Preset, StressConfig, StressRow,
 };
@@ -39,8 +41,8 @@ pub struct StressArgs {
     /// The small suite (seconds; the one the tests run).
     #[arg(long)]
     pub quick: bool,
-    /// Print one JSON document {"preset", "seed", "threads", "rows": [...], "failed", "seconds"}
-    /// instead of the table.
+    /// Print one JSON document {"preset", "seed", "threads", "kernels", "rows": [...], "passed",
+    /// "failed", "seconds"} instead of the table.
     #[arg(long)]
     pub json: bool,
 }
@@ -51,6 +53,7 @@ struct StressReport<'a> {
     preset: Preset,
     seed: u64,
     threads: usize,
+    kernels: &'static str,
     rows: &'a [StressRow],
     passed: usize,
     failed: usize,
@@ -67,12 +70,13 @@ pub fn run(a: &StressArgs, globals: &Globals) -> CliResult<ExitCode> {
     let preset = if a.quick { Preset::Quick } else { Preset::Full };
     let config = StressConfig::preset(preset, globals.seed());
     let threads = rayon::current_num_threads();
+    let kernels = kernels()?;
     let start = Instant::now();
     let rows = if a.json {
         run_stress(&config, |_| ControlFlow::Continue(()))?
     } else {
         outln!(
-            "rdlidar stress: {} preset, seed {}, {threads} threads",
+            "rdlidar stress: {} preset, seed {}, {threads} threads, kernels {kernels}",
             preset.name(),
             config.seed
         );
@@ -99,6 +103,7 @@ pub fn run(a: &StressArgs, globals: &Globals) -> CliResult<ExitCode> {
             preset,
             seed: config.seed,
             threads,
+            kernels,
             rows: &rows,
             passed: rows.len() - failed,
             failed,
@@ -120,4 +125,11 @@ pub fn run(a: &StressArgs, globals: &Globals) -> CliResult<ExitCode> {
         errln!("error: {failed} of {} stress rows failed", rows.len());
         Ok(ExitCode::FAILURE)
     }
+}
+
+/// The instruction set the operator's kernels run with on this machine.
+fn kernels() -> CliResult<&'static str> {
+    let g = Geometry::new(1, 1, 1)?;
+    let codes = Arc::new(Codes::random_binary(1, 1, 0)?);
+    Ok(RdOperator::<f32>::new(g, vec![1.0], codes)?.isa())
 }

@@ -44,7 +44,8 @@ use crate::lidar::Geometry;
 use crate::recon::Method;
 
 pub use conditioning::{
-    BLOCK, INVERSE_MAX_ITER, INVERSE_TOL, POWER_MAX_ITER, POWER_TOL, SIGMA_TOL, SIGMA_TOL_EPS,
+    BLOCK, INVERSE_MAX_ITER, INVERSE_TOL, NUMERICAL_ZERO, POWER_MAX_ITER, POWER_TOL, SIGMA_TOL,
+    SIGMA_TOL_EPS,
 };
 pub use precision::{ADJOINT_TOL_EPS, DOT_TOL_EPS, FORWARD_TOL_EPS};
 pub use solvers::{
@@ -333,11 +334,14 @@ impl StressRow {
     }
 }
 
-/// A number in three significant digits: plain between 0.01 and 1000, scientific otherwise.
+/// A number in four significant digits: an integer as such (below 10⁷), plain between 0.01 and
+/// 1000, scientific otherwise.
 pub fn sci(v: f64) -> String {
     let a = v.abs();
     if v == 0.0 || !v.is_finite() {
         format!("{v}")
+    } else if v.fract() == 0.0 && a < 1e7 {
+        format!("{v:.0}")
     } else if (0.01..1000.0).contains(&a) {
         let digits = if a >= 100.0 {
             1
@@ -358,15 +362,15 @@ pub fn sci(v: f64) -> String {
 pub fn table_header() -> [String; 2] {
     [
         format!(
-            "| {:<12} | {:<44} | {:<10} | {:<64} | {:<44} | {:<4} | {:>8} |",
+            "| {:<12} | {:<52} | {:<10} | {:<100} | {:<44} | {:<4} | {:>8} |",
             "group", "case", "precision", "measured", "tolerance", "pass", "time (s)"
         ),
         format!(
             "|{}|{}|{}|{}|{}|{}|{}:|",
             "-".repeat(14),
-            "-".repeat(46),
+            "-".repeat(54),
             "-".repeat(12),
-            "-".repeat(66),
+            "-".repeat(102),
             "-".repeat(46),
             "-".repeat(6),
             "-".repeat(9)
@@ -377,7 +381,7 @@ pub fn table_header() -> [String; 2] {
 /// One row of the Markdown table.
 pub fn table_line(row: &StressRow) -> String {
     format!(
-        "| {:<12} | {:<44} | {:<10} | {:<64} | {:<44} | {:<4} | {:>8.2} |",
+        "| {:<12} | {:<52} | {:<10} | {:<100} | {:<44} | {:<4} | {:>8.2} |",
         row.group.name(),
         row.case,
         row.precision,
