@@ -24,8 +24,9 @@ pub const FORWARD_TOL_EPS: f64 = 4.0;
 /// Tolerance of ‖A₃₂*y − A₆₄*y‖/‖A₆₄*y‖, in units of the `f32` epsilon. Each adjoint entry is a
 /// sum over K_p samples; the kernel adds at most 16 384 of them in `f32` buckets (one bucket per
 /// code byte) before it flushes the buckets to `f64`, so the gap does not grow with K (measured
-/// 1.1ε to 1.6ε from K = 10⁴ to 10⁷), whereas a plain `f32` sum drifts like ε·√(K/2) (the
-/// `naive_f32` value: 12ε at K = 10⁴, 390ε at 10⁷). The tolerance catches that drift at every K.
+/// 1.0ε to 1.8ε from K = 10⁴ to 10⁷), whereas a plain `f32` sum drifts like ε·√(K/2) (the
+/// `naive_f32` value: 3ε to 16ε at K = 10⁴, 140ε to 400ε at 10⁷). The tolerance catches that
+/// drift from K = 10⁵ on.
 pub const ADJOINT_TOL_EPS: f64 = 8.0;
 
 /// Tolerance of the dot-test gap, in units of the precision's epsilon (ε₃₂ ≈ 1.19e-7,
