@@ -33,5 +33,6 @@ mod reconstruct;
 mod scenes;
 mod solvers;
 mod sparse_solvers;
+mod stress;
 mod tight_frame;
 mod tv;

@@ -44,19 +44,48 @@ impl<T: Real> Pulse<T> {
 
     /// An i.i.d. Bernoulli{0, 1} pulse with P(1) = 1/2 from a ChaCha8 stream seeded with `seed`
     /// (one `bool` draw per sample; in the unlikely case of an all-zero draw, the stream continues
-    /// until a pulse with a 1 is drawn).
+    /// until a pulse with a 1 is drawn). The same draws as [`Pulse::bernoulli_duty`] with duty 1/2.
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] if `len` is zero.
     pub fn bernoulli(len: usize, seed: u64) -> Result<Self> {
+        Self::bernoulli_duty(len, 0.5, seed)
+    }
+
+    /// An i.i.d. Bernoulli{0, 1} pulse whose samples are 1 with probability `duty` (the duty
+    /// cycle: the expected fraction of the K_p samples during which light is sent), from a
+    /// ChaCha8 stream seeded with `seed`. One `bool` draw per sample; an all-zero draw is
+    /// discarded and the stream continues until a pulse with a 1 is drawn (for a tiny `duty`
+    /// and a short pulse this can take many draws).
+    ///
+    /// A low duty cycle (e.g. 0.05) is a harder acquisition than the default 1/2: each voxel's
+    /// column has about `duty`·K_p nonzero samples, so the measurements carry less energy.
+    ///
+    /// ```
+    /// use rdlidar::lidar::Pulse;
+    /// let p = Pulse::<f64>::bernoulli_duty(10_000, 0.05, 1).unwrap();
+    /// let ones = p.as_slice().iter().filter(|&&v| v == 1.0).count();
+    /// assert!((400..600).contains(&ones));
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if `len` is zero (`pulse_len`) or `duty` is not in (0, 1]
+    /// (`duty`).
+    pub fn bernoulli_duty(len: usize, duty: f64, seed: u64) -> Result<Self> {
         if len == 0 {
             return Err(Error::param("pulse_len", "must be at least 1"));
+        }
+        if !(duty > 0.0 && duty <= 1.0) {
+            return Err(Error::param(
+                "duty",
+                format!("the probability of a 1 must be in (0, 1], got {duty}"),
+            ));
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         loop {
             let p: Vec<T> = (0..len)
                 .map(|_| {
-                    if rng.random_bool(0.5) {
+                    if rng.random_bool(duty) {
                         T::one()
                     } else {
                         T::zero()
@@ -112,4 +141,47 @@ fn mean<T: Real>(p: &[T]) -> f64 {
 pub fn zero_mean<T: Real>(p: &[T]) -> Vec<T> {
     let m = mean(p);
     p.iter().map(|v| T::of_f64(v.as_f64() - m)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bernoulli_duty_draws_zeros_and_ones_at_the_asked_rate() {
+        let p = Pulse::<f64>::bernoulli_duty(40_000, 0.05, 11).unwrap();
+        assert!(p.as_slice().iter().all(|&v| v == 0.0 || v == 1.0));
+        // 2000 ones expected, standard deviation about 44.
+        let ones = p.as_slice().iter().filter(|&&v| v == 1.0).count();
+        assert!((1800..2200).contains(&ones), "{ones} ones");
+        // Reproducible, and the same draws in both precisions.
+        let again = Pulse::<f32>::bernoulli_duty(40_000, 0.05, 11).unwrap();
+        assert!(again
+            .as_slice()
+            .iter()
+            .zip(p.as_slice())
+            .all(|(&a, &b)| a as f64 == b));
+        // Duty 1 is a constant pulse; duty 1/2 is `bernoulli`.
+        let on = Pulse::<f32>::bernoulli_duty(50, 1.0, 3).unwrap();
+        assert!(on.as_slice().iter().all(|&v| v == 1.0));
+        assert_eq!(
+            Pulse::<f32>::bernoulli_duty(300, 0.5, 3).unwrap(),
+            Pulse::<f32>::bernoulli(300, 3).unwrap()
+        );
+        // A one-sample pulse at a low duty is redrawn until it is not all zero.
+        assert_eq!(
+            Pulse::<f64>::bernoulli_duty(1, 0.05, 5).unwrap().as_slice(),
+            &[1.0]
+        );
+    }
+
+    #[test]
+    fn bernoulli_duty_refuses_impossible_settings() {
+        for duty in [0.0, -0.1, 1.5, f64::NAN, f64::INFINITY] {
+            let e = Pulse::<f64>::bernoulli_duty(10, duty, 0).unwrap_err();
+            assert!(e.to_string().contains("duty"), "{e}");
+        }
+        let e = Pulse::<f64>::bernoulli_duty(0, 0.5, 0).unwrap_err();
+        assert!(e.to_string().contains("pulse_len"), "{e}");
+    }
 }

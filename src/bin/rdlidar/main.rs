@@ -15,6 +15,7 @@ mod layout;
 mod reconstruct;
 mod selfcheck;
 mod simulate;
+mod stress;
 
 use common::{errln, parse_threads, set_threads, CliResult, Failure, Globals, Precision};
 use experiment::{CompareArgs, Experiment, ExperimentArgs};
@@ -132,6 +133,8 @@ enum Command {
     Info(info::InfoArgs),
 
     Bench(bench::BenchArgs),
+
+    Stress(stress::StressArgs),
 }
 
 fn run(cli: Cli) -> CliResult<ExitCode> {
@@ -168,6 +171,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         Command::Reconstruct(a) => reconstruct::run(&a, &globals).map(done),
         Command::Info(a) => info::run(&a).map(done),
         Command::Bench(a) => bench::run(&a, &globals).map(done),
+        Command::Stress(a) => stress::run(&a, &globals),
     }
 }
 
