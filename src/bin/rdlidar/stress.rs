@@ -48,6 +48,36 @@ pub struct StressArgs {
 }
 
 /// The JSON form of `stress`.
+/// The memory of the largest precision check: both operators at the longest K, in f32 and f64,
+/// with their inputs, outputs and the forward's per-thread buffers.
+fn check_memory(config: &StressConfig) -> CliResult {
+    let g = config.precision_geometry;
+    let k = config.samples.iter().copied().max().unwrap_or(1);
+    let pulse_len = k.saturating_sub(g.ks - 1).max(1);
+    let threads = rayon::current_num_threads();
+    let bytes = |b: rdlidar::Result<usize>| b.map_or(u128::MAX, |b| b as u128);
+    let f32_op = bytes(RdOperator::<f32>::estimated_memory_bytes(
+        g,
+        pulse_len,
+        rdlidar::lidar::CodeAlphabet::Binary,
+        threads,
+    ));
+    let f64_op = bytes(RdOperator::<f64>::estimated_memory_bytes(
+        g,
+        pulse_len,
+        rdlidar::lidar::CodeAlphabet::Binary,
+        threads,
+    ));
+    rdlidar::limits::MemoryPlan::new()
+        .add("operators", f32_op.saturating_add(f64_op), 1)
+        .add("measurements and references", k as u128, 4 * 8)
+        .check(
+            &format!("stress at K up to {k}"),
+            "use --quick, or free memory",
+        )?;
+    Ok(())
+}
+
 #[derive(Serialize)]
 struct StressReport<'a> {
     preset: Preset,
@@ -69,6 +99,7 @@ pub fn run(a: &StressArgs, globals: &Globals) -> CliResult<ExitCode> {
     }
     let preset = if a.quick { Preset::Quick } else { Preset::Full };
     let config = StressConfig::preset(preset, globals.seed());
+    check_memory(&config)?;
     let threads = rayon::current_num_threads();
     let kernels = kernels()?;
     let start = Instant::now();
