@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 use crate::cli_support::{
-    assert_one_line_error, assert_usage_error, listing, rdlidar, s, stderr, TempDir,
+    assert_one_line_error, assert_usage_error, listing, npy_bytes, npy_dict, rdlidar, s, stderr,
+    TempDir,
 };
 
 /// A simulated 4×5×6 problem (K_p = 50, K = 55), the same with two ADCs, invalid files, and an
@@ -67,15 +68,7 @@ impl Fixture {
 
 /// A `.npy` file with a version 1.0 header and no data.
 fn write_header_only(path: &Path, descr: &str, shape: &str) {
-    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    std::fs::write(path, bytes).unwrap();
+    std::fs::write(path, npy_bytes(&npy_dict(descr, shape), &[])).unwrap();
 }
 
 fn run(args: &[String]) -> Output {

@@ -6,28 +6,40 @@ use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-use crate::cli_support::{assert_one_line_error, assert_usage_error, rdlidar, s, stderr, TempDir};
+use crate::cli_support::{
+    assert_one_line_error, assert_usage_error, npy_bytes, npy_dict, rdlidar, s, stderr, TempDir,
+};
 
 /// Writes a version 1.0 `.npy` file of float64 values with the given `descr` and shape.
 pub fn write_f64(path: &Path, descr: &str, shape: &str, values: &[f64]) {
-    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
     let big = descr.starts_with('>');
-    for v in values {
-        if big {
-            bytes.extend_from_slice(&v.to_be_bytes());
-        } else {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
+    let data: Vec<u8> = values
+        .iter()
+        .flat_map(|v| {
+            if big {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            }
+        })
+        .collect();
+    std::fs::write(path, npy_bytes(&npy_dict(descr, shape), &data)).unwrap();
 }
+
+/// `reconstruct` on the problem of [`problem`] with CGLS, without its outputs.
+const RECONSTRUCT: [&str; 11] = [
+    "reconstruct",
+    "--pulse",
+    "@s/pulse.npy",
+    "--codes",
+    "@s/codes.npy",
+    "--meas",
+    "@s/meas.npy",
+    "--depth-bins",
+    "4",
+    "--solver",
+    "cgls",
+];
 
 /// A simulated 4×4×4 problem with K_p = 20 in `dir/s`.
 fn problem(tag: &str) -> TempDir {
@@ -139,16 +151,7 @@ fn outputs_that_name_inputs_are_refused_before_any_work() {
         ),
         (
             [
-                &["reconstruct"][..],
-                &common,
-                &[
-                    "--meas",
-                    "@s/meas.npy",
-                    "--depth-bins",
-                    "4",
-                    "--solver",
-                    "cgls",
-                ],
+                &RECONSTRUCT[..],
                 &["--out-depth", "@s/meas.npy", "--out-scene", "@x.npy"],
             ]
             .concat(),
@@ -156,16 +159,7 @@ fn outputs_that_name_inputs_are_refused_before_any_work() {
         ),
         (
             [
-                &["reconstruct"][..],
-                &common,
-                &[
-                    "--meas",
-                    "@s/meas.npy",
-                    "--depth-bins",
-                    "4",
-                    "--solver",
-                    "cgls",
-                ],
+                &RECONSTRUCT[..],
                 &[
                     "--out-depth",
                     "@d.npy",
@@ -400,20 +394,9 @@ fn native_and_big_endian_headers_are_read() {
 fn an_empty_truth_is_reported_as_such() {
     let tmp = problem("empty-truth");
     write_f64(&tmp.path("empty.npy"), "<f8", "(4, 4, 4)", &[0.0; 64]);
-    let res = run_in(
-        &tmp,
+    let args = [
+        &RECONSTRUCT[..],
         &[
-            "reconstruct",
-            "--pulse",
-            "@s/pulse.npy",
-            "--codes",
-            "@s/codes.npy",
-            "--meas",
-            "@s/meas.npy",
-            "--depth-bins",
-            "4",
-            "--solver",
-            "cgls",
             "--out-depth",
             "@d.npy",
             "--out-scene",
@@ -421,7 +404,9 @@ fn an_empty_truth_is_reported_as_such() {
             "--truth",
             "@empty.npy",
         ],
-    );
+    ]
+    .concat();
+    let res = run_in(&tmp, &args);
     assert!(res.status.success(), "{}", stderr(&res));
     let out = String::from_utf8_lossy(&res.stdout);
     assert!(out.contains("the true scene has no lit pixel"), "{out}");

@@ -97,3 +97,23 @@ pub fn assert_usage_error(out: &Output, needles: &[&str]) {
         );
     }
 }
+
+/// The header dict numpy writes for `descr` and `shape` (C order).
+pub fn npy_dict(descr: &str, shape: &str) -> String {
+    format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}")
+}
+
+/// The bytes of a version 1.0 `.npy` file: the header `dict`, padded with spaces and a newline
+/// to a multiple of 64 bytes as numpy pads it, then `data`.
+pub fn npy_bytes(dict: &str, data: &[u8]) -> Vec<u8> {
+    let mut header = dict.to_string();
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    bytes.extend_from_slice(data);
+    bytes
+}

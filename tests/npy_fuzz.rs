@@ -17,25 +17,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rdlidar::io::{self, ShapeExpectation};
 
-use crate::cli_support::{rdlidar, s, TempDir};
-
-/// A version 1.0 file with `header` as its dict and `data` after it.
-fn npy(header: &str, data: &[u8]) -> Vec<u8> {
-    let mut h = header.to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
-        h.push(' ');
-    }
-    h.push('\n');
-    let mut v = b"\x93NUMPY\x01\x00".to_vec();
-    v.extend_from_slice(&(h.len() as u16).to_le_bytes());
-    v.extend_from_slice(h.as_bytes());
-    v.extend_from_slice(data);
-    v
-}
-
-fn dict(descr: &str, shape: &str) -> String {
-    format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}")
-}
+use crate::cli_support::{npy_bytes, npy_dict, rdlidar, s, TempDir};
 
 /// Valid files of every kind the readers take (K_p = 20, K_s = 5, K = 24, 3×4 pixels).
 fn seeds() -> Vec<Vec<u8>> {
@@ -55,14 +37,14 @@ fn seeds() -> Vec<Vec<u8>> {
             .collect()
     };
     vec![
-        npy(&dict("<f8", "(3, 4, 5)"), &f64s(60)),
-        npy(&dict("<f4", "(20,)"), &f32s(20)),
-        npy(&dict("|i1", "(3, 4, 24)"), &codes(288)),
-        npy(&dict("|i1", "(2, 3, 4, 24)"), &codes(576)),
-        npy(&dict("<f8", "(24,)"), &f64s(24)),
-        npy(&dict("<f8", "(2, 24)"), &f64s(48)),
-        npy(
-            &dict("<i4", "(3, 4)"),
+        npy_bytes(&npy_dict("<f8", "(3, 4, 5)"), &f64s(60)),
+        npy_bytes(&npy_dict("<f4", "(20,)"), &f32s(20)),
+        npy_bytes(&npy_dict("|i1", "(3, 4, 24)"), &codes(288)),
+        npy_bytes(&npy_dict("|i1", "(2, 3, 4, 24)"), &codes(576)),
+        npy_bytes(&npy_dict("<f8", "(24,)"), &f64s(24)),
+        npy_bytes(&npy_dict("<f8", "(2, 24)"), &f64s(48)),
+        npy_bytes(
+            &npy_dict("<i4", "(3, 4)"),
             &(0..12i32)
                 .flat_map(|i| (i % 6 - 1).to_le_bytes())
                 .collect::<Vec<_>>(),
@@ -75,11 +57,11 @@ fn hostile_header(rng: &mut ChaCha8Rng) -> String {
     let depth = rng.random_range(1..40);
     let pick = rng.random_range(0..10);
     match pick {
-        0 => dict(
+        0 => npy_dict(
             "<f8",
             &format!("{}3{}", "(".repeat(depth), ",)".repeat(depth)),
         ),
-        1 => dict(
+        1 => npy_dict(
             "<f8",
             &format!("{}{}", "[".repeat(depth), "]".repeat(depth)),
         ),
@@ -93,9 +75,9 @@ fn hostile_header(rng: &mut ChaCha8Rng) -> String {
             "[".repeat(depth),
             "]".repeat(depth)
         ),
-        4 => dict("<f8", "(99999999999999999999999999, 2)"),
-        5 => dict("<f8", "(4294967296, 4294967296)"),
-        6 => dict(
+        4 => npy_dict("<f8", "(99999999999999999999999999, 2)"),
+        5 => npy_dict("<f8", "(4294967296, 4294967296)"),
+        6 => npy_dict(
             [
                 "<i8", "|b1", "<c16", "|O", "<U4", "=f4", ">f8", "|u1", "<f2", "",
             ][depth % 10],
@@ -105,7 +87,7 @@ fn hostile_header(rng: &mut ChaCha8Rng) -> String {
             "{{'descr': '<f8\u{1b}[31m\u{0}', 'fortran_order': False, 'shape': ({depth},)}}"
         ),
         8 => "{".repeat(depth * 50),
-        _ => dict("<f8", &format!("({})", vec!["1"; depth * 10].join(", "))),
+        _ => npy_dict("<f8", &format!("({})", vec!["1"; depth * 10].join(", "))),
     }
 }
 
@@ -144,7 +126,7 @@ fn mutate(rng: &mut ChaCha8Rng, base: &[u8]) -> Vec<u8> {
         }
         _ => {
             let data = &base[128.min(base.len())..];
-            v = npy(&hostile_header(rng), data);
+            v = npy_bytes(&hostile_header(rng), data);
         }
     }
     v
@@ -255,7 +237,7 @@ fn nested_headers_are_refused_at_once() {
     for depth in [16, 24, 64, 1000] {
         let path = tmp.path(&format!("n{depth}.npy"));
         let shape = format!("{}3{}", "(".repeat(depth), ",)".repeat(depth));
-        std::fs::write(&path, npy(&dict("<f8", &shape), &[0; 24])).unwrap();
+        std::fs::write(&path, npy_bytes(&npy_dict("<f8", &shape), &[0; 24])).unwrap();
         let start = Instant::now();
         let e = io::read_header(&path).unwrap_err().to_string();
         assert!(start.elapsed() < Duration::from_secs(1));
