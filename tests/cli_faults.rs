@@ -60,7 +60,8 @@ fn problem(tag: &str) -> TempDir {
     tmp
 }
 
-fn run_in(tmp: &TempDir, args: &[&str]) -> std::process::Output {
+/// Runs the binary with `args`, `@rel` standing for `tmp/rel`, and the environment `env`.
+fn run_env(tmp: &TempDir, args: &[&str], env: &[(&str, &str)]) -> std::process::Output {
     let args: Vec<String> = args
         .iter()
         .map(|a| match a.strip_prefix('@') {
@@ -68,8 +69,15 @@ fn run_in(tmp: &TempDir, args: &[&str]) -> std::process::Output {
             None => a.to_string(),
         })
         .collect();
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    rdlidar(&args)
+    Command::new(env!("CARGO_BIN_EXE_rdlidar"))
+        .args(&args)
+        .envs(env.iter().copied())
+        .output()
+        .expect("the binary runs")
+}
+
+fn run_in(tmp: &TempDir, args: &[&str]) -> std::process::Output {
+    run_env(tmp, args, &[])
 }
 
 #[test]
@@ -287,6 +295,39 @@ fn requests_beyond_the_memory_are_refused_before_allocating() {
         .output()
         .unwrap();
     assert_one_line_error(&res, &["reading an array of shape", "bytes"]);
+    // Files that fit, but not the operator and the scenes built on them.
+    let common = ["--pulse", "@s/pulse.npy", "--codes", "@s/codes.npy"];
+    for args in [
+        [
+            &["forward"][..],
+            &common,
+            &["--scene", "@s/scene.npy", "--out", "@y.npy"],
+        ]
+        .concat(),
+        [
+            &["adjoint"][..],
+            &common,
+            &[
+                "--meas",
+                "@s/meas.npy",
+                "--depth-bins",
+                "4",
+                "--out",
+                "@y.npy",
+            ],
+        ]
+        .concat(),
+        [&["dottest"][..], &common, &["--depth-bins", "4"]].concat(),
+        [
+            &RECONSTRUCT[..],
+            &["--out-depth", "@y.npy", "--out-scene", "@x.npy"],
+        ]
+        .concat(),
+    ] {
+        let res = run_env(&tmp, &args, &[("RDLIDAR_MEMORY_LIMIT", "20K")]);
+        assert_one_line_error(&res, &[args[0], "codes and operator", "--codes", "bytes"]);
+        assert!(!tmp.path("y.npy").exists() && !tmp.path("x.npy").exists());
+    }
 }
 
 #[test]

@@ -11,7 +11,7 @@ use crate::common::{
     check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
     Globals, MeasurementFiles,
 };
-use crate::layout::{architecture_of, expectation, read_measurements, Layout};
+use crate::layout::{architecture_of, check_memory, expectation, read_measurements, Layout};
 
 /// Apply the adjoint (backprojection): x̃ = A* y.
 ///
@@ -54,6 +54,7 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
     let expect = expectation(p.len(), a.files.depth_bins)?;
     let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
     let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
+    check_memory::<T>("adjoint", &a.files.codes, &expect, 2)?;
     let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins)?;
     let g = layout.geometry;
     let pulse = if a.debiased {

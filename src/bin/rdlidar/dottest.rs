@@ -8,7 +8,7 @@ use rdlidar::lidar::{zero_mean, TileSize};
 use rdlidar::operator::DotTest;
 
 use crate::common::{errln, outln, parse_depth_bins, parse_tile, CliResult, Globals};
-use crate::layout::{architecture_of, expectation, Layout};
+use crate::layout::{architecture_of, check_memory, expectation, Layout};
 
 /// Check the adjoint identity <Ax, y> = <x, A*y> of the operator built from files.
 ///
@@ -43,6 +43,8 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
     let p = io::read_pulse::<f64>(&a.pulse)?;
     let expect = expectation(p.len(), a.depth_bins)?;
     let (arch, _) = architecture_of(&a.codes, a.tiles)?;
+    // Operators in both precisions, each with its test vectors.
+    check_memory::<f64>("dottest", &a.codes, &expect, 6)?;
     let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins)?;
     let p64 = p.as_slice().to_vec();
     let p32: Vec<f32> = p.as_slice().iter().map(|&v| v as f32).collect();

@@ -11,7 +11,7 @@ use crate::common::{
     check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
     Globals,
 };
-use crate::layout::{architecture_of, Layout};
+use crate::layout::{architecture_of, check_memory, Layout};
 
 /// Apply the measurement operator: y = A x.
 ///
@@ -67,6 +67,7 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
         grid: Some((g.m, g.n)),
     };
     let (arch, _) = architecture_of(&a.codes, a.tiles)?;
+    check_memory::<T>("forward", &a.codes, &expect, 2)?;
     let layout = Layout::read(&a.codes, arch, &expect, g.ks)?;
     let op = layout.operator(p.into_inner())?;
     let mut y = vec![T::zero(); op.nrows()];

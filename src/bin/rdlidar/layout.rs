@@ -207,3 +207,53 @@ pub fn expectation(pulse_len: usize, depth_bins: usize) -> CliResult<ShapeExpect
         grid: None,
     })
 }
+
+/// Checks, from the codes file's header and before any data are read, that `command` fits in
+/// memory in `T`: the codes with the operator's per-thread buffers (one per code set), `copies`
+/// scenes (inputs, outputs and a solver's working copies) and the measurements. A file the
+/// readers will refuse is left to them.
+pub fn check_memory<T: Real>(
+    command: &str,
+    codes: &Path,
+    expect: &ShapeExpectation,
+    copies: u128,
+) -> CliResult {
+    let h = io::read_header(codes)?;
+    let (sets, m, n) = match h.shape.as_slice() {
+        [g, m, n, _] => (*g, *m, *n),
+        [m, n, _] => (1, *m, *n),
+        _ => return Ok(()),
+    };
+    let Ok(g) = Geometry::new(m, n, expect.depth_bins) else {
+        return Ok(());
+    };
+    let operator = RdOperator::<T>::estimated_memory_bytes(
+        g,
+        expect.pulse_len,
+        CodeAlphabet::Ternary,
+        rayon::current_num_threads(),
+    )
+    .map_or(u128::MAX, |b| b as u128);
+    let size = std::mem::size_of::<T>();
+    rdlidar::limits::MemoryPlan::new()
+        .add(
+            "codes and operator",
+            operator.saturating_mul(sets as u128),
+            1,
+        )
+        .add("scenes", copies.saturating_mul(g.voxels() as u128), size)
+        .add(
+            "measurements",
+            (sets as u128).saturating_mul(expect.samples() as u128) * 2,
+            size,
+        )
+        .check(
+            &format!(
+                "{command} on {g} with K_p = {} (--codes {})",
+                expect.pulse_len,
+                codes.display()
+            ),
+            "use smaller inputs or free memory",
+        )?;
+    Ok(())
+}

@@ -13,7 +13,7 @@ use crate::common::{
     check_out_file, npy_dtype, outln, parse_positive, with_precision, CliResult, Globals,
     MeasurementFiles,
 };
-use crate::layout::expectation;
+use crate::layout::{check_memory, expectation};
 
 /// Reconstruct the scene from measurements: a depth map and a one-return-per-pixel scene.
 ///
@@ -104,6 +104,8 @@ fn reconstruct_files<T: Real + WritableElement>(
         )
         .into());
     }
+    // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
+    check_memory::<T>("reconstruct", &a.files.codes, &expect, 10)?;
     let ((m, n), codes) = io::read_codes(&a.files.codes, &expect)?;
     let g = Geometry::new(m, n, a.files.depth_bins).map_err(|e| format!("--depth-bins: {e}"))?;
     let truth = match &a.truth {
