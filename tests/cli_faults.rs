@@ -26,6 +26,14 @@ pub fn write_f64(path: &Path, descr: &str, shape: &str, values: &[f64]) {
     std::fs::write(path, npy_bytes(&npy_dict(descr, shape), &data)).unwrap();
 }
 
+/// A float64 pulse file of K_p = 20 samples, `value` at every third one and 0 elsewhere.
+fn pulse_file(tmp: &TempDir, name: &str, value: f64) {
+    let pulse: Vec<f64> = (0..20)
+        .map(|i| if i % 3 == 0 { value } else { 0.0 })
+        .collect();
+    write_f64(&tmp.path(name), "<f8", "(20,)", &pulse);
+}
+
 /// `reconstruct` on the problem of [`problem`] with CGLS, without its outputs.
 const RECONSTRUCT: [&str; 11] = [
     "reconstruct",
@@ -355,10 +363,7 @@ fn overflow_and_underflow_are_errors_naming_the_file() {
     assert_one_line_error(&res, &["huge.npy", "overflow float64", "--scene"]);
     assert!(!tmp.path("y.npy").exists());
     // A float64 pulse of 1e-300 read in f32 underflows to zero.
-    let pulse: Vec<f64> = (0..20)
-        .map(|i| if i % 3 == 0 { 1e-300 } else { 0.0 })
-        .collect();
-    write_f64(&tmp.path("tiny.npy"), "<f8", "(20,)", &pulse);
+    pulse_file(&tmp, "tiny.npy", 1e-300);
     let res = run_in(
         &tmp,
         &[
@@ -383,10 +388,7 @@ fn overflow_and_underflow_are_errors_naming_the_file() {
     );
     assert_one_line_error(&res, &["tiny.npy", "underflows f32", "--precision f64"]);
     // A pulse too large for the f32 half of the dot test.
-    let pulse: Vec<f64> = (0..20)
-        .map(|i| if i % 3 == 0 { 1e300 } else { 0.0 })
-        .collect();
-    write_f64(&tmp.path("big.npy"), "<f8", "(20,)", &pulse);
+    pulse_file(&tmp, "big.npy", 1e300);
     let res = run_in(
         &tmp,
         &[
