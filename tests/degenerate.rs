@@ -84,6 +84,7 @@ fn check_all<T: Real>() {
         progress: false,
         seed: 0,
         power_iterations: Some(20),
+        ..ReconstructOptions::default()
     };
     let mut failures = Vec::new();
     for case in problems::<T>() {

@@ -221,7 +221,13 @@ fn simulate_then_reconstruct_recovers_the_depth_map() {
 
     // Debiased backprojection: every detection at its true depth, no false one; it may miss
     // weak pixels under its robust threshold.
-    let text = reconstruct(&sim, &out, "bp", "backprojection-debiased", &[]);
+    let text = reconstruct(
+        &sim,
+        &out,
+        "bp",
+        "backprojection-debiased",
+        &["--threshold", "robust"],
+    );
     let (exact, rmse, missed, false_, rel) = metrics(&text);
     assert_eq!((rmse, false_), (0.0, 0), "{text}");
     assert!(exact >= 70.0 && missed <= lit / 4, "{text}");

@@ -6,6 +6,7 @@ mod algebra;
 mod amp;
 mod architectures;
 mod argmin_solvers;
+mod auto;
 mod cli;
 mod cli_errors;
 mod cli_experiments;

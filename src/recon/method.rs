@@ -14,6 +14,8 @@ use crate::solver::{
 };
 
 use super::peaks::backproject;
+use super::pursuit::{support_pursuit, PURSUIT_ROUNDS};
+use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
 
 /// λ of [`Method::Fista`] as a fraction of ‖Aᵀy‖∞.
 const FISTA_LAMBDA_FRACTION: f64 = 0.05;
@@ -29,25 +31,34 @@ const COSAMP_INNER_ITER: usize = 10;
 /// A reconstruction method, named on the command line as [`Method::name`] gives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Method {
-    /// The paper's method: plain backprojection Aᵀy normalized by ‖p‖², per-pixel peak, robust
-    /// threshold ([`Threshold::Auto`](crate::solver::Threshold::Auto) with k = 3).
+    /// The paper's method: plain backprojection Aᵀy normalized by ‖p‖², per-pixel peak,
+    /// threshold by [`ReconstructOptions::threshold`] (the paper's rule by default).
     Backprojection,
     /// Backprojection with the zero-mean pulse, normalized by Σ(p − mean p)·p (≈ K_p/4 for a 0/1
-    /// pulse) so that peaks estimate amplitudes; per-pixel peak, robust threshold.
+    /// pulse) so that peaks estimate amplitudes; per-pixel peak, threshold as
+    /// [`Method::Backprojection`].
     BackprojectionDebiased,
     /// Least squares by CGLS (at most 300 iterations or a relative normal-equation residual of
-    /// 1e-8), then per-pixel peaks.
+    /// 1e-8), then its returns.
     Cgls,
     /// Nonnegative lasso by FISTA (λ = 0.05·‖Aᵀy‖∞, power-iteration step, function restart, at
-    /// most 200 iterations), then per-pixel peaks.
+    /// most 200 iterations), debiased by least squares on its support
+    /// ([`ReconstructOptions::debias`]), then its returns.
     Fista,
     /// Iterative hard thresholding (at most 100 iterations) with the sparsity estimated from the
-    /// debiased backprojection, then per-pixel peaks.
+    /// debiased backprojection, then its returns.
     Iht,
     /// CoSaMP (at most 100 iterations; least squares on the merged support by at most 10
     /// warm-started CGLS iterations on the support operator) with the sparsity estimated from the
-    /// debiased backprojection, then per-pixel peaks.
+    /// debiased backprojection, then its returns.
     Cosamp,
+    /// Support pursuit: greedy rounds that add each pixel's best voxel where the residual's
+    /// correlation stands out of the cross-talk, solve least squares on the support and drop
+    /// insignificant amplitudes, until the data are explained (at most 12 rounds, a support of
+    /// at most K/3 voxels). No per-pixel model: pixels may keep several returns. Exact and cheap
+    /// wherever the measurements comfortably outnumber the returns; [`Method::Auto`] runs it
+    /// first.
+    SupportLs,
     /// Message passing with the one-reflector-per-pixel prior alone
     /// ([`ReflectorAmpParams::default`](crate::solver::ReflectorAmpParams)): the most probable
     /// scene, without the least-squares refinement of [`Method::ModelBased`].
@@ -63,13 +74,14 @@ pub enum Method {
 
 impl Method {
     /// Every method, in the order of the command-line help.
-    pub const ALL: [Method; 10] = [
+    pub const ALL: [Method; 11] = [
         Method::Backprojection,
         Method::BackprojectionDebiased,
         Method::Cgls,
         Method::Fista,
         Method::Iht,
         Method::Cosamp,
+        Method::SupportLs,
         Method::Amp,
         Method::ModelBased,
         Method::Tv,
@@ -77,13 +89,14 @@ impl Method {
     ];
 
     /// The command-line names of [`Method::ALL`].
-    pub const NAMES: [&'static str; 10] = [
+    pub const NAMES: [&'static str; 11] = [
         "backprojection",
         "backprojection-debiased",
         "cgls",
         "fista",
         "iht",
         "cosamp",
+        "support-ls",
         "amp",
         "model-based",
         "tv",
@@ -130,8 +143,63 @@ impl FromStr for Method {
     }
 }
 
+/// How the backprojections decide which per-pixel peaks are returns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum PeakThreshold {
+    /// The paper's rule (default): a pixel's peak counts when it reaches 0.4 times the 99th
+    /// percentile of all per-pixel peaks ([`PAPER_FRACTION`](super::PAPER_FRACTION) of the
+    /// [`PAPER_QUANTILE`](super::PAPER_QUANTILE)): a level relative to the strong returns, which
+    /// reproduces the quality of the paper's Fig. 2 on scenes with many lit pixels. It assumes
+    /// the scene has returns: on an empty scene it keeps the strongest cross-talk.
+    #[default]
+    Paper,
+    /// Median + 3σ of all backprojected values (σ = 1.4826·MAD): a level relative to the
+    /// cross-talk and noise floor. It keeps fewer false returns on noisy or sparsely lit scenes
+    /// and misses more weak ones.
+    Robust,
+}
+
+impl PeakThreshold {
+    /// The command-line names, in the order of [`PeakThreshold::ALL`].
+    pub const NAMES: [&'static str; 2] = ["paper", "robust"];
+    /// Every rule.
+    pub const ALL: [PeakThreshold; 2] = [PeakThreshold::Paper, PeakThreshold::Robust];
+
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            PeakThreshold::Paper => "paper",
+            PeakThreshold::Robust => "robust",
+        }
+    }
+}
+
+impl FromStr for PeakThreshold {
+    type Err = Error;
+
+    /// Parses `paper` or `robust`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`threshold`) listing the valid names.
+    fn from_str(s: &str) -> Result<Self> {
+        PeakThreshold::NAMES
+            .iter()
+            .position(|&n| n == s)
+            .map(|i| PeakThreshold::ALL[i])
+            .ok_or_else(|| {
+                Error::param(
+                    "threshold",
+                    format!(
+                        "unknown threshold rule {s:?}; expected one of {}",
+                        PeakThreshold::NAMES.join(", ")
+                    ),
+                )
+            })
+    }
+}
+
 /// Settings of [`reconstruct`](super::reconstruct) shared by every method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ReconstructOptions {
     /// Overrides the method's iteration limit (ignored by the backprojections).
     pub max_iter: Option<usize>,
@@ -145,6 +213,26 @@ pub struct ReconstructOptions {
     /// underestimate ‖A‖² a little (about 2% after 30 iterations at 100×100×40), so the step's
     /// safety margin grows from 1.01 to 1.05 when this is set.
     pub power_iterations: Option<usize>,
+    /// The threshold rule of [`Method::Backprojection`] and [`Method::BackprojectionDebiased`]
+    /// (default [`PeakThreshold::Paper`]).
+    pub threshold: PeakThreshold,
+    /// Debias [`Method::Fista`]: least squares on the support of the lasso solution removes the
+    /// shrinkage of the amplitudes (default `true`; skipped when the support has more than half
+    /// as many voxels as there are measurements).
+    pub debias: bool,
+}
+
+impl Default for ReconstructOptions {
+    fn default() -> Self {
+        ReconstructOptions {
+            max_iter: None,
+            progress: false,
+            seed: 0,
+            power_iterations: None,
+            threshold: PeakThreshold::Paper,
+            debias: true,
+        }
+    }
 }
 
 #[cfg(feature = "progress")]
@@ -194,7 +282,7 @@ pub(super) fn model_params(options: &ReconstructOptions) -> ModelBasedParams {
 
 /// Runs one concrete method (not [`Method::Auto`]); returns the estimate and the solver's report.
 /// The backprojections' estimates have one return per pixel at most; the iterative ones still
-/// need [`pixel_peaks`].
+/// need [`returns`](super::peaks::returns).
 pub(super) fn run<T: Real>(
     op: &RdOperator<T>,
     y: &[T],
@@ -206,7 +294,8 @@ pub(super) fn run<T: Real>(
     let mut x = vec![T::zero(); n];
     let report = match method {
         Method::Backprojection | Method::BackprojectionDebiased => {
-            let bp = backproject(op, y, method == Method::BackprojectionDebiased)?;
+            let debiased = method == Method::BackprojectionDebiased;
+            let bp = backproject(op, y, debiased, options.threshold)?;
             return Ok((bp.x, None));
         }
         Method::Cgls => {
@@ -256,8 +345,13 @@ pub(super) fn run<T: Real>(
                 ),
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = fista(op, y, &mut x, &params, &mut progress)?;
+            let mut r = fista(op, y, &mut x, &params, &mut progress)?;
             progress.finish();
+            if options.debias {
+                if let Some(refit) = refit_support(op, y, &mut x, REFIT_MAX_ITER, REFIT_ROUNDS)? {
+                    r.absorb_applies(&refit);
+                }
+            }
             r
         }
         Method::Iht => {
@@ -303,6 +397,12 @@ pub(super) fn run<T: Real>(
             progress.finish();
             r
         }
+        Method::SupportLs => {
+            let rounds = options.max_iter.unwrap_or(PURSUIT_ROUNDS);
+            let p = support_pursuit(op, y, rounds)?;
+            x = p.x;
+            p.report
+        }
         Method::Amp => {
             let d = ReflectorAmpParams::default();
             let params = ReflectorAmpParams {
@@ -342,7 +442,7 @@ pub(super) fn run<T: Real>(
 /// return per pixel at most, and K/3 keeps CoSaMP's least squares on up to 3s columns
 /// overdetermined.
 fn estimate_sparsity<T: Real>(op: &RdOperator<T>, y: &[T]) -> Result<usize> {
-    let bp = backproject(op, y, true)?;
+    let bp = backproject(op, y, true, PeakThreshold::Robust)?;
     let found = bp.peaks.iter().filter(|&&p| p != NO_RETURN).count();
     let cap = (op.nrows() / 3).min(op.geometry().pixels()).max(1);
     Ok((2 * found).clamp(1, cap))

@@ -58,6 +58,25 @@ pub struct Metrics {
     /// estimate always scores 0). From depth maps, the cubes are the single-return scenes they
     /// describe.
     pub relative_error: f64,
+    /// Returns (nonzero voxels) of the truth: several per pixel in semi-transparent scenes.
+    pub true_returns: usize,
+    /// Returns of the estimate at the voxel of a true return.
+    pub returns_exact: usize,
+    /// True returns with no return of the estimate at their voxel.
+    pub returns_missed: usize,
+    /// Returns of the estimate at a voxel that is empty in the truth.
+    pub returns_false: usize,
+    /// ‖x_E − x̂_E‖ / ‖x_E‖ over the returns E found at the exact voxel (0 when there are none):
+    /// the amplitude error where the support is right.
+    pub amplitude_error: f64,
+}
+
+impl Metrics {
+    /// Whether the truth or the estimate has a pixel with more than one return.
+    pub fn multi_return(&self) -> bool {
+        self.true_returns != self.lit
+            || self.returns_exact + self.returns_false != self.detected + self.false_detections
+    }
 }
 
 impl std::fmt::Display for Metrics {
@@ -88,7 +107,21 @@ impl std::fmt::Display for Metrics {
             100.0 * self.false_fraction_all,
             100.0 * self.false_fraction_empty,
             self.relative_error
-        )
+        )?;
+        if self.multi_return() {
+            write!(
+                f,
+                "; returns: {} of {} at the exact voxel ({:.1}%), {} missed, {} false, \
+                 amplitude error {:.4}",
+                self.returns_exact,
+                self.true_returns,
+                100.0 * ratio(self.returns_exact, self.true_returns, 1.0),
+                self.returns_missed,
+                self.returns_false,
+                self.amplitude_error
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -157,7 +190,47 @@ fn depth_metrics(truth: &Array2<i32>, estimate: &Array2<i32>, tau_s: f64) -> Res
         false_fraction_all: ratio(false_detections, pixels, 0.0),
         false_fraction_empty: ratio(false_detections, empty, 0.0),
         relative_error: 0.0,
+        true_returns: 0,
+        returns_exact: 0,
+        returns_missed: 0,
+        returns_false: 0,
+        amplitude_error: 0.0,
     })
+}
+
+/// The return counts and the amplitude error from (truth, estimate) value pairs, one per voxel.
+fn return_metrics(m: &mut Metrics, pairs: impl Iterator<Item = (f64, f64)>) -> Result<()> {
+    let (mut truth_sq, mut diff_sq, mut scale) = (0.0f64, 0.0f64, 0.0f64);
+    let mut found: Vec<(f64, f64)> = Vec::new();
+    for (x, e) in pairs {
+        match (x != 0.0, e != 0.0) {
+            (true, true) => {
+                m.true_returns += 1;
+                m.returns_exact += 1;
+                scale = scale.max(x.abs()).max(e.abs());
+                found.push((x, e));
+            }
+            (true, false) => {
+                m.true_returns += 1;
+                m.returns_missed += 1;
+            }
+            (false, true) => m.returns_false += 1,
+            (false, false) => {}
+        }
+    }
+    if scale > 0.0 {
+        for (x, e) in found {
+            let (x, e) = (x / scale, e / scale);
+            diff_sq += (x - e) * (x - e);
+            truth_sq += x * x;
+        }
+    }
+    m.amplitude_error = if truth_sq > 0.0 {
+        relative(diff_sq, truth_sq, "the returns found")?
+    } else {
+        0.0
+    };
+    Ok(())
 }
 
 /// `‖diff‖ / ‖truth‖`, or `‖diff‖` for a zero truth, from squared norms.
@@ -243,6 +316,14 @@ pub fn compare<T: Real>(truth: &Scene<T>, estimate: &Scene<T>, tau_s: f64) -> Re
     let relative_error = relative_error(truth, estimate)?;
     let mut m = depth_metrics(&truth.depth_map().depth, &estimate.depth_map().depth, tau_s)?;
     m.relative_error = relative_error;
+    return_metrics(
+        &mut m,
+        truth
+            .as_slice()
+            .iter()
+            .zip(estimate.as_slice())
+            .map(|(x, e)| (x.as_f64(), e.as_f64())),
+    )?;
     Ok(m)
 }
 
@@ -312,5 +393,24 @@ pub fn compare_depth<T: Real>(
         };
     }
     m.relative_error = relative(diff_sq, truth_sq, "depth maps")?;
+    // Each lit pixel is one return, at its depth.
+    let value = |d: i32, a: f64| if d == NO_RETURN { 0.0 } else { a };
+    let mut pairs = Vec::new();
+    for (((&d, &e), &x), &xe) in truth
+        .depth
+        .iter()
+        .zip(estimate.depth.iter())
+        .zip(truth.amplitude.iter())
+        .zip(estimate.amplitude.iter())
+    {
+        let (x, xe) = (value(d, x.as_f64()), value(e, xe.as_f64()));
+        if d == e {
+            pairs.push((x, xe));
+        } else {
+            pairs.push((x, 0.0));
+            pairs.push((0.0, xe));
+        }
+    }
+    return_metrics(&mut m, pairs.into_iter())?;
     Ok(m)
 }

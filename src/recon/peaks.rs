@@ -1,24 +1,48 @@
-//! From a voxel estimate to one return per pixel, and the lidar backprojection with its
-//! normalization and robust threshold.
+//! From a voxel estimate to the returns it reports, and the lidar backprojection with its
+//! normalization and threshold rules.
 
 use crate::error::{Error, Result};
 use crate::lidar::{Geometry, RdOperator};
 use crate::real::Real;
-use crate::solver::{backprojection, select_peaks, Backprojection, Threshold};
+use crate::solver::{backprojection, Backprojection, Threshold};
 
-/// How many robust standard deviations above the median a per-pixel peak must be to count as a
-/// return ([`Threshold::Auto`]).
+use super::method::PeakThreshold;
+
+/// How many robust standard deviations above the median a value must be to count as a return
+/// ([`Threshold::Auto`]).
 const AUTO_K: f64 = 3.0;
 
-/// Peaks of an iterative estimate below this fraction of the strongest peak are dropped: they are
-/// the numerical residue of empty pixels, not returns.
+/// Returns of an iterative estimate below this fraction of the strongest one are dropped: they are
+/// the numerical residue of empty voxels, not returns.
 const RELATIVE_FLOOR: f64 = 0.05;
 
-/// The (plain or debiased) backprojection with the lidar normalization and the robust threshold.
+/// The paper's rule ([`PeakThreshold::Paper`]): a pixel's peak counts when it reaches
+/// [`PAPER_FRACTION`] of the [`PAPER_QUANTILE`] of all per-pixel peaks.
+pub const PAPER_QUANTILE: f64 = 0.99;
+
+/// See [`PAPER_QUANTILE`].
+pub const PAPER_FRACTION: f64 = 0.4;
+
+impl PeakThreshold {
+    /// The rule as a [`Threshold`] of the backprojection.
+    pub fn rule(self) -> Threshold {
+        match self {
+            PeakThreshold::Paper => Threshold::PeakQuantile {
+                quantile: PAPER_QUANTILE,
+                fraction: PAPER_FRACTION,
+            },
+            PeakThreshold::Robust => Threshold::Auto { k: AUTO_K },
+        }
+    }
+}
+
+/// The (plain or debiased) backprojection with the lidar normalization and the given threshold
+/// rule.
 pub(super) fn backproject<T: Real>(
     op: &RdOperator<T>,
     y: &[T],
     debiased: bool,
+    threshold: PeakThreshold,
 ) -> Result<crate::solver::BackprojectionResult<T>> {
     let p = op.pulse();
     let (filter, normalization) = if debiased {
@@ -44,7 +68,7 @@ pub(super) fn backproject<T: Real>(
     let params = Backprojection {
         column_len: op.geometry().ks,
         normalization,
-        threshold: Threshold::Auto { k: AUTO_K },
+        threshold: threshold.rule(),
     };
     match &filter {
         Some(z) => backprojection(z, y, &params),
@@ -52,10 +76,25 @@ pub(super) fn backproject<T: Real>(
     }
 }
 
-/// One return per pixel from a voxel estimate: each pixel's largest positive entry, kept above the
-/// robust threshold median + [`AUTO_K`]·σ of all entries ([`select_peaks`]), then peaks below
-/// [`RELATIVE_FLOOR`] of the strongest dropped.
-pub(super) fn pixel_peaks<T: Real>(x: &[T], g: Geometry) -> Vec<T> {
-    let auto = select_peaks(x, g.ks, Threshold::Auto { k: AUTO_K });
-    select_peaks(&auto.x, g.ks, Threshold::RelativeToMax(RELATIVE_FLOOR)).x
+/// The returns an iterative estimate reports: every positive voxel above the robust threshold
+/// median + [`AUTO_K`]·σ of all entries and at least [`RELATIVE_FLOOR`] of the strongest one;
+/// the others are zeroed. A pixel may keep several returns (semi-transparent scenes); an estimate
+/// with one nonzero per pixel keeps at most one.
+pub(super) fn returns<T: Real>(x: &[T], g: Geometry) -> Vec<T> {
+    debug_assert_eq!(x.len(), g.voxels());
+    let mut all: Vec<f64> = x.iter().map(|v| v.as_f64()).collect();
+    let med = crate::linalg::median(&mut all);
+    let robust = med + AUTO_K * crate::linalg::robust_sigma(&mut all, med);
+    let strongest = x.iter().map(|v| v.as_f64()).fold(0.0, f64::max);
+    let floor = robust.max(RELATIVE_FLOOR * strongest);
+    x.iter()
+        .map(|&v| {
+            let f = v.as_f64();
+            if f > 0.0 && f >= floor {
+                v
+            } else {
+                T::zero()
+            }
+        })
+        .collect()
 }

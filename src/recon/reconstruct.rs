@@ -11,13 +11,13 @@ use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
 use crate::lidar::{DepthMap, RdOperator, Regime, Scene, NO_RETURN};
-use crate::linalg::norm2;
 use crate::operator::LinearOperator;
 use crate::real::Real;
-use crate::solver::{residual_norm_sq, tv_depth, Report, Termination, TvDepthParams};
+use crate::solver::Report;
 
-use super::method::{model_params, progress_bar, run, Method, ReconstructOptions};
-use super::peaks::pixel_peaks;
+use super::auto::{auto, Stage};
+use super::method::{run, Method, ReconstructOptions};
+use super::peaks::returns;
 
 /// Fraction of the lit pixels of a depth map that must have a lit 4-neighbour within
 /// [`SMOOTH_BINS`] of their depth for the map to count as piecewise smooth
@@ -27,26 +27,25 @@ pub const SMOOTH_FRACTION: f64 = 0.6;
 /// Depth difference, in bins, up to which two neighbouring returns belong to one surface.
 pub const SMOOTH_BINS: i32 = 1;
 
-/// [`Method::Auto`] keeps the TV refinement only if its residual ‖Ax − y‖ is at most this factor
-/// times the model-based one (plus 10⁻⁶‖y‖): TV must not buy smoothness with a worse data fit.
-pub const TV_RESIDUAL_MARGIN: f64 = 1.05;
-
 /// What [`reconstruct`] returns.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reconstruction<T> {
-    /// The estimate, at most one nonzero voxel per pixel.
+    /// The estimate: every return the method found (one per pixel at most for the backprojections
+    /// and the one-reflector solvers; the generic solvers may keep several).
     pub scene: Scene<T>,
     /// Its depth map ([`Scene::depth_map`]): depth bin and amplitude per pixel, [`NO_RETURN`]
     /// where there is none.
     pub depth: DepthMap<T>,
-    /// The method that produced the estimate: the one asked for, or what [`Method::Auto`] chose
-    /// ([`Method::Tv`] when it refined a model-based fit).
+    /// The method that produced the estimate: the one asked for, or the stage [`Method::Auto`]
+    /// kept.
     pub method_used: Method,
     /// The regime of the pulse length (eq. 8–9).
     pub regime: Regime,
-    /// The iterative solver's report (`None` for the backprojections). For [`Method::Auto`]
-    /// refined by TV, the model-based and TV reports are summed (iterations, applies, elapsed).
+    /// The iterative solver's report (`None` for the backprojections). For [`Method::Auto`],
+    /// the reports of every stage it ran are summed (iterations, applies, elapsed).
     pub report: Option<Report>,
+    /// What [`Method::Auto`] tried, in order, what it kept and why (empty for other methods).
+    pub stages: Vec<Stage>,
     /// Wall-clock time of the whole reconstruction, peak extraction included.
     pub elapsed: Duration,
 }
@@ -54,25 +53,29 @@ pub struct Reconstruction<T> {
 /// Reconstructs a scene from the measurements `y = A x` of the lidar operator `op`.
 ///
 /// Each [`Method`] runs with lidar defaults (see its documentation). The iterative solvers'
-/// estimates are reduced to one return per pixel: each pixel's largest positive entry, kept if it
-/// is above median + 3σ of all entries (σ = 1.4826·MAD) and at least 5% of the strongest peak
-/// (for the model-based and TV solvers, which already give one return per pixel, this only drops
-/// returns too weak to be real).
+/// estimates are reduced to the returns they found: every positive voxel above median + 3σ of
+/// all entries (σ = 1.4826·MAD) and at least 5% of the strongest one. The generic solvers may
+/// keep several returns per pixel; the model-based and TV solvers give one per pixel themselves,
+/// and for them this only drops returns too weak to be real. The depth map keeps each pixel's
+/// strongest return.
 ///
-/// **The [`Method::Auto`] rule.** From the regime of K_p ([`Geometry::regime`](crate::lidar::Geometry::regime)):
+/// **The [`Method::Auto`] rule** escalates from the cheapest method and stops at the first whose
+/// estimate explains the data (‖y − Ax‖ ≤ [`explained_tolerance`](super::explained_tolerance)
+/// · ‖y‖, or the model-based solver's own convergence to its tolerance):
 ///
-/// * redundant (K > M·N·K_s): [`Method::BackprojectionDebiased`] — the operator is close to a
-///   frame and one zero-mean adjoint approximately inverts it;
-/// * critical (K = M·N·K_s): [`Method::Cgls`] — A is square and least squares suffices;
-/// * compressive: [`Method::ModelBased`]; then, unless its fit already explains the data (its
-///   relative residual reached the solver's tolerance, as when it recovers a noise-free scene
-///   exactly), [`Method::Tv`] runs from scratch, starting with its neighbourhood prior, which
-///   exploits piecewise-smooth depth maps. Its scene is kept if it fits the data about as well
-///   ([`TV_RESIDUAL_MARGIN`]); otherwise the model-based scene is returned (and the report, which
-///   then still includes the TV run, says `tv-depth` while `method_used` says model-based).
-///   [`is_piecewise_smooth`] does not gate TV: at short pulses the model-based map can be too
-///   scattered to pass it although the scene is piecewise smooth (docs/solvers.md has the
-///   measurements).
+/// 1. [`Method::SupportLs`]: greedy support pursuit with least squares on the support; exact and
+///    cheap wherever the measurements comfortably outnumber the returns, whatever the regime,
+///    and for any number of returns per pixel;
+/// 2. if A has full column rank (critical or redundant regime, K ≥ M·N·K_s): [`Method::Cgls`],
+///    its returns refitted by least squares on their support (which also denoises);
+/// 3. otherwise (compressive) [`Method::ModelBased`], then, unless it explains the data,
+///    [`Method::Tv`] from scratch, kept if it fits about as well as the model-based scene
+///    ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If the support pursuit fitted the
+///    data more than twice as well as the better one-reflector scene, the scene has more than
+///    one return per pixel and the pursuit's estimate is kept.
+///
+/// [`Reconstruction::stages`] lists what ran, each stage's residual, returns, applications and
+/// time, what was kept and why.
 ///
 /// # Errors
 /// [`Error::ShapeMismatch`] / [`Error::NonFinite`] if `y` does not fit the operator or is not
@@ -100,50 +103,15 @@ pub fn reconstruct<T: Real>(
     }
     let g = op.geometry();
     let regime = g.regime(op.pulse().len());
-    let chosen = match method {
-        Method::Auto => match regime {
-            Regime::Redundant => Method::BackprojectionDebiased,
-            Regime::Critical => Method::Cgls,
-            Regime::Compressive => Method::ModelBased,
-        },
-        m => m,
+    let (x, method_used, report, stages) = if method == Method::Auto {
+        let a = auto(op, y, options)?;
+        (a.x, a.method_used, a.report, a.stages)
+    } else {
+        let (x, report) = run(op, y, method, options)?;
+        // The backprojections already keep one thresholded peak per pixel.
+        let x = if report.is_some() { returns(&x, g) } else { x };
+        (x, method, report, Vec::new())
     };
-    let (mut x, mut report) = run(op, y, chosen, options)?;
-    let mut method_used = chosen;
-    if method == Method::Auto && chosen == Method::ModelBased {
-        let explained = report
-            .as_ref()
-            .is_some_and(|r| r.termination == Termination::Residual);
-        if !explained {
-            let params = TvDepthParams {
-                model: model_params(options),
-                ..TvDepthParams::default()
-            };
-            let mut progress = progress_bar(params.model.stopping.max_iter, options);
-            // From scratch, so that TV starts with its neighbourhood prior: at short pulses the
-            // model-based map is too scattered to be a useful start.
-            let mut x_tv = vec![T::zero(); x.len()];
-            let tv = tv_depth(op, (g.m, g.n), y, &mut x_tv, &params, &mut progress)?;
-            progress.finish();
-            let r_mb = residual_norm_sq(op, y, &x).sqrt();
-            let r_tv = residual_norm_sq(op, y, &x_tv).sqrt();
-            let y_norm = norm2(y);
-            if r_tv <= TV_RESIDUAL_MARGIN * r_mb + 1e-6 * y_norm {
-                x = x_tv;
-                method_used = Method::Tv;
-            }
-            report = Some(match report {
-                Some(mut r) => {
-                    r.absorb(tv);
-                    r
-                }
-                None => tv,
-            });
-        }
-    }
-    if report.is_some() {
-        x = pixel_peaks(&x, g);
-    }
     let scene = Scene::from_vec(g, x)?;
     let depth = scene.depth_map();
     Ok(Reconstruction {
@@ -152,6 +120,7 @@ pub fn reconstruct<T: Real>(
         method_used,
         regime,
         report,
+        stages,
         elapsed: start.elapsed(),
     })
 }

@@ -16,6 +16,15 @@ pub enum Threshold {
     Absolute(f64),
     /// Keep peaks of at least this fraction of the largest peak.
     RelativeToMax(f64),
+    /// Keep peaks of at least `fraction` times the `quantile` of the per-column peaks: the
+    /// largest peak made robust to a few outliers (a strong isolated voxel, a noise spike). With
+    /// most columns lit, as in the paper's scenes, the quantile is a typical strong return.
+    PeakQuantile {
+        /// Which quantile of the per-column peaks, in [0, 1] (0.99: the 99th percentile).
+        quantile: f64,
+        /// The fraction of it a peak must reach, in [0, 1].
+        fraction: f64,
+    },
     /// Keep peaks above median + k·σ of all backprojected values, with σ = 1.4826·MAD (a robust
     /// estimate of the cross-talk and noise floor, valid when most voxels are empty).
     Auto {
@@ -92,6 +101,16 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
                 format!("relative threshold must be in [0, 1], got {f}"),
             ))
         }
+        Threshold::PeakQuantile { quantile, fraction }
+            if !((0.0..=1.0).contains(&quantile) && (0.0..=1.0).contains(&fraction)) =>
+        {
+            return Err(Error::param(
+                "threshold",
+                format!(
+                    "peak quantile and fraction must be in [0, 1], got {quantile} and {fraction}"
+                ),
+            ))
+        }
         Threshold::Auto { k } if !(k.is_finite() && k >= 0.0) => {
             return Err(Error::param(
                 "threshold",
@@ -112,6 +131,15 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
         backprojection: bp,
         threshold: selection.threshold,
     })
+}
+
+/// The `q`-quantile of `v` (nearest rank, `q` in [0, 1]); −∞ for an empty slice. Reorders `v`.
+fn quantile_of(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NEG_INFINITY;
+    }
+    let rank = ((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1);
+    *v.select_nth_unstable_by(rank, f64::total_cmp).1
 }
 
 /// What [`select_peaks`] keeps.
@@ -146,6 +174,10 @@ pub fn select_peaks<T: Real>(
                 .flatten()
                 .map(|p| p.1)
                 .fold(f64::NEG_INFINITY, f64::max)
+        }
+        Threshold::PeakQuantile { quantile, fraction } => {
+            let mut peaks: Vec<f64> = found.iter().flatten().map(|p| p.1).collect();
+            fraction * quantile_of(&mut peaks, quantile)
         }
         Threshold::Auto { k } => {
             let mut all: Vec<f64> = values.iter().map(|v| v.as_f64()).collect();

@@ -210,6 +210,12 @@ pub struct Report {
     pub forward_applies: usize,
     /// Adjoint applications of the operator.
     pub adjoint_applies: usize,
+    /// Applications, in either direction, of the operator restricted to a few columns
+    /// ([`LinearOperator::restrict_columns`](crate::operator::LinearOperator::restrict_columns))
+    /// or of its sparse forward, when the solver counts them apart: for the lidar operator each
+    /// costs O(support × K_p) instead of a full application's O(M·N·K). Solvers that do not
+    /// count them apart include them in the forward and adjoint counts.
+    pub support_applies: usize,
     /// Wall-clock time.
     pub elapsed: Duration,
 }
@@ -218,14 +224,26 @@ impl Report {
     /// Appends a later run to this one: counts, histories and time are added, the termination
     /// and the solver's name become the later run's.
     pub fn absorb(&mut self, later: Report) {
+        self.absorb_applies(&later);
         self.solver = later.solver;
         self.iterations += later.iterations;
         self.termination = later.termination;
         self.residual_history.extend(later.residual_history);
         self.objective_history.extend(later.objective_history);
-        self.forward_applies += later.forward_applies;
-        self.adjoint_applies += later.adjoint_applies;
-        self.elapsed += later.elapsed;
+    }
+
+    /// Adds the apply counts and the time of a subsidiary run (a refinement step) to this one,
+    /// leaving the iterations, histories and termination as they are.
+    pub fn absorb_applies(&mut self, other: &Report) {
+        self.forward_applies += other.forward_applies;
+        self.adjoint_applies += other.adjoint_applies;
+        self.support_applies += other.support_applies;
+        self.elapsed += other.elapsed;
+    }
+
+    /// Every application counted, full and support ones alike.
+    pub fn total_applies(&self) -> usize {
+        self.forward_applies + self.adjoint_applies + self.support_applies
     }
 }
 
@@ -316,6 +334,7 @@ impl<'o, T: Real, O: Observer<T> + ?Sized> Monitor<'o, T, O> {
             objective_history: self.objectives,
             forward_applies: op.forward_count(),
             adjoint_applies: op.adjoint_count(),
+            support_applies: 0,
             elapsed: self.start.elapsed(),
         }
     }

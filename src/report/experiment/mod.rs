@@ -253,6 +253,7 @@ pub fn estimated_work(method: Method, budget: Option<usize>, pulse_len: usize) -
         Method::Fista => 3.0 * it(200) + 20.0,
         Method::Iht => 3.0 * it(100),
         Method::Cosamp => 10.0 * it(100),
+        Method::SupportLs => 10.0 * it(12),
         Method::Amp => 2.0 * it(60),
         Method::ModelBased => 15.0 * it(30),
         Method::Tv => 30.0 * it(30),

@@ -88,6 +88,7 @@ fn run_one<T: Real>(
         progress: false,
         seed: case.seed,
         power_iterations: config.power_iterations,
+        ..ReconstructOptions::default()
     };
     let start = Instant::now();
     let result = reconstruct(&problem.op, &problem.y, method, &options)

@@ -1,0 +1,246 @@
+//! [`Method::Auto`]: the cheapest method that explains the data, found by escalating from the
+//! data themselves rather than from the regime alone.
+
+use crate::error::Result;
+use crate::lidar::RdOperator;
+use crate::operator::LinearOperator;
+use crate::real::Real;
+use crate::solver::{Report, Termination};
+
+use super::method::{run, Method, ReconstructOptions};
+use super::peaks::returns;
+use super::pursuit::{
+    explained_tolerance, relative_residual, support_pursuit, PursuitEnd, PURSUIT_ROUNDS,
+};
+use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
+
+/// [`Method::Auto`] keeps TV's one-return-per-pixel scene over the model-based one only if its
+/// residual ‖Ax − y‖ is at most this factor times the model-based one (plus 10⁻⁶‖y‖): TV must not
+/// buy smoothness with a worse data fit.
+pub const TV_RESIDUAL_MARGIN: f64 = 1.05;
+
+/// What one stage of [`Method::Auto`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stage {
+    /// The method the stage ran.
+    pub method: Method,
+    /// ‖y − Ax‖ / ‖y‖ of its estimate (after the returns are extracted).
+    pub relative_residual: f64,
+    /// Nonzero voxels (returns) of its estimate.
+    pub returns: usize,
+    /// Its solver's report.
+    pub report: Option<Report>,
+    /// Whether its estimate is the one [`reconstruct`](super::reconstruct) returns.
+    pub kept: bool,
+    /// Why auto stopped or went on after it.
+    pub verdict: String,
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: residual {:.2e}, {} returns",
+            self.method, self.relative_residual, self.returns
+        )?;
+        if let Some(r) = &self.report {
+            write!(
+                f,
+                ", {} forward + {} adjoint + {} support applies, {:.3} s",
+                r.forward_applies,
+                r.adjoint_applies,
+                r.support_applies,
+                r.elapsed.as_secs_f64()
+            )?;
+        }
+        write!(
+            f,
+            "{}: {}",
+            if self.kept { ", kept" } else { "" },
+            self.verdict
+        )
+    }
+}
+
+/// What [`auto`] returns.
+pub(super) struct Auto<T> {
+    pub x: Vec<T>,
+    pub method_used: Method,
+    pub report: Option<Report>,
+    pub stages: Vec<Stage>,
+}
+
+/// One candidate estimate and its stage.
+struct Tried<T> {
+    x: Vec<T>,
+    stage: Stage,
+}
+
+fn nonzeros<T: Real>(x: &[T]) -> usize {
+    x.iter().filter(|v| **v != T::zero()).count()
+}
+
+/// Runs a method and extracts its returns, measuring the residual of what it reports.
+fn attempt<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    method: Method,
+    options: &ReconstructOptions,
+) -> Result<Tried<T>> {
+    let (x, report) = run(op, y, method, options)?;
+    let x = returns(&x, op.geometry());
+    let mut report = report.expect("iterative methods report");
+    let rel = relative_residual(op, y, &x, &mut report);
+    Ok(Tried {
+        stage: Stage {
+            method,
+            relative_residual: rel,
+            returns: nonzeros(&x),
+            report: Some(report),
+            kept: false,
+            verdict: String::new(),
+        },
+        x,
+    })
+}
+
+/// The rule of [`Method::Auto`]; see [`reconstruct`](super::reconstruct).
+pub(super) fn auto<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    options: &ReconstructOptions,
+) -> Result<Auto<T>> {
+    let tol = explained_tolerance::<T>();
+    let explained = |rel: f64| rel <= tol;
+    let mut stages: Vec<Stage> = Vec::new();
+
+    // 1. Support pursuit: cheap, and exact wherever the returns are few for the measurements.
+    let rounds = options.max_iter.unwrap_or(PURSUIT_ROUNDS);
+    let mut p = support_pursuit(op, y, rounds)?;
+    p.x = returns(&p.x, op.geometry());
+    let mut best = Tried {
+        stage: Stage {
+            method: Method::SupportLs,
+            relative_residual: p.relative_residual,
+            returns: nonzeros(&p.x),
+            report: Some(p.report),
+            kept: false,
+            verdict: String::new(),
+        },
+        x: p.x,
+    };
+    if p.end == PursuitEnd::Explained {
+        best.stage.verdict = format!("{}; nothing more to run", p.end.describe());
+        return Ok(finish(best, stages));
+    }
+    best.stage.verdict = format!("not explained ({})", p.end.describe());
+
+    let g = op.geometry();
+    if op.nrows() >= g.voxels() {
+        // 2a. Critical or redundant: least squares on every voxel is exact without noise; its
+        // returns, refitted on their support, denoise it.
+        let mut ls = attempt(op, y, Method::Cgls, options)?;
+        let refit = refit_support(op, y, &mut ls.x, REFIT_MAX_ITER, REFIT_ROUNDS)?;
+        if let (Some(r), Some(rep)) = (refit, ls.stage.report.as_mut()) {
+            rep.absorb_applies(&r);
+            ls.stage.relative_residual = relative_residual(op, y, &ls.x, rep);
+            ls.stage.returns = nonzeros(&ls.x);
+        }
+        ls.stage.verdict = if explained(ls.stage.relative_residual) {
+            "A has full column rank: least squares explains the data".to_string()
+        } else {
+            "A has full column rank: the least-squares returns, refitted on their support"
+                .to_string()
+        };
+        stages.push(best.stage);
+        return Ok(finish(ls, stages));
+    }
+
+    // 2b. Compressive: the one-reflector model, then TV on the depth map.
+    let mut mb = attempt(op, y, Method::ModelBased, options)?;
+    let mb_converged = mb
+        .stage
+        .report
+        .as_ref()
+        .is_some_and(|r| r.termination == Termination::Residual);
+    if explained(mb.stage.relative_residual) || mb_converged {
+        mb.stage.verdict = "one reflector per pixel explains the data".to_string();
+        stages.push(best.stage);
+        return Ok(finish(mb, stages));
+    }
+    mb.stage.verdict = "one reflector per pixel does not explain the data".to_string();
+    let mut tv = attempt(op, y, Method::Tv, options)?;
+    let y_norm = crate::linalg::norm2(y);
+    let (r_mb, r_tv) = (mb.stage.relative_residual, tv.stage.relative_residual);
+    let tv_fits = r_tv * y_norm <= TV_RESIDUAL_MARGIN * r_mb * y_norm + 1e-6 * y_norm;
+    tv.stage.verdict = if explained(r_tv) {
+        "TV on the depth map explains the data".to_string()
+    } else if tv_fits {
+        "TV fits about as well as the model-based scene (within 5%)".to_string()
+    } else {
+        "TV fits worse than the model-based scene".to_string()
+    };
+    let (one, other) = if tv_fits { (tv, mb) } else { (mb, tv) };
+    // The pursuit (no per-pixel model) is kept over the one-reflector fits only when it explains
+    // the data markedly better: a sign of several returns per pixel.
+    let multi = best.stage.relative_residual < 0.5 * one.stage.relative_residual;
+    if multi {
+        best.stage.verdict = format!(
+            "{}; it fits better than one reflector per pixel can (residual {:.2e} against {:.2e})",
+            best.stage.verdict, best.stage.relative_residual, one.stage.relative_residual
+        );
+        stages.push(other.stage);
+        stages.push(one.stage);
+        Ok(finish(best, stages))
+    } else {
+        stages.push(best.stage);
+        stages.push(other.stage);
+        Ok(finish(one, stages))
+    }
+}
+
+/// The kept estimate goes last among the stages, marked kept; the reports are summed.
+fn finish<T: Real>(mut kept: Tried<T>, mut stages: Vec<Stage>) -> Auto<T> {
+    kept.stage.kept = true;
+    let method_used = kept.stage.method;
+    stages.push(kept.stage);
+    stages.sort_by_key(|s| order(s.method));
+    let mut report: Option<Report> = None;
+    for s in &stages {
+        if let Some(r) = &s.report {
+            match &mut report {
+                Some(t) => t.absorb(r.clone()),
+                None => report = Some(r.clone()),
+            }
+        }
+    }
+    if let Some(r) = report.as_mut() {
+        if let Some(k) = stages
+            .iter()
+            .find(|s| s.kept)
+            .and_then(|s| s.report.as_ref())
+        {
+            r.solver = k.solver;
+            r.termination = k.termination;
+        }
+    }
+    Auto {
+        x: kept.x,
+        method_used,
+        report,
+        stages,
+    }
+}
+
+/// The order in which [`auto`] runs its stages.
+fn order(m: Method) -> usize {
+    [
+        Method::SupportLs,
+        Method::Cgls,
+        Method::ModelBased,
+        Method::Tv,
+    ]
+    .iter()
+    .position(|&x| x == m)
+    .unwrap_or(usize::MAX)
+}

@@ -1,0 +1,68 @@
+//! Least squares on the support of an estimate: the debiasing step of the sparse solvers and the
+//! refit of [`Method::Auto`](super::Method::Auto)'s support stage.
+
+use crate::error::Result;
+use crate::lidar::RdOperator;
+use crate::operator::LinearOperator;
+use crate::real::Real;
+use crate::solver::{cgls, CglsParams, Report, Stopping};
+
+/// CGLS iterations of one least-squares refit on a support.
+pub(super) const REFIT_MAX_ITER: usize = 50;
+
+/// Rounds of refitting after dropping non-positive amplitudes.
+pub(super) const REFIT_ROUNDS: usize = 3;
+
+/// Least squares on the support of `x` (its nonzero voxels), warm-started from its values, in
+/// place: the amplitudes that best explain `y` with those voxels alone. Voxels whose amplitude
+/// comes out non-positive are dropped (reflectivities are nonnegative) and the rest refitted, up
+/// to `rounds` fits in all ([`REFIT_ROUNDS`] for a full refit).
+///
+/// Returns `None`, leaving `x` unchanged, when the support is empty or holds more than half as
+/// many voxels as there are measurements (least squares would then fit noise and cross-talk
+/// rather than remove a bias). The report counts its applications as support applies.
+///
+/// # Errors
+/// The least squares' errors ([`crate::Error::Breakdown`]).
+pub(super) fn refit_support<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    x: &mut [T],
+    max_iter: usize,
+    rounds: usize,
+) -> Result<Option<Report>> {
+    let mut support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
+    if support.is_empty() || 2 * support.len() > y.len() {
+        return Ok(None);
+    }
+    let params = CglsParams {
+        damp: 0.0,
+        stopping: Stopping {
+            max_iter,
+            rel_residual: Some(1e-12),
+            ..Stopping::default()
+        },
+    };
+    let mut total: Option<Report> = None;
+    for _ in 0..rounds.max(1) {
+        let restricted = op.restrict_columns(support.clone())?;
+        let mut b: Vec<T> = support.iter().map(|&v| x[v]).collect();
+        let mut rep = cgls(restricted.as_ref(), y, &mut b, &params, &mut ())?;
+        rep.support_applies = rep.forward_applies + rep.adjoint_applies;
+        rep.forward_applies = 0;
+        rep.adjoint_applies = 0;
+        match &mut total {
+            Some(t) => t.absorb(rep),
+            None => total = Some(rep),
+        }
+        for (&v, &a) in support.iter().zip(&b) {
+            x[v] = if a > T::zero() { a } else { T::zero() };
+        }
+        let before = support.len();
+        support.retain(|&v| x[v] > T::zero());
+        if support.len() == before || support.is_empty() {
+            break;
+        }
+    }
+    Ok(total)
+}

@@ -1,0 +1,200 @@
+//! `auto` across the regimes and scene kinds, multi-return scenes, FISTA's debiasing and the
+//! paper's backprojection threshold.
+
+use std::sync::Arc;
+
+use ndarray::Array3;
+use rdlidar::lidar::{
+    paper_scene, random_opaque_scene, semi_transparent_scene, Codes, Geometry, Pulse, RdOperator,
+    Scene,
+};
+use rdlidar::recon::{compare, reconstruct, Method, PeakThreshold, ReconstructOptions};
+use rdlidar::solver::{backprojection, Backprojection, Threshold};
+use rdlidar::{LinearOperator, Real};
+
+fn problem<T: Real>(g: Geometry, kp: usize, seed: u64) -> RdOperator<T> {
+    let pulse = Pulse::<T>::bernoulli(kp, seed).unwrap().into_inner();
+    let codes = Codes::random_binary(g.pixels(), g.samples(kp), seed + 1).unwrap();
+    RdOperator::new(g, pulse, Arc::new(codes)).unwrap()
+}
+
+fn measure<T: Real>(op: &RdOperator<T>, x: &Scene<T>) -> Vec<T> {
+    let mut y = vec![T::zero(); op.nrows()];
+    op.apply(x.as_slice(), &mut y);
+    y
+}
+
+/// Scenes of several shapes, each with the pulse lengths to try: compressive (at least 5
+/// measurements per return), critical, 2× and 4× redundant.
+fn cases() -> Vec<(&'static str, Scene<f64>)> {
+    vec![
+        (
+            "paper 8x8x8",
+            paper_scene(Geometry::new(8, 8, 8).unwrap()).unwrap(),
+        ),
+        (
+            "random 6x7x6",
+            random_opaque_scene(Geometry::new(6, 7, 6).unwrap(), 0.5, 3).unwrap(),
+        ),
+        (
+            "transparent 5x6x10",
+            semi_transparent_scene(Geometry::new(5, 6, 10).unwrap(), 1..=3, 4).unwrap(),
+        ),
+    ]
+}
+
+#[test]
+fn auto_is_exact_noise_free_in_every_regime_on_scenes_of_several_shapes() {
+    for (name, truth) in cases() {
+        let g = truth.geometry();
+        let crit = g.critical_pulse_len();
+        let returns = truth.nnz();
+        // The shortest pulse that gives 5 measurements per return, if that is compressive.
+        let compressive = (5 * returns).saturating_sub(g.ks - 1);
+        let mut lens = vec![crit, 2 * crit, 4 * crit];
+        if compressive < crit {
+            lens.insert(0, compressive.max(1));
+        }
+        for kp in lens {
+            let op = problem::<f64>(g, kp, 7);
+            let y = measure(&op, &truth);
+            let r = reconstruct(&op, &y, Method::Auto, &ReconstructOptions::default()).unwrap();
+            let m = compare(&truth, &r.scene, 200e-12).unwrap();
+            assert!(
+                m.relative_error <= 1e-6,
+                "{name}, K_p {kp}: {m}; stages {:?}",
+                r.stages
+            );
+            assert_eq!(m.returns_exact, m.true_returns, "{name}, K_p {kp}: {m}");
+            assert_eq!(m.returns_false, 0, "{name}, K_p {kp}: {m}");
+            let kept = r.stages.last().unwrap();
+            assert!(kept.kept && kept.method == r.method_used, "{name}: {kept}");
+        }
+    }
+}
+
+#[test]
+fn a_scene_with_one_to_three_returns_per_pixel_is_recovered_at_eight_measurements_per_return() {
+    let g = Geometry::new(8, 8, 24).unwrap();
+    let truth = semi_transparent_scene::<f64>(g, 1..=3, 11).unwrap();
+    let kp = 8 * truth.nnz() - (g.ks - 1);
+    assert!(kp < g.critical_pulse_len(), "compressive");
+    let op = problem::<f64>(g, kp, 12);
+    let y = measure(&op, &truth);
+    for method in [Method::Auto, Method::SupportLs] {
+        let r = reconstruct(&op, &y, method, &ReconstructOptions::default()).unwrap();
+        let m = compare(&truth, &r.scene, 200e-12).unwrap();
+        assert!(m.multi_return(), "{m}");
+        assert!(
+            m.returns_exact as f64 >= 0.99 * m.true_returns as f64,
+            "{method}: {m}"
+        );
+        assert!(m.to_string().contains("returns:"), "{m}");
+        // Several returns stay in a pixel of the output scene; the depth map keeps the
+        // strongest.
+        let most = r
+            .scene
+            .as_slice()
+            .chunks(g.ks)
+            .map(|c| c.iter().filter(|v| **v != 0.0).count())
+            .max()
+            .unwrap();
+        assert!(most >= 2, "{method}: at most {most} return per pixel");
+        assert_eq!(r.depth.depth, truth.depth_map().depth, "{method}");
+    }
+}
+
+#[test]
+fn fista_debiased_is_exact_where_its_support_is_right_and_biased_without() {
+    let g = Geometry::new(6, 6, 8).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    let op = problem::<f64>(g, 2 * g.critical_pulse_len(), 5);
+    let y = measure(&op, &truth);
+    let debiased = reconstruct(&op, &y, Method::Fista, &ReconstructOptions::default()).unwrap();
+    let m = compare(&truth, &debiased.scene, 200e-12).unwrap();
+    assert_eq!(m.exact, m.lit, "{m}");
+    assert!(m.relative_error <= 1e-6, "debiased: {m}");
+    let lasso = ReconstructOptions {
+        debias: false,
+        ..ReconstructOptions::default()
+    };
+    let biased = reconstruct(&op, &y, Method::Fista, &lasso).unwrap();
+    let b = compare(&truth, &biased.scene, 200e-12).unwrap();
+    assert_eq!(b.exact, b.lit, "{b}");
+    assert!(
+        b.relative_error > 1e-3,
+        "the lasso keeps its shrinkage: {b}"
+    );
+}
+
+#[test]
+fn the_paper_threshold_keeps_most_right_peaks_of_a_paper_like_scene() {
+    let g = Geometry::new(24, 24, 16).unwrap();
+    let truth = paper_scene::<f32>(g).unwrap();
+    let op = problem::<f32>(g, 2000, 21);
+    let y = measure(&op, &truth);
+    // How many lit pixels the plain backprojection's argmax puts at the true depth.
+    let all = backprojection(
+        &op,
+        &y,
+        &Backprojection {
+            column_len: g.ks,
+            normalization: 1.0,
+            threshold: Threshold::None,
+        },
+    )
+    .unwrap();
+    let true_depth = truth.depth_map().depth;
+    let right = all
+        .peaks
+        .iter()
+        .zip(true_depth.iter())
+        .filter(|(p, t)| **t >= 0 && p == t)
+        .count();
+    let exact = |rule: PeakThreshold| {
+        let options = ReconstructOptions {
+            threshold: rule,
+            ..ReconstructOptions::default()
+        };
+        let r = reconstruct(&op, &y, Method::Backprojection, &options).unwrap();
+        compare(&truth, &r.scene, 200e-12).unwrap()
+    };
+    let (paper, robust) = (exact(PeakThreshold::Paper), exact(PeakThreshold::Robust));
+    assert!(right > paper.lit / 5, "{right} of {}", paper.lit);
+    assert!(
+        paper.exact as f64 >= 0.75 * right as f64,
+        "paper rule: {paper}; argmax right for {right}"
+    );
+    assert!(paper.exact > robust.exact, "{paper} / {robust}");
+    assert!(robust.false_detections <= paper.false_detections);
+}
+
+#[test]
+fn return_metrics_count_exact_missed_and_false_returns() {
+    let g = Geometry::new(1, 2, 4).unwrap();
+    let mut t = Array3::<f64>::zeros((1, 2, 4));
+    t[[0, 0, 0]] = 1.0;
+    t[[0, 0, 2]] = 0.5;
+    t[[0, 1, 1]] = 0.8;
+    let mut e = Array3::<f64>::zeros((1, 2, 4));
+    e[[0, 0, 0]] = 0.9;
+    e[[0, 1, 1]] = 0.8;
+    e[[0, 1, 3]] = 0.2;
+    let (t, e) = (Scene::new(t).unwrap(), Scene::new(e).unwrap());
+    assert_eq!(t.geometry(), g);
+    let m = compare(&t, &e, 200e-12).unwrap();
+    assert_eq!(
+        (
+            m.true_returns,
+            m.returns_exact,
+            m.returns_missed,
+            m.returns_false
+        ),
+        (3, 2, 1, 1)
+    );
+    // Over the two returns found: ‖(1, 0.8) − (0.9, 0.8)‖ / ‖(1, 0.8)‖.
+    let expected = 0.1 / (1.0f64 + 0.64).sqrt();
+    assert!((m.amplitude_error - expected).abs() < 1e-12, "{m}");
+    assert!(m.multi_return());
+    assert!(m.to_string().contains("2 of 3 at the exact voxel"), "{m}");
+}
