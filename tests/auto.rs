@@ -198,3 +198,34 @@ fn return_metrics_count_exact_missed_and_false_returns() {
     assert!(m.multi_return());
     assert!(m.to_string().contains("2 of 3 at the exact voxel"), "{m}");
 }
+
+#[test]
+fn with_noise_at_and_above_the_critical_length_auto_keeps_a_sparse_fit_not_least_squares() {
+    use rdlidar::lidar::add_gaussian_snr;
+    let g = Geometry::new(8, 8, 8).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    for kp in [g.critical_pulse_len(), 2 * g.critical_pulse_len()] {
+        let op = problem::<f64>(g, kp, 31);
+        let mut y = measure(&op, &truth);
+        add_gaussian_snr(&mut y, 20.0, 32).unwrap();
+        let options = ReconstructOptions::default();
+        let auto = reconstruct(&op, &y, Method::Auto, &options).unwrap();
+        let mb = reconstruct(&op, &y, Method::ModelBased, &options).unwrap();
+        let (a, b) = (
+            compare(&truth, &auto.scene, 200e-12).unwrap(),
+            compare(&truth, &mb.scene, 200e-12).unwrap(),
+        );
+        assert_eq!(a.exact, a.lit, "K_p {kp}: {a}");
+        assert!(
+            a.relative_error <= 1.5 * b.relative_error,
+            "K_p {kp}: auto {a} / model-based {b}"
+        );
+        // Nothing explains noisy data: every stage says why it was or was not kept.
+        assert!(auto.stages.len() >= 2, "{:?}", auto.stages);
+        assert_eq!(auto.stages.iter().filter(|s| s.kept).count(), 1);
+        assert!(auto
+            .stages
+            .iter()
+            .all(|s| s.verdict.contains("information criterion")));
+    }
+}

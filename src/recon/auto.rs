@@ -19,6 +19,15 @@ use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
 /// buy smoothness with a worse data fit.
 pub const TV_RESIDUAL_MARGIN: f64 = 1.05;
 
+/// The Bayesian information criterion of a stage's sparse fit, up to a constant:
+/// K·ln(‖r‖²/‖y‖²) + |S|·ln K, lower is better. It weighs the residual a support leaves against
+/// the support's size, so that a fit does not win by fitting noise with extra returns.
+fn bic(stage: &Stage, k: usize) -> f64 {
+    let k = k as f64;
+    let rel_sq = (stage.relative_residual * stage.relative_residual).max(f64::MIN_POSITIVE);
+    k * rel_sq.ln() + stage.returns as f64 * k.ln()
+}
+
 /// What one stage of [`Method::Auto`] did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Stage {
@@ -137,23 +146,58 @@ pub(super) fn auto<T: Real>(
 
     let g = op.geometry();
     if op.nrows() >= g.voxels() {
-        // 2a. Critical or redundant: least squares on every voxel is exact without noise; its
-        // returns, refitted on their support, denoise it.
-        let mut ls = attempt(op, y, Method::Cgls, options)?;
-        let refit = refit_support(op, y, &mut ls.x, REFIT_MAX_ITER, REFIT_ROUNDS)?;
-        if let (Some(r), Some(rep)) = (refit, ls.stage.report.as_mut()) {
-            rep.absorb_applies(&r);
-            ls.stage.relative_residual = relative_residual(op, y, &ls.x, rep);
-            ls.stage.returns = nonzeros(&ls.x);
+        // 2a. A has full column rank (critical or redundant regime). The one-reflector fit is
+        // cheap and well posed here; least squares on every voxel is exact without noise but
+        // slow near the critical length, so it runs only when the two cheap fits disagree.
+        let mut mb = attempt(op, y, Method::ModelBased, options)?;
+        if explained(mb.stage.relative_residual) {
+            mb.stage.verdict = "one reflector per pixel explains the data".to_string();
+            stages.push(best.stage);
+            return Ok(finish(mb, stages));
         }
-        ls.stage.verdict = if explained(ls.stage.relative_residual) {
-            "A has full column rank: least squares explains the data".to_string()
-        } else {
-            "A has full column rank: the least-squares returns, refitted on their support"
-                .to_string()
-        };
-        stages.push(best.stage);
-        return Ok(finish(ls, stages));
+        let (r_p, r_mb) = (best.stage.relative_residual, mb.stage.relative_residual);
+        let agree = (r_p - r_mb).abs() <= 0.05 * r_p.max(r_mb);
+        let mut tried = vec![best, mb];
+        if !agree {
+            let mut ls = attempt(op, y, Method::Cgls, options)?;
+            let refit = refit_support(op, y, &mut ls.x, REFIT_MAX_ITER, REFIT_ROUNDS)?;
+            if let (Some(r), Some(rep)) = (refit, ls.stage.report.as_mut()) {
+                rep.absorb_applies(&r);
+                ls.stage.relative_residual = relative_residual(op, y, &ls.x, rep);
+                ls.stage.returns = nonzeros(&ls.x);
+            }
+            if explained(ls.stage.relative_residual) {
+                ls.stage.verdict = "least squares on every voxel explains the data".into();
+                stages.extend(tried.into_iter().map(|t| t.stage));
+                return Ok(finish(ls, stages));
+            }
+            tried.push(ls);
+        }
+        // Noise: no fit explains the data; the information criterion weighs each sparse fit's
+        // residual against its number of returns.
+        let k = op.nrows();
+        let scores: Vec<f64> = tried.iter().map(|t| bic(&t.stage, k)).collect();
+        let pick = (0..tried.len())
+            .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+            .expect("at least two candidates");
+        for (t, score) in tried.iter_mut().zip(&scores) {
+            let what = match t.stage.method {
+                Method::SupportLs => "support pursuit",
+                Method::Cgls => "least-squares returns refitted on their support",
+                _ => "one reflector per pixel",
+            };
+            t.stage.verdict = format!(
+                "not explained ({what}{}); information criterion {score:.1}",
+                if agree {
+                    ", agreeing with the other cheap fit within 5%"
+                } else {
+                    ""
+                }
+            );
+        }
+        let kept = tried.remove(pick);
+        stages.extend(tried.into_iter().map(|t| t.stage));
+        return Ok(finish(kept, stages));
     }
 
     // 2b. Compressive: the one-reflector model, then TV on the depth map.
@@ -199,7 +243,7 @@ pub(super) fn auto<T: Real>(
     }
 }
 
-/// The kept estimate goes last among the stages, marked kept; the reports are summed.
+/// The stages in the order they ran, the kept one marked; the reports are summed.
 fn finish<T: Real>(mut kept: Tried<T>, mut stages: Vec<Stage>) -> Auto<T> {
     kept.stage.kept = true;
     let method_used = kept.stage.method;
@@ -236,8 +280,8 @@ fn finish<T: Real>(mut kept: Tried<T>, mut stages: Vec<Stage>) -> Auto<T> {
 fn order(m: Method) -> usize {
     [
         Method::SupportLs,
-        Method::Cgls,
         Method::ModelBased,
+        Method::Cgls,
         Method::Tv,
     ]
     .iter()

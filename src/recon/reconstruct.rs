@@ -66,8 +66,11 @@ pub struct Reconstruction<T> {
 /// 1. [`Method::SupportLs`]: greedy support pursuit with least squares on the support; exact and
 ///    cheap wherever the measurements comfortably outnumber the returns, whatever the regime,
 ///    and for any number of returns per pixel;
-/// 2. if A has full column rank (critical or redundant regime, K ≥ M·N·K_s): [`Method::Cgls`],
-///    its returns refitted by least squares on their support (which also denoises);
+/// 2. if A has full column rank (critical or redundant regime, K ≥ M·N·K_s):
+///    [`Method::ModelBased`]; unless it explains the data or agrees with the pursuit's residual
+///    within 5%, [`Method::Cgls`] with its returns refitted by least squares on their support.
+///    With noise nothing explains the data, and the sparse fit with the lowest information
+///    criterion K·ln(‖r‖²/‖y‖²) + |S|·ln K is kept;
 /// 3. otherwise (compressive) [`Method::ModelBased`], then, unless it explains the data,
 ///    [`Method::Tv`] from scratch, kept if it fits about as well as the model-based scene
 ///    ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If the support pursuit fitted the

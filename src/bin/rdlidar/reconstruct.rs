@@ -28,9 +28,10 @@ use crate::layout::{check_memory, expectation};
 /// debiased by least squares on its support), iht and cosamp (sparsity estimated from the
 /// debiased backprojection), support-ls (greedy support pursuit with least squares), amp
 /// (message passing with the one-reflector prior), model-based (one reflector per pixel), tv
-/// (TV on the depth map) and auto, which escalates from the cheapest: support-ls; then cgls
-/// when K ≥ M·N·K_s; otherwise model-based, then tv, keeping the first fit that explains the
-/// data. auto prints each stage it ran and why it stopped.
+/// (TV on the depth map) and auto, which escalates from the cheapest: support-ls; then, when
+/// K ≥ M·N·K_s, model-based and cgls; otherwise model-based, then tv. It keeps the first fit
+/// that explains the data (with noise, the best by an information criterion) and prints each
+/// stage it ran and why.
 ///
 /// With --truth SCENE.npy the estimate is compared with the true scene (exact depths,
 /// RMSE, misses, false detections, relative error; τ = 200 ps per bin).
