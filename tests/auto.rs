@@ -81,7 +81,7 @@ fn a_scene_with_one_to_three_returns_per_pixel_is_recovered_at_eight_measurement
     assert!(kp < g.critical_pulse_len(), "compressive");
     let op = problem::<f64>(g, kp, 12);
     let y = measure(&op, &truth);
-    for method in [Method::Auto, Method::SupportLs] {
+    for method in [Method::Auto, Method::SupportLs, Method::Cosamp, Method::Iht] {
         let r = reconstruct(&op, &y, method, &ReconstructOptions::default()).unwrap();
         let m = compare(&truth, &r.scene, 200e-12).unwrap();
         assert!(m.multi_return(), "{m}");

@@ -46,11 +46,11 @@ pub enum Method {
     /// ([`ReconstructOptions::debias`]), then its returns.
     Fista,
     /// Iterative hard thresholding (at most 100 iterations) with the sparsity estimated from the
-    /// debiased backprojection, then its returns.
+    /// debiased backprojection and the support pursuit, then its returns.
     Iht,
     /// CoSaMP (at most 100 iterations; least squares on the merged support by at most 10
-    /// warm-started CGLS iterations on the support operator) with the sparsity estimated from the
-    /// debiased backprojection, then its returns.
+    /// warm-started CGLS iterations on the support operator) with the sparsity estimated as for
+    /// [`Method::Iht`], then its returns.
     Cosamp,
     /// Support pursuit: greedy rounds that add each pixel's best voxel where the residual's
     /// correlation stands out of the cross-talk, solve least squares on the support and drop
@@ -436,14 +436,17 @@ pub(super) fn run<T: Real>(
     Ok((x, Some(report)))
 }
 
-/// The sparsity for IHT and CoSaMP: twice the number of pixels the debiased backprojection
-/// detects (cross-talk hides weak returns from it, and too small a sparsity cannot be recovered
-/// from, whereas a larger one only costs some accuracy), clamped to [1, min(M·N, K/3)]: one
-/// return per pixel at most, and K/3 keeps CoSaMP's least squares on up to 3s columns
-/// overdetermined.
+/// The sparsity for IHT and CoSaMP: the larger of twice the number of pixels the debiased
+/// backprojection detects (cross-talk hides weak returns from it, and too small a sparsity
+/// cannot be recovered from, whereas a larger one only costs some accuracy) and 1.25 times the
+/// support the support pursuit ([`Method::SupportLs`]) settles on, which counts every return of
+/// a pixel with several; clamped to [1, K/3], which keeps CoSaMP's least squares on up to 3s
+/// columns overdetermined.
 fn estimate_sparsity<T: Real>(op: &RdOperator<T>, y: &[T]) -> Result<usize> {
     let bp = backproject(op, y, true, PeakThreshold::Robust)?;
     let found = bp.peaks.iter().filter(|&&p| p != NO_RETURN).count();
-    let cap = (op.nrows() / 3).min(op.geometry().pixels()).max(1);
-    Ok((2 * found).clamp(1, cap))
+    let pursuit = support_pursuit(op, y, PURSUIT_ROUNDS)?;
+    let settled = pursuit.x.iter().filter(|v| **v != T::zero()).count();
+    let cap = (op.nrows() / 3).min(op.geometry().voxels()).max(1);
+    Ok((2 * found).max(settled + settled.div_ceil(4)).clamp(1, cap))
 }
