@@ -229,3 +229,27 @@ fn with_noise_at_and_above_the_critical_length_auto_keeps_a_sparse_fit_not_least
             .all(|s| s.verdict.contains("information criterion")));
     }
 }
+
+#[test]
+fn auto_turns_to_the_debiased_lasso_when_one_reflector_per_pixel_leaves_returns_unexplained() {
+    let g = Geometry::new(8, 8, 16).unwrap();
+    let truth = semi_transparent_scene::<f64>(g, 1..=3, 0).unwrap();
+    // About 6 measurements per return: too few for the support pursuit.
+    let kp = 6 * truth.nnz() - (g.ks - 1);
+    let op = problem::<f64>(g, kp, 1);
+    let y = measure(&op, &truth);
+    let options = ReconstructOptions::default();
+    let auto = reconstruct(&op, &y, Method::Auto, &options).unwrap();
+    let fista = reconstruct(&op, &y, Method::Fista, &options).unwrap();
+    let (a, f) = (
+        compare(&truth, &auto.scene, 200e-12).unwrap(),
+        compare(&truth, &fista.scene, 200e-12).unwrap(),
+    );
+    let ran: Vec<Method> = auto.stages.iter().map(|s| s.method).collect();
+    assert!(ran.contains(&Method::Fista), "{:?}", auto.stages);
+    assert!(
+        a.relative_error <= f.relative_error.max(1e-9) * 1.01,
+        "auto {a} / fista {f}"
+    );
+    assert!(a.returns_exact as f64 >= 0.9 * a.true_returns as f64, "{a}");
+}

@@ -224,23 +224,105 @@ pub(super) fn auto<T: Real>(
     } else {
         "TV fits worse than the model-based scene".to_string()
     };
-    let (one, other) = if tv_fits { (tv, mb) } else { (mb, tv) };
-    // The pursuit (no per-pixel model) is kept over the one-reflector fits only when it explains
-    // the data markedly better: a sign of several returns per pixel.
-    let multi = best.stage.relative_residual < 0.5 * one.stage.relative_residual;
-    if multi {
+    let (mut one, other) = if tv_fits { (tv, mb) } else { (mb, tv) };
+    // The pursuit (no per-pixel model) is kept over the one-reflector fits when it explains the
+    // data markedly better: a sign of several returns per pixel.
+    if best.stage.relative_residual < 0.5 * one.stage.relative_residual {
         best.stage.verdict = format!(
             "{}; it fits better than one reflector per pixel can (residual {:.2e} against {:.2e})",
             best.stage.verdict, best.stage.relative_residual, one.stage.relative_residual
         );
         stages.push(other.stage);
         stages.push(one.stage);
-        Ok(finish(best, stages))
-    } else {
+        return Ok(finish(best, stages));
+    }
+    if explained(one.stage.relative_residual) {
         stages.push(best.stage);
         stages.push(other.stage);
-        Ok(finish(one, stages))
+        return Ok(finish(one, stages));
     }
+    // Does the residual of the one-reflector fit still hold returns in its lit pixels?
+    let (hidden, lit) = hidden_returns(op, y, &one.x, one.stage.report.as_mut());
+    if (hidden as f64) < HIDDEN_FRACTION * lit as f64 {
+        one.stage.verdict = format!(
+            "{}; its residual holds no further return in {} of {lit} lit pixels",
+            one.stage.verdict,
+            lit - hidden
+        );
+        stages.push(best.stage);
+        stages.push(other.stage);
+        return Ok(finish(one, stages));
+    }
+    // 3. Several returns per pixel: the convex solver, debiased, competes.
+    one.stage.verdict = format!(
+        "{}; its residual still holds returns in {hidden} of {lit} lit pixels",
+        one.stage.verdict
+    );
+    let mut fista = attempt(op, y, Method::Fista, options)?;
+    if explained(fista.stage.relative_residual) {
+        fista.stage.verdict = "the debiased lasso explains the data".to_string();
+        stages.extend([best.stage, other.stage, one.stage]);
+        return Ok(finish(fista, stages));
+    }
+    let k = op.nrows();
+    let mut tried = vec![best, one, fista];
+    let scores: Vec<f64> = tried.iter().map(|t| bic(&t.stage, k)).collect();
+    let pick = (0..tried.len())
+        .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+        .expect("three candidates");
+    for (t, score) in tried.iter_mut().zip(&scores) {
+        t.stage.verdict = format!("{}; information criterion {score:.1}", t.stage.verdict);
+    }
+    let kept = tried.remove(pick);
+    stages.push(other.stage);
+    stages.extend(tried.into_iter().map(|t| t.stage));
+    Ok(finish(kept, stages))
+}
+
+/// [`auto`] turns to the multi-return solvers when the residual of the one-reflector fit still
+/// shows a return in at least this fraction of its lit pixels.
+const HIDDEN_FRACTION: f64 = 0.05;
+
+/// How far above the median, in robust standard deviations, a residual correlation must stand to
+/// show a hidden return.
+const HIDDEN_Z: f64 = 3.5;
+
+/// The lit pixels of a one-return-per-pixel estimate whose residual correlation (one adjoint
+/// with the zero-mean pulse) stands [`HIDDEN_Z`] robust standard deviations above the median at
+/// a voxel other than their return: returns the fit has no room for. Returns (such pixels, lit
+/// pixels).
+fn hidden_returns<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    x: &[T],
+    report: Option<&mut Report>,
+) -> (usize, usize) {
+    let ks = op.geometry().ks;
+    let mut ax = vec![T::zero(); y.len()];
+    op.apply_sparse(x, &mut ax);
+    let r: Vec<T> = y.iter().zip(&ax).map(|(&a, &b)| a - b).collect();
+    let mut u = vec![T::zero(); x.len()];
+    crate::operator::VoxelOperator::correlate(op, &r, &mut u);
+    if let Some(rep) = report {
+        rep.support_applies += 1;
+        rep.adjoint_applies += 1;
+    }
+    let mut all: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
+    let med = crate::linalg::median(&mut all);
+    let level = med + HIDDEN_Z * crate::linalg::robust_sigma(&mut all, med);
+    let (mut hidden, mut lit) = (0, 0);
+    for (col, cu) in x.chunks(ks).zip(u.chunks(ks)) {
+        if col.iter().all(|v| *v == T::zero()) {
+            continue;
+        }
+        lit += 1;
+        let stands = col
+            .iter()
+            .zip(cu)
+            .any(|(v, c)| *v == T::zero() && c.as_f64() > 0.0 && c.as_f64() >= level);
+        hidden += usize::from(stands);
+    }
+    (hidden, lit)
 }
 
 /// The stages in the order they ran, the kept one marked; the reports are summed.
@@ -283,6 +365,7 @@ fn order(m: Method) -> usize {
         Method::ModelBased,
         Method::Cgls,
         Method::Tv,
+        Method::Fista,
     ]
     .iter()
     .position(|&x| x == m)

@@ -75,7 +75,10 @@ pub struct Reconstruction<T> {
 ///    [`Method::Tv`] from scratch, kept if it fits about as well as the model-based scene
 ///    ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If the support pursuit fitted the
 ///    data more than twice as well as the better one-reflector scene, the scene has more than
-///    one return per pixel and the pursuit's estimate is kept.
+///    one return per pixel and the pursuit's estimate is kept;
+/// 4. if the one-reflector fit's residual still shows returns at other depths of at least 5% of
+///    its lit pixels, [`Method::Fista`] (debiased) runs, and is kept if it explains the data;
+///    otherwise the fit with the lowest information criterion is.
 ///
 /// [`Reconstruction::stages`] lists what ran, each stage's residual, returns, applications and
 /// time, what was kept and why.

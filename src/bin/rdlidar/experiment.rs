@@ -36,7 +36,7 @@ pub struct ExperimentArgs {
     /// K_p 50,211,800).
     #[arg(long)]
     pub tiny: bool,
-    /// Scene: paper (the default) or random.
+    /// Scene: paper (the default), random, or transparent (1 to 3 returns per pixel).
     #[arg(long, value_parser = parse_scene)]
     pub scene: Option<ExpScene>,
     /// Scene grid MxNxKS (at most 1024 rows and columns, 2^26 voxels).
@@ -48,8 +48,9 @@ pub struct ExperimentArgs {
     /// Pulse lengths K_p, comma-separated.
     #[arg(long, value_name = "LIST", value_parser = parse_pulse_lens)]
     pub pulse_lens: Option<PulseLens>,
-    /// Solvers, comma-separated, or `all` (every solver but iht): backprojection,
-    /// backprojection-debiased, cgls, fista, iht, cosamp, amp, model-based, tv, auto.
+    /// Solvers, comma-separated, or `all` (every solver but iht and support-ls): backprojection,
+    /// backprojection-debiased, cgls, fista, iht, cosamp, support-ls, amp, model-based, tv,
+    /// auto.
     #[arg(long, value_name = "LIST", value_parser = parse_solver_list)]
     pub solvers: Option<Solvers>,
     /// Noise levels in dB SNR, comma-separated; `none` for noise-free.

@@ -31,6 +31,7 @@ fn simulate_case<T: Real>(config: &ExperimentConfig, case: &Case) -> Result<Prob
             SceneKind::Random => SceneSpec::Random {
                 lit_fraction: config.lit_fraction,
             },
+            SceneKind::Transparent => SceneSpec::Transparent,
         },
         snr_db: case.snr_db,
         ..SimulationSpec::new(config.size, case.pulse_len, case.seed)

@@ -46,14 +46,18 @@ pub enum SceneKind {
     /// A random opaque scene ([`crate::lidar::random_opaque_scene`]) drawn from SEED+3 for each
     /// seed, each pixel lit with probability `lit_fraction`.
     Random,
+    /// A semi-transparent scene ([`crate::lidar::semi_transparent_scene`]) drawn from SEED+3
+    /// for each seed: every pixel has 1 to min(3, K_s) returns.
+    Transparent,
 }
 
 impl SceneKind {
-    /// `"paper"` or `"random"`.
+    /// `"paper"`, `"random"` or `"transparent"`.
     pub fn name(self) -> &'static str {
         match self {
             SceneKind::Paper => "paper",
             SceneKind::Random => "random",
+            SceneKind::Transparent => "transparent",
         }
     }
 }
@@ -65,9 +69,10 @@ impl std::str::FromStr for SceneKind {
         match s {
             "paper" => Ok(SceneKind::Paper),
             "random" => Ok(SceneKind::Random),
+            "transparent" => Ok(SceneKind::Transparent),
             _ => Err(Error::param(
                 "scene",
-                format!("unknown scene {s:?}; expected paper or random"),
+                format!("unknown scene {s:?}; expected paper, random or transparent"),
             )),
         }
     }
