@@ -1,6 +1,7 @@
 //! Lidar reconstruction pipelines over the generic solvers and the lidar operator: the method
-//! registry and its defaults, [`reconstruct`] with the `auto` rule, the per-pixel peak rule that
-//! reduces a voxel estimate to one return per pixel, and the quality metrics against a truth.
+//! registry and its defaults, [`reconstruct`] and the stages of `auto`, the support pursuit, the
+//! least-squares refit on a support, the rule that extracts the returns of a voxel estimate, the
+//! backprojection thresholds, and the quality metrics against a truth.
 
 mod auto;
 mod method;
