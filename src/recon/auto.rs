@@ -28,6 +28,21 @@ fn bic(stage: &Stage, k: usize) -> f64 {
     k * rel_sq.ln() + stage.returns as f64 * k.ln()
 }
 
+/// Of fits none of which explains the data, the one with the lowest [`bic`]: appends the
+/// criterion to every verdict, moves the others' stages to `stages` and returns the kept one.
+fn keep_lowest_bic<T>(mut tried: Vec<Tried<T>>, k: usize, stages: &mut Vec<Stage>) -> Tried<T> {
+    let scores: Vec<f64> = tried.iter().map(|t| bic(&t.stage, k)).collect();
+    let pick = (0..tried.len())
+        .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+        .unwrap_or(0);
+    for (t, score) in tried.iter_mut().zip(&scores) {
+        t.stage.verdict = format!("{}; information criterion {score:.1}", t.stage.verdict);
+    }
+    let kept = tried.swap_remove(pick);
+    stages.extend(tried.into_iter().map(|t| t.stage));
+    kept
+}
+
 /// What one stage of [`Method::Auto`] did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Stage {
@@ -175,28 +190,20 @@ pub(super) fn auto<T: Real>(
         }
         // Noise: no fit explains the data; the information criterion weighs each sparse fit's
         // residual against its number of returns.
-        let k = op.nrows();
-        let scores: Vec<f64> = tried.iter().map(|t| bic(&t.stage, k)).collect();
-        let pick = (0..tried.len())
-            .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
-            .expect("at least two candidates");
-        for (t, score) in tried.iter_mut().zip(&scores) {
+        for t in tried.iter_mut() {
             let what = match t.stage.method {
                 Method::SupportLs => "support pursuit",
                 Method::Cgls => "least-squares returns refitted on their support",
                 _ => "one reflector per pixel",
             };
-            t.stage.verdict = format!(
-                "not explained ({what}{}); information criterion {score:.1}",
-                if agree {
-                    ", agreeing with the other cheap fit within 5%"
-                } else {
-                    ""
-                }
-            );
+            let agreeing = if agree {
+                ", agreeing with the other cheap fit within 5%"
+            } else {
+                ""
+            };
+            t.stage.verdict = format!("not explained ({what}{agreeing})");
         }
-        let kept = tried.remove(pick);
-        stages.extend(tried.into_iter().map(|t| t.stage));
+        let kept = keep_lowest_bic(tried, op.nrows(), &mut stages);
         return Ok(finish(kept, stages));
     }
 
@@ -264,18 +271,8 @@ pub(super) fn auto<T: Real>(
         stages.extend([best.stage, other.stage, one.stage]);
         return Ok(finish(fista, stages));
     }
-    let k = op.nrows();
-    let mut tried = vec![best, one, fista];
-    let scores: Vec<f64> = tried.iter().map(|t| bic(&t.stage, k)).collect();
-    let pick = (0..tried.len())
-        .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
-        .expect("three candidates");
-    for (t, score) in tried.iter_mut().zip(&scores) {
-        t.stage.verdict = format!("{}; information criterion {score:.1}", t.stage.verdict);
-    }
-    let kept = tried.remove(pick);
     stages.push(other.stage);
-    stages.extend(tried.into_iter().map(|t| t.stage));
+    let kept = keep_lowest_bic(vec![best, one, fista], op.nrows(), &mut stages);
     Ok(finish(kept, stages))
 }
 
