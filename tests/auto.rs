@@ -1,28 +1,12 @@
 //! `auto` across the regimes and scene kinds, multi-return scenes, FISTA's debiasing and the
 //! paper's backprojection threshold.
 
-use std::sync::Arc;
-
 use ndarray::Array3;
-use rdlidar::lidar::{
-    paper_scene, random_opaque_scene, semi_transparent_scene, Codes, Geometry, Pulse, RdOperator,
-    Scene,
-};
+use rdlidar::lidar::{paper_scene, random_opaque_scene, semi_transparent_scene, Geometry, Scene};
 use rdlidar::recon::{compare, reconstruct, Method, PeakThreshold, ReconstructOptions};
 use rdlidar::solver::{backprojection, Backprojection, Threshold};
-use rdlidar::{LinearOperator, Real};
 
-fn problem<T: Real>(g: Geometry, kp: usize, seed: u64) -> RdOperator<T> {
-    let pulse = Pulse::<T>::bernoulli(kp, seed).unwrap().into_inner();
-    let codes = Codes::random_binary(g.pixels(), g.samples(kp), seed + 1).unwrap();
-    RdOperator::new(g, pulse, Arc::new(codes)).unwrap()
-}
-
-fn measure<T: Real>(op: &RdOperator<T>, x: &Scene<T>) -> Vec<T> {
-    let mut y = vec![T::zero(); op.nrows()];
-    op.apply(x.as_slice(), &mut y);
-    y
-}
+use super::reconstruct::{measure, problem};
 
 /// Scenes of several shapes, each with the pulse lengths to try: compressive (at least 5
 /// measurements per return), critical, 2× and 4× redundant.

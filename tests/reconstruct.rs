@@ -8,13 +8,15 @@ use rdlidar::lidar::{paper_scene, Codes, Geometry, Pulse, RdOperator, Regime, Sc
 use rdlidar::recon::{compare, is_piecewise_smooth, reconstruct, Method, ReconstructOptions};
 use rdlidar::{Error, LinearOperator, Real};
 
-fn problem<T: Real>(g: Geometry, kp: usize, seed: u64) -> RdOperator<T> {
+/// A lidar operator with a Bernoulli pulse from `seed` and binary codes from `seed + 1`.
+pub(crate) fn problem<T: Real>(g: Geometry, kp: usize, seed: u64) -> RdOperator<T> {
     let pulse = Pulse::<T>::bernoulli(kp, seed).unwrap().into_inner();
     let codes = Codes::random_binary(g.pixels(), g.samples(kp), seed + 1).unwrap();
     RdOperator::new(g, pulse, Arc::new(codes)).unwrap()
 }
 
-fn measure<T: Real>(op: &RdOperator<T>, x: &Scene<T>) -> Vec<T> {
+/// Noise-free measurements y = A x.
+pub(crate) fn measure<T: Real>(op: &RdOperator<T>, x: &Scene<T>) -> Vec<T> {
     let mut y = vec![T::zero(); op.nrows()];
     op.apply(x.as_slice(), &mut y);
     y

@@ -376,6 +376,8 @@ pub fn compare_depth<T: Real>(
     )?;
     let mut m = depth_metrics(&truth.depth, &estimate.depth, tau_s)?;
     let (mut diff_sq, mut truth_sq) = (0.0f64, 0.0f64);
+    // Each lit pixel is one return, at its depth: (truth, estimate) per voxel that either has.
+    let mut pairs = Vec::new();
     for (((&d, &e), &x), &xe) in truth
         .depth
         .iter()
@@ -386,31 +388,16 @@ pub fn compare_depth<T: Real>(
         let x = if d == NO_RETURN { 0.0 } else { x.as_f64() };
         let xe = if e == NO_RETURN { 0.0 } else { xe.as_f64() };
         truth_sq += x * x;
-        diff_sq += if d == e {
-            (x - xe) * (x - xe)
-        } else {
-            x * x + xe * xe
-        };
-    }
-    m.relative_error = relative(diff_sq, truth_sq, "depth maps")?;
-    // Each lit pixel is one return, at its depth.
-    let value = |d: i32, a: f64| if d == NO_RETURN { 0.0 } else { a };
-    let mut pairs = Vec::new();
-    for (((&d, &e), &x), &xe) in truth
-        .depth
-        .iter()
-        .zip(estimate.depth.iter())
-        .zip(truth.amplitude.iter())
-        .zip(estimate.amplitude.iter())
-    {
-        let (x, xe) = (value(d, x.as_f64()), value(e, xe.as_f64()));
         if d == e {
+            diff_sq += (x - xe) * (x - xe);
             pairs.push((x, xe));
         } else {
+            diff_sq += x * x + xe * xe;
             pairs.push((x, 0.0));
             pairs.push((0.0, xe));
         }
     }
+    m.relative_error = relative(diff_sq, truth_sq, "depth maps")?;
     return_metrics(&mut m, pairs.into_iter())?;
     Ok(m)
 }
