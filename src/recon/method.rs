@@ -127,20 +127,31 @@ impl FromStr for Method {
     /// # Errors
     /// [`Error::InvalidParameter`] (`method`) listing the valid names.
     fn from_str(s: &str) -> Result<Self> {
-        Method::NAMES
-            .iter()
-            .position(|&n| n == s)
-            .map(|i| Method::ALL[i])
-            .ok_or_else(|| {
-                Error::param(
-                    "method",
-                    format!(
-                        "unknown method {s:?}; expected one of {}",
-                        Method::NAMES.join(", ")
-                    ),
-                )
-            })
+        by_name(s, &Method::NAMES, &Method::ALL, "method", "method")
     }
+}
+
+/// The entry of `all` whose command-line name in `names` (same order) is `s`.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`param`) naming the unknown `what` and listing the valid names.
+fn by_name<V: Copy>(
+    s: &str,
+    names: &[&str],
+    all: &[V],
+    param: &'static str,
+    what: &str,
+) -> Result<V> {
+    names
+        .iter()
+        .position(|&n| n == s)
+        .map(|i| all[i])
+        .ok_or_else(|| {
+            Error::param(
+                param,
+                format!("unknown {what} {s:?}; expected one of {}", names.join(", ")),
+            )
+        })
 }
 
 /// How the backprojections decide which per-pixel peaks are returns.
@@ -167,10 +178,11 @@ impl PeakThreshold {
 
     /// The command-line name.
     pub fn name(self) -> &'static str {
-        match self {
-            PeakThreshold::Paper => "paper",
-            PeakThreshold::Robust => "robust",
-        }
+        let i = PeakThreshold::ALL
+            .iter()
+            .position(|&t| t == self)
+            .expect("ALL lists every rule");
+        PeakThreshold::NAMES[i]
     }
 }
 
@@ -182,19 +194,13 @@ impl FromStr for PeakThreshold {
     /// # Errors
     /// [`Error::InvalidParameter`] (`threshold`) listing the valid names.
     fn from_str(s: &str) -> Result<Self> {
-        PeakThreshold::NAMES
-            .iter()
-            .position(|&n| n == s)
-            .map(|i| PeakThreshold::ALL[i])
-            .ok_or_else(|| {
-                Error::param(
-                    "threshold",
-                    format!(
-                        "unknown threshold rule {s:?}; expected one of {}",
-                        PeakThreshold::NAMES.join(", ")
-                    ),
-                )
-            })
+        by_name(
+            s,
+            &PeakThreshold::NAMES,
+            &PeakThreshold::ALL,
+            "threshold",
+            "threshold rule",
+        )
     }
 }
 
