@@ -89,6 +89,34 @@ fn a_scene_with_one_to_three_returns_per_pixel_is_recovered_at_eight_measurement
 }
 
 #[test]
+fn the_model_based_solver_with_k_returns_per_pixel_recovers_a_multi_return_scene() {
+    let g = Geometry::new(8, 8, 24).unwrap();
+    let truth = semi_transparent_scene::<f64>(g, 1..=3, 11).unwrap();
+    let kp = 8 * truth.nnz() - (g.ks - 1);
+    let op = problem::<f64>(g, kp, 12);
+    let y = measure(&op, &truth);
+    let run = |k: Option<usize>| {
+        let options = ReconstructOptions {
+            max_returns: k,
+            ..ReconstructOptions::default()
+        };
+        let r = reconstruct(&op, &y, Method::ModelBased, &options).unwrap();
+        compare(&truth, &r.scene, 200e-12).unwrap()
+    };
+    for k in [Some(3), Some(4), None] {
+        let m = run(k);
+        assert!(
+            m.returns_exact as f64 >= 0.99 * m.true_returns as f64,
+            "k {k:?}: {m}"
+        );
+    }
+    // One return per pixel cannot hold the scene.
+    let one = run(Some(1));
+    assert!(one.returns_exact <= g.pixels(), "{one}");
+    assert!(one.returns_missed > 0, "{one}");
+}
+
+#[test]
 fn fista_debiased_is_exact_where_its_support_is_right_and_biased_without() {
     let g = Geometry::new(6, 6, 8).unwrap();
     let truth = paper_scene::<f64>(g).unwrap();
@@ -231,6 +259,13 @@ fn auto_turns_to_the_debiased_lasso_when_one_reflector_per_pixel_leaves_returns_
     );
     let ran: Vec<Method> = auto.stages.iter().map(|s| s.method).collect();
     assert!(ran.contains(&Method::Fista), "{:?}", auto.stages);
+    // Before the lasso, the model-based solver with several returns per pixel was tried.
+    assert!(
+        auto.stages.iter().any(|s| s.method == Method::ModelBased
+            && s.verdict.contains("returns per pixel do not explain")),
+        "{:?}",
+        auto.stages
+    );
     assert!(
         a.relative_error <= f.relative_error.max(1e-9) * 1.01,
         "auto {a} / fista {f}"

@@ -240,6 +240,38 @@ fn an_unknown_solver_is_a_usage_error_listing_the_valid_names() {
 }
 
 #[test]
+fn returns_per_pixel_takes_a_count_or_auto_and_refuses_anything_else() {
+    let dir = TempDir::new("returns");
+    let sim = simulate(&dir, 2000);
+    let truth = sim.join("scene.npy");
+    for k in ["2", "auto"] {
+        let out = reconstruct(
+            &dir,
+            &sim,
+            "model-based",
+            &["--returns", k, "--truth", s(&truth)],
+        );
+        assert!(out.status.success(), "--returns {k}: {}", stderr(&out));
+        assert!(
+            stdout(&out).contains("exact depth 100.0%"),
+            "{}",
+            stdout(&out)
+        );
+    }
+    for bad in ["0", "9", "two"] {
+        let dir = TempDir::new("returns-bad");
+        let out = reconstruct(&dir, &sim, "model-based", &["--returns", bad]);
+        assert_eq!(out.status.code(), Some(2), "--returns {bad}");
+        let err = stderr(&out);
+        assert!(
+            err.contains("--returns") && err.contains("from 1 to 8 or auto"),
+            "{err}"
+        );
+        assert!(outputs(&dir).is_empty());
+    }
+}
+
+#[test]
 fn a_missing_file_is_named_and_nothing_is_written() {
     let dir = TempDir::new("missing");
     let sim = simulate(&dir, 200);

@@ -7,7 +7,7 @@ use crate::operator::LinearOperator;
 use crate::real::Real;
 use crate::solver::{Report, Termination};
 
-use super::method::{run, Method, ReconstructOptions};
+use super::method::{estimate_returns, run, Method, ReconstructOptions};
 use super::peaks::returns;
 use super::pursuit::{
     explained_tolerance, relative_residual, support_pursuit, PursuitEnd, PURSUIT_ROUNDS,
@@ -98,6 +98,16 @@ pub(super) struct Auto<T> {
 struct Tried<T> {
     x: Vec<T>,
     stage: Stage,
+}
+
+impl<T> Tried<T> {
+    /// Whether its solver stopped on its own residual tolerance.
+    fn converged(&self) -> bool {
+        self.stage
+            .report
+            .as_ref()
+            .is_some_and(|r| r.termination == Termination::Residual)
+    }
 }
 
 fn nonzeros<T: Real>(x: &[T]) -> usize {
@@ -207,30 +217,31 @@ pub(super) fn auto<T: Real>(
         return Ok(finish(kept, stages));
     }
 
-    // 2b. Compressive: the one-reflector model, then TV on the depth map.
-    let mut mb = attempt(op, y, Method::ModelBased, options)?;
-    let mb_converged = mb
-        .stage
-        .report
-        .as_ref()
-        .is_some_and(|r| r.termination == Termination::Residual);
-    if explained(mb.stage.relative_residual) || mb_converged {
-        mb.stage.verdict = "one reflector per pixel explains the data".to_string();
+    // 2b. Compressive: TV on the depth map, whose first fit is the model-based one (so that it
+    // costs little more where that fit explains the data already); the model-based fit alone
+    // only when TV does not explain the data, as a scene need not be piecewise smooth.
+    let mut tv = attempt(op, y, Method::Tv, options)?;
+    if explained(tv.stage.relative_residual) || tv.converged() {
+        tv.stage.verdict = "TV on the depth map explains the data".to_string();
         stages.push(best.stage);
+        return Ok(finish(tv, stages));
+    }
+    let mut mb = attempt(op, y, Method::ModelBased, options)?;
+    if explained(mb.stage.relative_residual) || mb.converged() {
+        tv.stage.verdict = "TV on the depth map does not explain the data".to_string();
+        mb.stage.verdict = "one reflector per pixel explains the data".to_string();
+        stages.extend([best.stage, tv.stage]);
         return Ok(finish(mb, stages));
     }
-    mb.stage.verdict = "one reflector per pixel does not explain the data".to_string();
-    let mut tv = attempt(op, y, Method::Tv, options)?;
     let y_norm = crate::linalg::norm2(y);
     let (r_mb, r_tv) = (mb.stage.relative_residual, tv.stage.relative_residual);
     let tv_fits = r_tv * y_norm <= TV_RESIDUAL_MARGIN * r_mb * y_norm + 1e-6 * y_norm;
-    tv.stage.verdict = if explained(r_tv) {
-        "TV on the depth map explains the data".to_string()
-    } else if tv_fits {
+    tv.stage.verdict = if tv_fits {
         "TV fits about as well as the model-based scene (within 5%)".to_string()
     } else {
         "TV fits worse than the model-based scene".to_string()
     };
+    mb.stage.verdict = "one reflector per pixel does not explain the data".to_string();
     let (mut one, other) = if tv_fits { (tv, mb) } else { (mb, tv) };
     // The pursuit (no per-pixel model) is kept over the one-reflector fits when it explains the
     // data markedly better: a sign of several returns per pixel.
@@ -242,11 +253,6 @@ pub(super) fn auto<T: Real>(
         stages.push(other.stage);
         stages.push(one.stage);
         return Ok(finish(best, stages));
-    }
-    if explained(one.stage.relative_residual) {
-        stages.push(best.stage);
-        stages.push(other.stage);
-        return Ok(finish(one, stages));
     }
     // Does the residual of the one-reflector fit still hold returns in its lit pixels?
     let (hidden, lit) = hidden_returns(op, y, &one.x, one.stage.report.as_mut());
@@ -260,19 +266,32 @@ pub(super) fn auto<T: Real>(
         stages.push(other.stage);
         return Ok(finish(one, stages));
     }
-    // 3. Several returns per pixel: the convex solver, debiased, competes.
+    // 3. Several returns per pixel: the model-based fit with as many returns per pixel as the
+    // pursuit suggests, then the convex solver, debiased.
     one.stage.verdict = format!(
         "{}; its residual still holds returns in {hidden} of {lit} lit pixels",
         one.stage.verdict
     );
+    let k = estimate_returns(&best.x, g.ks).max(2);
+    let several = ReconstructOptions {
+        max_returns: Some(k),
+        ..*options
+    };
+    let mut mbk = attempt(op, y, Method::ModelBased, &several)?;
+    if explained(mbk.stage.relative_residual) {
+        mbk.stage.verdict = format!("up to {k} returns per pixel explain the data");
+        stages.extend([best.stage, other.stage, one.stage]);
+        return Ok(finish(mbk, stages));
+    }
+    mbk.stage.verdict = format!("up to {k} returns per pixel do not explain the data");
     let mut fista = attempt(op, y, Method::Fista, options)?;
     if explained(fista.stage.relative_residual) {
         fista.stage.verdict = "the debiased lasso explains the data".to_string();
-        stages.extend([best.stage, other.stage, one.stage]);
+        stages.extend([best.stage, other.stage, one.stage, mbk.stage]);
         return Ok(finish(fista, stages));
     }
     stages.push(other.stage);
-    let kept = keep_lowest_bic(vec![best, one, fista], op.nrows(), &mut stages);
+    let kept = keep_lowest_bic(vec![best, one, mbk, fista], op.nrows(), &mut stages);
     Ok(finish(kept, stages))
 }
 
@@ -359,9 +378,9 @@ fn finish<T: Real>(mut kept: Tried<T>, mut stages: Vec<Stage>) -> Auto<T> {
 fn order(m: Method) -> usize {
     [
         Method::SupportLs,
+        Method::Tv,
         Method::ModelBased,
         Method::Cgls,
-        Method::Tv,
         Method::Fista,
     ]
     .iter()

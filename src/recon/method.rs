@@ -63,7 +63,8 @@ pub enum Method {
     /// ([`ReflectorAmpParams::default`](crate::solver::ReflectorAmpParams)): the most probable
     /// scene, without the least-squares refinement of [`Method::ModelBased`].
     Amp,
-    /// Model-based recovery, at most one reflector per pixel ([`ModelBasedParams::default`]):
+    /// Model-based recovery, at most k reflectors per pixel ([`ReconstructOptions::max_returns`],
+    /// one by default; otherwise [`ModelBasedParams::default`]):
     /// started by message passing, refined by least squares on the support.
     ModelBased,
     /// Total variation on the depth map ([`TvDepthParams::default`]).
@@ -226,6 +227,10 @@ pub struct ReconstructOptions {
     /// shrinkage of the amplitudes (default `true`; skipped when the support has more than half
     /// as many voxels as there are measurements).
     pub debias: bool,
+    /// Returns per pixel at most for [`Method::ModelBased`]: `Some(k)` (default `Some(1)`, the
+    /// one-reflector model), or `None` to estimate k from the data (from a support pursuit,
+    /// [`estimate_returns`]).
+    pub max_returns: Option<usize>,
 }
 
 impl Default for ReconstructOptions {
@@ -237,6 +242,7 @@ impl Default for ReconstructOptions {
             power_iterations: None,
             threshold: PeakThreshold::Paper,
             debias: true,
+            max_returns: Some(1),
         }
     }
 }
@@ -421,10 +427,23 @@ pub(super) fn run<T: Real>(
             r
         }
         Method::ModelBased => {
-            let params = model_params(options);
+            let mut params = model_params(options);
+            let mut pursuit = None;
+            params.max_returns = match options.max_returns {
+                Some(k) => k,
+                None => {
+                    let p = support_pursuit(op, y, PURSUIT_ROUNDS)?;
+                    let k = estimate_returns(&p.x, g.ks);
+                    pursuit = Some(p.report);
+                    k
+                }
+            };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = model_based(op, y, &mut x, &params, &mut progress)?;
+            let mut r = model_based(op, y, &mut x, &params, &mut progress)?;
             progress.finish();
+            if let Some(p) = pursuit {
+                r.absorb_applies(&p);
+            }
             r
         }
         Method::Tv => {
@@ -440,6 +459,27 @@ pub(super) fn run<T: Real>(
         Method::Auto => unreachable!("Auto is resolved before run"),
     };
     Ok((x, Some(report)))
+}
+
+/// The most returns per pixel [`estimate_returns`] proposes.
+pub const MAX_RETURNS_ESTIMATE: usize = 8;
+
+/// The returns per pixel a scene estimate `x` (K_s voxels per pixel) suggests: the smallest k
+/// such that at least 99% of its lit pixels hold at most k returns, within
+/// [1, [`MAX_RETURNS_ESTIMATE`]]. From the support pursuit's estimate, which has no per-pixel
+/// model, it gives [`Method::ModelBased`] its k when none is given.
+pub fn estimate_returns<T: Real>(x: &[T], ks: usize) -> usize {
+    let mut counts: Vec<usize> = x
+        .chunks(ks.max(1))
+        .map(|c| c.iter().filter(|v| **v != T::zero()).count())
+        .filter(|&c| c > 0)
+        .collect();
+    if counts.is_empty() {
+        return 1;
+    }
+    counts.sort_unstable();
+    let at = ((0.99 * counts.len() as f64).ceil() as usize).clamp(1, counts.len());
+    counts[at - 1].clamp(1, MAX_RETURNS_ESTIMATE)
 }
 
 /// The sparsity for IHT and CoSaMP: the larger of twice the number of pixels the debiased

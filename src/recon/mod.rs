@@ -12,7 +12,9 @@ mod reconstruct;
 mod refit;
 
 pub use auto::{Stage, TV_RESIDUAL_MARGIN};
-pub use method::{Method, PeakThreshold, ReconstructOptions};
+pub use method::{
+    estimate_returns, Method, PeakThreshold, ReconstructOptions, MAX_RETURNS_ESTIMATE,
+};
 pub use metrics::{compare, compare_depth, relative_error, Metrics};
 pub use peaks::{PAPER_FRACTION, PAPER_QUANTILE};
 pub use pursuit::explained_tolerance;

@@ -5,7 +5,8 @@
 //! [`Reconstruction`]. Generic solvers (CGLS, FISTA, IHT, CoSaMP) estimate the whole voxel cube;
 //! their estimate is reduced to at most one return per pixel by the per-pixel peak rule of
 //! [`backprojection`] (the largest positive entry of each pixel, kept above a robust threshold).
-//! The model-based and TV solvers produce one return per pixel themselves.
+//! The model-based solver (with its default k = 1) and TV produce one return per pixel
+//! themselves.
 
 use std::time::{Duration, Instant};
 
@@ -55,8 +56,8 @@ pub struct Reconstruction<T> {
 /// Each [`Method`] runs with lidar defaults (see its documentation). The iterative solvers'
 /// estimates are reduced to the returns they found: every positive voxel above median + 3σ of
 /// all entries (σ = 1.4826·MAD) and at least 5% of the strongest one. The generic solvers may
-/// keep several returns per pixel; the model-based and TV solvers give one per pixel themselves,
-/// and for them this only drops returns too weak to be real. The depth map keeps each pixel's
+/// keep several returns per pixel; the model-based solver (k per pixel, one by default) and TV
+/// give one per pixel themselves, and for them this only drops returns too weak to be real. The depth map keeps each pixel's
 /// strongest return.
 ///
 /// **The [`Method::Auto`] rule** escalates from the cheapest method and stops at the first whose
@@ -71,14 +72,16 @@ pub struct Reconstruction<T> {
 ///    within 5%, [`Method::Cgls`] with its returns refitted by least squares on their support.
 ///    With noise nothing explains the data, and the sparse fit with the lowest information
 ///    criterion K·ln(‖r‖²/‖y‖²) + |S|·ln K is kept;
-/// 3. otherwise (compressive) [`Method::ModelBased`], then, unless it explains the data,
-///    [`Method::Tv`] from scratch, kept if it fits about as well as the model-based scene
-///    ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If the support pursuit fitted the
-///    data more than twice as well as the better one-reflector scene, the scene has more than
-///    one return per pixel and the pursuit's estimate is kept;
+/// 3. otherwise (compressive) [`Method::Tv`], whose first fit is the model-based one; unless it
+///    explains the data, [`Method::ModelBased`] alone, and TV is kept if it fits about as well
+///    as the model-based scene ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If the
+///    support pursuit fitted the data more than twice as well as the better one-reflector scene,
+///    the scene has more than one return per pixel and the pursuit's estimate is kept;
 /// 4. if the one-reflector fit's residual still shows returns at other depths of at least 5% of
-///    its lit pixels, [`Method::Fista`] (debiased) runs, and is kept if it explains the data;
-///    otherwise the fit with the lowest information criterion is.
+///    its lit pixels, [`Method::ModelBased`] with k returns per pixel (k from the pursuit's
+///    estimate, [`estimate_returns`](super::estimate_returns), at least 2), then
+///    [`Method::Fista`] (debiased); the first that explains the data is kept, otherwise the fit
+///    with the lowest information criterion.
 ///
 /// [`Reconstruction::stages`] lists what ran, each stage's residual, returns, applications and
 /// time, what was kept and why.

@@ -6,7 +6,9 @@ use std::sync::Arc;
 use ndarray_npy::WritableElement;
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{depth_bin_m, Geometry, RdOperator, DEFAULT_TAU_S};
-use rdlidar::recon::{compare, reconstruct, Method, PeakThreshold, ReconstructOptions};
+use rdlidar::recon::{
+    compare, reconstruct, Method, PeakThreshold, ReconstructOptions, MAX_RETURNS_ESTIMATE,
+};
 use rdlidar::Real;
 
 use crate::common::{
@@ -27,9 +29,11 @@ use crate::layout::{check_memory, expectation};
 /// backprojection-debiased (zero-mean pulse), cgls (least squares), fista (nonnegative lasso,
 /// debiased by least squares on its support), iht and cosamp (sparsity estimated from the
 /// debiased backprojection), support-ls (greedy support pursuit with least squares), amp
-/// (message passing with the one-reflector prior), model-based (one reflector per pixel), tv
-/// (TV on the depth map) and auto, which escalates from the cheapest: support-ls; then, when
-/// K ≥ M·N·K_s, model-based and cgls; otherwise model-based, then tv. It keeps the first fit
+/// (message passing with the one-reflector prior), model-based (one reflector per pixel, or
+/// --returns K), tv (TV on the depth map) and auto, which escalates from the cheapest:
+/// support-ls; then, when K ≥ M·N·K_s, model-based and cgls; otherwise tv, then model-based
+/// (and, for returns the one-reflector fit has no room for, model-based with k returns and
+/// fista). It keeps the first fit
 /// that explains the data (with noise, the best by an information criterion) and prints each
 /// stage it ran and why.
 ///
@@ -68,6 +72,28 @@ pub struct ReconstructArgs {
     /// shrinkage.
     #[arg(long)]
     pub no_debias: bool,
+    /// Returns per pixel at most for the model-based solver: a count from 1 to 8 (1: the
+    /// one-reflector model), or auto to estimate it from a support pursuit (the count that 99%
+    /// of its lit pixels do not exceed).
+    #[arg(long, value_name = "K|auto", value_parser = parse_returns, default_value = "1")]
+    pub returns: MaxReturns,
+}
+
+/// A `--returns` value: a count, or `None` for auto.
+#[derive(Debug, Clone, Copy)]
+pub struct MaxReturns(Option<usize>);
+
+/// A `--returns` value: a count in 1 ..= 8, or auto.
+fn parse_returns(text: &str) -> Result<MaxReturns, String> {
+    if text == "auto" {
+        return Ok(MaxReturns(None));
+    }
+    match text.parse::<usize>() {
+        Ok(k) if (1..=MAX_RETURNS_ESTIMATE).contains(&k) => Ok(MaxReturns(Some(k))),
+        _ => Err(format!(
+            "expected a count from 1 to {MAX_RETURNS_ESTIMATE} or auto, got {text:?}"
+        )),
+    }
 }
 
 /// A `--threshold` rule name.
@@ -153,6 +179,7 @@ fn reconstruct_files<T: Real + WritableElement>(
         power_iterations: None,
         threshold: a.threshold,
         debias: !a.no_debias,
+        max_returns: a.returns.0,
     };
     let r = reconstruct(&op, &y, a.solver, &options)
         .map_err(|e| format!("--solver {}: {e}", a.solver))?;

@@ -115,7 +115,7 @@ impl Grams {
 
 /// The prior's parameters.
 #[derive(Debug, Clone, Copy)]
-struct Prior {
+pub(crate) struct Prior {
     lit: f64,
     mean: f64,
     var: f64,
@@ -155,6 +155,16 @@ pub(crate) struct Posteriors {
     pub(crate) lit: Vec<f64>,
     /// E[a | return] and E[a² | return], one pair per pixel ((0, 0) where P(return) = 0).
     pub(crate) amplitude: Vec<(f64, f64)>,
+}
+
+/// Where a run stopped, to resume from: AMP's state is its Onsager-corrected residual, the
+/// posterior mean and the learned prior. A run resumed under other pixel priors continues from
+/// it instead of from z = y, x̂ = 0, so that it only has to move the posteriors on.
+#[derive(Clone)]
+pub(crate) struct AmpState {
+    z: Vec<f64>,
+    mean: Vec<f64>,
+    prior: Prior,
 }
 
 impl Posteriors {
@@ -328,11 +338,12 @@ where
     O: Observer<T> + ?Sized,
 {
     reflector_amp_constrained(op, y, x, params, PixelConstraints::default(), observer)
-        .map(|(r, _)| r)
+        .map(|(r, ..)| r)
 }
 
-/// [`reflector_amp`] under per-pixel constraints (depth windows, priors); also returns the
-/// posteriors of the best iterate.
+/// [`reflector_amp`] under per-pixel constraints (depth windows, priors), resumed from
+/// `constraints.resume` when given; also returns the posteriors of the best iterate and the
+/// state to resume from (that of the best iterate).
 pub(crate) fn reflector_amp_constrained<T, A, O>(
     op: &A,
     y: &[T],
@@ -340,19 +351,32 @@ pub(crate) fn reflector_amp_constrained<T, A, O>(
     params: &ReflectorAmpParams,
     constraints: PixelConstraints<'_>,
     observer: &mut O,
-) -> Result<(Report, Posteriors)>
+) -> Result<(Report, Posteriors, AmpState)>
 where
     T: Real,
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    let PixelConstraints { windows, priors } = constraints;
+    let PixelConstraints {
+        windows,
+        priors,
+        resume,
+    } = constraints;
     const NAME: &str = "reflector-amp";
     params.validate()?;
     let (m, n) = (op.nrows(), op.ncols());
     check_problem(NAME, m, n, y, x)?;
     let ks = op.column_len();
     let pixels = check_pixels(NAME, n, ks, windows)?;
+    if let Some(state) = resume {
+        if state.z.len() != m || state.mean.len() != n {
+            return Err(Error::shape(
+                "reflector-amp: resumed state vs operator columns",
+                n,
+                state.mean.len(),
+            ));
+        }
+    }
     if let Some(pr) = priors {
         if pr.lit.len() != pixels
             || pr.depth.len() != n
@@ -376,6 +400,15 @@ where
         return Ok((
             monitor.finish(0, Termination::ZeroResidual, &counted),
             best_post,
+            AmpState {
+                z: y64,
+                mean: vec![0.0; n],
+                prior: Prior {
+                    lit: params.lit_probability,
+                    mean: 0.0,
+                    var: 0.0,
+                },
+            },
         ));
     }
     let grams = Grams::of(op, pixels);
@@ -404,6 +437,16 @@ where
 
     let mut mean = vec![0.0f64; n];
     let mut z = y64.clone();
+    if let Some(state) = resume {
+        mean.copy_from_slice(&state.mean);
+        z.copy_from_slice(&state.z);
+        prior = state.prior;
+    }
+    let mut best_state = AmpState {
+        z: z.clone(),
+        mean: mean.clone(),
+        prior,
+    };
     let mut xt = vec![T::zero(); n];
     let mut u = vec![T::zero(); n];
     let mut ax = vec![T::zero(); m];
@@ -428,9 +471,11 @@ where
         let tau2 = z.iter().map(|v| v * v).sum::<f64>() / m as f64;
         if !(tau2 > 0.0 && tau2.is_finite()) {
             // z = 0 exactly: the last posterior mean explains y, and x holds its scene.
+            let state = AmpState { z, mean, prior };
             return Ok((
                 finish(monitor, it - 1, Termination::ZeroResidual, applies),
                 posteriors,
+                state,
             ));
         }
         for (t, v) in zt.iter_mut().zip(&z) {
@@ -520,6 +565,9 @@ where
             best_post.depth.copy_from_slice(&posteriors.depth);
             best_post.lit.copy_from_slice(&posteriors.lit);
             best_post.amplitude.copy_from_slice(&posteriors.amplitude);
+            best_state.z.copy_from_slice(&z);
+            best_state.mean.copy_from_slice(&mean);
+            best_state.prior = prior;
             since_best = 0;
         } else {
             since_best += 1;
@@ -541,7 +589,7 @@ where
         };
         if let Some(t) = term {
             x.copy_from_slice(&best_x);
-            return Ok((finish(monitor, it, t, applies), best_post));
+            return Ok((finish(monitor, it, t, applies), best_post, best_state));
         }
     }
 }

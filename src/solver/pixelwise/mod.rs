@@ -12,11 +12,13 @@ pub use amp::{reflector_amp, ReflectorAmpParams};
 pub use model_based::{model_based, ModelBasedParams};
 pub use tv_depth::{tv_depth, TvDepthParams};
 
-/// What restricts a pixelwise solve beyond its parameters.
+/// What restricts (or resumes) a pixelwise solve beyond its parameters.
 #[derive(Clone, Copy, Default)]
 pub(crate) struct PixelConstraints<'a> {
     /// Each pixel's depth within a window `lo..=hi` (`windows[p] = (lo, hi)`).
     pub windows: Option<&'a [(usize, usize)]>,
     /// Each pixel's prior, from its neighbours.
     pub priors: Option<&'a amp::PixelPriors>,
+    /// Message passing continues from this state instead of starting afresh.
+    pub resume: Option<&'a amp::AmpState>,
 }

@@ -1,5 +1,5 @@
-//! Model-based recovery with at most one reflector per pixel (model-based CoSaMP with an
-//! adaptive support size).
+//! Model-based recovery with at most k reflectors per pixel, one by default (model-based CoSaMP
+//! with an adaptive support size).
 
 use rayon::prelude::*;
 
@@ -17,6 +17,11 @@ use crate::solver::{Stopping, Termination};
 /// Parameters of [`model_based`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ModelBasedParams {
+    /// Returns per pixel at most (k, default 1: one reflector per pixel). With k > 1 each
+    /// iteration picks a pixel's returns one at a time, each judged on the pixel's correlations
+    /// with the ones picked before taken out, and keeps a further return only when it is
+    /// significant ([`detection_z`](Self::detection_z), or already held).
+    pub max_returns: usize,
     /// Reflectivities are nonnegative: depths are chosen by the largest signed correlation and
     /// pixels whose least-squares amplitude is not positive are dropped (default `true`).
     pub nonnegative: bool,
@@ -54,6 +59,7 @@ pub struct ModelBasedParams {
 impl Default for ModelBasedParams {
     fn default() -> Self {
         ModelBasedParams {
+            max_returns: 1,
             nonnegative: true,
             explore_iterations: 3,
             detection_z: 4.0,
@@ -88,6 +94,9 @@ impl ModelBasedParams {
         if let Some(a) = &self.amp {
             a.validate()?;
         }
+        if self.max_returns == 0 {
+            return Err(Error::param("max_returns", "must be at least 1"));
+        }
         check_tolerance("detection_z", self.detection_z)?;
         check_tolerance("amplitude_z", self.amplitude_z)?;
         check_tolerance("noise_floor", self.noise_floor)?;
@@ -114,11 +123,13 @@ fn robust_sigma<T: Real>(u: &[T]) -> f64 {
     crate::linalg::robust_sigma(&mut a, 0.0)
 }
 
-/// Counts applications of restricted operators (least-squares steps).
+/// Counts applications: of the full operator (message passing, correlations) and of operators
+/// restricted to the support (least-squares steps).
 #[derive(Default)]
 struct Applies {
     forward: usize,
     adjoint: usize,
+    support: usize,
 }
 
 /// y − A_S b for the restriction `restricted` of the operator to a support.
@@ -157,8 +168,7 @@ where
             },
             other => other,
         })?;
-        applies.forward += rep.forward_applies + 1;
-        applies.adjoint += rep.adjoint_applies;
+        applies.support += rep.forward_applies + 1 + rep.adjoint_applies;
     }
     Ok(support_residual(restricted.as_ref(), y, b))
 }
@@ -175,7 +185,7 @@ where
     T: Real,
     A: VoxelOperator<T> + ?Sized,
 {
-    applies.forward += usize::from(!voxels.is_empty());
+    applies.support += usize::from(!voxels.is_empty());
     Ok(support_residual(
         op.restrict_columns(voxels.to_vec())?.as_ref(),
         y,
@@ -207,10 +217,11 @@ fn retain_support<T: Copy>(
     retain_rows(own, keep, ks);
 }
 
-/// Recovers a scene with at most one nonzero per pixel (a pixel is `column_len` consecutive
-/// unknowns: one reflector per lidar pixel, empty pixels allowed) from y ≈ Ax, starting from `x`.
+/// Recovers a scene with at most [`max_returns`](ModelBasedParams::max_returns) nonzeros per
+/// pixel, one by default (a pixel is `column_len` consecutive unknowns: one reflector per lidar
+/// pixel, empty pixels allowed) from y ≈ Ax, starting from `x`.
 ///
-/// Model-based CoSaMP (Baraniuk et al. 2010) with the one-reflector-per-pixel model and a support
+/// Model-based CoSaMP (Baraniuk et al. 2010) with the k-reflectors-per-pixel model and a support
 /// size found from the data. Each iteration
 ///
 /// 1. correlates the residual r = y − Ax with every column ([`VoxelOperator::correlate`]: one
@@ -223,7 +234,9 @@ fn retain_support<T: Copy>(
 /// 3. prunes to the model: per pixel the depth with the largest correlation, kept when it is
 ///    significant (at least [`detection_z`](ModelBasedParams::detection_z) robust standard
 ///    deviations of all correlations, which measure the cross-talk left and the noise), within a
-///    support budget;
+///    support budget; with k > 1, up to k − 1 further depths, one at a time, each the largest
+///    correlation once the returns picked before are taken out of the pixel's correlations
+///    (matching pursuit within the pixel), kept when significant or already held;
 /// 4. solves least squares on the new support by [`cgls`] on the restricted operator
 ///    ([`LinearOperator::restrict_columns`]: for the lidar operator O(support × K_p) per application,
 ///    never the full cube), warm-started, and drops pixels whose amplitude is not positive
@@ -233,7 +246,7 @@ fn retain_support<T: Copy>(
 /// detectable and wrong depths are corrected: the iteration stops with
 /// [`Termination::Converged`] when an iteration leaves the support unchanged, with
 /// [`Termination::ZeroResidual`] for y = 0, otherwise by the [`Stopping`] rules (residual
-/// ‖Ax − y‖ / ‖y‖). The report's apply counts include the restricted applications.
+/// ‖Ax − y‖ / ‖y‖). The report counts the restricted applications as support applications.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for invalid parameters; [`Error::ShapeMismatch`] /
@@ -292,26 +305,31 @@ where
         if x.iter().all(|v| *v == T::zero()) {
             let constraints = PixelConstraints {
                 windows,
-                priors: None,
+                ..PixelConstraints::default()
             };
-            let (rep, _) = reflector_amp_constrained(op, y, x, amp_params, constraints, &mut ())?;
+            let (rep, ..) = reflector_amp_constrained(op, y, x, amp_params, constraints, &mut ())?;
             applies.forward += rep.forward_applies;
             applies.adjoint += rep.adjoint_applies;
             explore_iterations = 0;
         }
     }
 
-    // The warm start, pruned to the model (per pixel its largest entry) and re-fitted.
+    // The warm start, pruned to the model (per pixel its largest entries) and re-fitted.
     let mut voxels: Vec<usize> = x
         .par_chunks(ks)
         .enumerate()
-        .filter_map(|(p, col)| {
-            let (j, v) = col
+        .flat_map_iter(|(p, col)| {
+            let mut held: Vec<(usize, f64)> = col
                 .iter()
                 .enumerate()
                 .map(|(j, v)| (j, score(v.as_f64())))
-                .fold((0, 0.0), |b, c| if c.1 > b.1 { c } else { b });
-            (v > 0.0).then_some(p * ks + j)
+                .filter(|c| c.1 > 0.0)
+                .collect();
+            held.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            held.truncate(params.max_returns);
+            let mut kept: Vec<usize> = held.iter().map(|h| p * ks + h.0).collect();
+            kept.sort_unstable();
+            kept
         })
         .collect();
     let mut amp: Vec<T> = voxels.iter().map(|&v| x[v]).collect();
@@ -327,33 +345,63 @@ where
         applies.adjoint += 1;
         let sigma = robust_sigma(&u);
         let explore = it <= explore_iterations;
-        // Each supported pixel's own reflector is added back to its correlations.
-        let mut slot = vec![usize::MAX; n / ks];
-        for (i, &v) in voxels.iter().enumerate() {
-            slot[v / ks] = i;
+        // Each supported pixel's own reflectors are added back to its correlations.
+        let mut first = vec![usize::MAX; n / ks];
+        for (i, &v) in voxels.iter().enumerate().rev() {
+            first[v / ks] = i;
         }
+        let own_of = |i: usize| &own[i * ks..(i + 1) * ks];
         let mut picks: Vec<(usize, f64, f64)> = u
             .par_chunks(ks)
             .enumerate()
-            .filter_map(|(p, col)| {
-                let i = slot[p];
-                let mut best = (0, f64::NEG_INFINITY, 0.0);
+            .flat_map_iter(|(p, col)| {
                 let (lo, hi) = windows.map_or((0, ks - 1), |w| w[p]);
-                for (j, c) in col.iter().enumerate().take(hi + 1).skip(lo) {
-                    let mut v = c.as_f64();
-                    if i != usize::MAX {
-                        v += amp[i].as_f64() * own[i * ks + j];
-                    }
-                    if score(v) > best.1 {
-                        best = (j, score(v), v);
+                let mut v: Vec<f64> = col.iter().map(|c| c.as_f64()).collect();
+                let supported = (first[p]..voxels.len())
+                    .take_while(|&i| first[p] != usize::MAX && voxels[i] / ks == p);
+                for i in supported.clone() {
+                    for (vj, o) in v.iter_mut().zip(own_of(i)) {
+                        *vj += amp[i].as_f64() * o;
                     }
                 }
-                let join = if explore || i != usize::MAX || sigma == 0.0 {
-                    best.1 > 0.0
-                } else {
-                    best.1 >= params.detection_z * sigma
-                };
-                join.then_some((p * ks + best.0, best.1, best.2))
+                let mut found = Vec::new();
+                for rank in 0..params.max_returns {
+                    let best = (lo..=hi)
+                        .map(|j| (j, score(v[j]), v[j]))
+                        .filter(|b| {
+                            !found
+                                .iter()
+                                .any(|f: &(usize, f64, f64)| f.0 == p * ks + b.0)
+                        })
+                        .fold(
+                            (0, f64::NEG_INFINITY, 0.0),
+                            |b, c| if c.1 > b.1 { c } else { b },
+                        );
+                    let held = supported.clone().any(|i| voxels[i] == p * ks + best.0);
+                    let lenient =
+                        explore || sigma == 0.0 || held || rank == 0 && first[p] != usize::MAX;
+                    let join = if lenient {
+                        best.1 > 0.0
+                    } else {
+                        best.1 >= params.detection_z * sigma
+                    };
+                    if !join {
+                        break;
+                    }
+                    found.push((p * ks + best.0, best.1, best.2));
+                    if rank + 1 < params.max_returns {
+                        // The next return is judged with this one's contribution taken out.
+                        let row = op.self_correlations(&[p * ks + best.0]);
+                        let d = row[best.0];
+                        if d > 0.0 {
+                            for (vj, o) in v.iter_mut().zip(&row) {
+                                *vj -= best.2 / d * o;
+                            }
+                        }
+                    }
+                }
+                found.sort_by_key(|f| f.0);
+                found
             })
             .collect();
         if picks.len() > budget {
@@ -435,6 +483,7 @@ where
             let mut report = monitor.finish(it, t, &counted);
             report.forward_applies += applies.forward;
             report.adjoint_applies += applies.adjoint;
+            report.support_applies += applies.support;
             return Ok(report);
         }
     }

@@ -32,12 +32,17 @@ pub struct TvDepthParams {
     /// Alternations of TV denoising and windowed fitting (default 2).
     pub rounds: usize,
     /// Rounds of the neighbourhood prior before the first fit, when it starts by message passing
-    /// ([`ModelBasedParams::amp`]): each round runs message passing again with every pixel's prior
-    /// built from its neighbours' posteriors (at most this many, default 16; 0 disables it).
+    /// ([`ModelBasedParams::amp`]): each round continues message passing with every pixel's prior
+    /// built from its neighbours' posteriors (at most this many, default 32; 0 disables it).
     pub neighbour_rounds: usize,
-    /// Message-passing iterations per round at most (default 20; the rounds run the remaining
+    /// Message-passing iterations with the global prior before the first round, at most
+    /// (default 10; the run stops earlier by the stopping rules of [`ModelBasedParams::amp`]).
+    /// The rounds continue from where it stops: it only needs to find the pixels the data
+    /// alone decide.
+    pub neighbour_start: usize,
+    /// Message-passing iterations per round at most (default 2; the rounds run the remaining
     /// stopping rules of [`ModelBasedParams::amp`]). A round only needs to move the posteriors
-    /// on: the next round continues from them.
+    /// on: the next round continues from its state under the updated priors.
     pub neighbour_iterations: usize,
     /// The rounds stop when a round changes the estimate (which pixels have a return, at which
     /// depth) in at most this fraction of the pixels (in [0, 1), default 0.002).
@@ -63,8 +68,9 @@ impl Default for TvDepthParams {
             lambda: 0.3,
             window: 2,
             rounds: 2,
-            neighbour_rounds: 16,
-            neighbour_iterations: 20,
+            neighbour_rounds: 32,
+            neighbour_start: 10,
+            neighbour_iterations: 2,
             neighbour_change: 0.002,
             neighbour_radius: 2,
             neighbour_floor: 0.1,
@@ -204,16 +210,20 @@ fn changed_fraction<T: Real>(a: &[T], b: &[T], ks: usize) -> f64 {
 /// regularization acts on the M×N depth map, not on the voxel cube.
 ///
 /// When the fits start by message passing ([`ModelBasedParams::amp`], the default) and `x` is
-/// all zero, a *neighbourhood prior* comes first. Message passing runs with the global prior;
-/// then, for up to [`neighbour_rounds`](TvDepthParams::neighbour_rounds) rounds, it runs again
-/// with every pixel's prior built from its neighbours' posteriors of the previous round: the
-/// probability of a return, the depth distribution (spread over ±1 bin) and the amplitude's mean
-/// and spread. A pixel whose neighbours agree on a surface thus needs the data only to confirm a
+/// all zero, a *neighbourhood prior* comes first. Message passing runs with the global prior
+/// for [`neighbour_start`](TvDepthParams::neighbour_start) iterations; then, for up to
+/// [`neighbour_rounds`](TvDepthParams::neighbour_rounds) rounds of
+/// [`neighbour_iterations`](TvDepthParams::neighbour_iterations) each, it continues from where it
+/// stopped (its residual, posterior means and learned prior) with every pixel's prior built from
+/// its neighbours' posteriors at the end of the previous round: the probability of a return, the
+/// depth distribution (spread over ±1 bin) and the amplitude's mean and spread. A pixel whose neighbours agree on a surface thus needs the data only to confirm a
 /// few depths and an amplitude close to theirs, so confident regions grow round by round from
 /// where the data alone decide. The rounds stop when a run explains the data, or when a round
 /// changes fewer than [`neighbour_change`](TvDepthParams::neighbour_change) of the pixels. On the
 /// 100×100×40 paper scene this recovers every depth from K_p = 10000 samples (K ≈ 1.8 times the
-/// number of returns), noise-free, where message passing alone finds 19%. Neighbours with an
+/// number of returns), noise-free, where message passing alone finds 19%; short rounds that
+/// continue one run (2 iterations each) need a quarter of the iterations that rounds restarted
+/// from scratch (20 each) need. Neighbours with an
 /// expected amplitude below [`neighbour_gate`](TvDepthParams::neighbour_gate) of the typical
 /// one count as empty: otherwise "a return of vanishing amplitude", which the data cannot tell
 /// from an empty pixel, spreads through the background.
@@ -283,8 +293,13 @@ where
             format!("must be in (0, 1], got {}", params.neighbour_floor),
         ));
     }
-    if params.neighbour_iterations == 0 {
-        return Err(Error::param("neighbour_iterations", "must be at least 1"));
+    if params.neighbour_iterations == 0 || params.neighbour_start == 0 {
+        let name = if params.neighbour_start == 0 {
+            "neighbour_start"
+        } else {
+            "neighbour_iterations"
+        };
+        return Err(Error::param(name, "must be at least 1"));
     }
     for (name, v) in [
         ("neighbour_change", params.neighbour_change),
@@ -304,8 +319,15 @@ where
         .filter(|_| params.neighbour_rounds > 0)
     {
         if x.iter().all(|v| *v == T::zero()) {
-            let (mut rep, mut post) =
-                reflector_amp_constrained(op, y, x, amp, PixelConstraints::default(), &mut ())?;
+            let first = ReflectorAmpParams {
+                stopping: Stopping {
+                    max_iter: amp.stopping.max_iter.min(params.neighbour_start),
+                    ..amp.stopping
+                },
+                ..*amp
+            };
+            let (mut rep, mut post, mut state) =
+                reflector_amp_constrained(op, y, x, &first, PixelConstraints::default(), &mut ())?;
             let (mean, var) = post.amplitude_moments();
             let hood = Neighbourhood {
                 radius: params.neighbour_radius,
@@ -327,7 +349,7 @@ where
                     break;
                 }
                 let priors = neighbour_priors(&post, grid, ks, &hood);
-                let (more, p) = reflector_amp_constrained(
+                let (more, p, s) = reflector_amp_constrained(
                     op,
                     y,
                     x,
@@ -335,11 +357,13 @@ where
                     PixelConstraints {
                         windows: None,
                         priors: Some(&priors),
+                        resume: Some(&state),
                     },
                     &mut (),
                 )?;
                 rep.absorb(more);
                 post = p;
+                state = s;
                 if changed_fraction(x, &last, ks) <= params.neighbour_change {
                     break;
                 }
