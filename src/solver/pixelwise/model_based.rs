@@ -36,8 +36,14 @@ pub struct ModelBasedParams {
     /// over the pixel's depths, hence a high bar (default 4).
     pub detection_z: f64,
     /// A pixel stays in the support when its least-squares amplitude is at least this many
-    /// standard errors σ_r/‖a‖ (σ_r² = ‖r‖²/(K − |S|), ‖a‖ its column's norm) (default 3).
+    /// standard errors σ_r/(‖a‖·√(1 − |S|/K)) (σ_r² = ‖r‖²/(K − |S|), ‖a‖ its column's norm, the
+    /// square root the variance inflation of least squares on |S| of K measurements, bounded at
+    /// √0.05) (default 3).
     pub amplitude_z: f64,
+    /// The test of the final support, once, with the same standard errors: a return stays when
+    /// its amplitude is at least this many, and the rest is refitted (default 3.7). An empty pixel offers the best of its K_s depths, so its chance of
+    /// passing in noise is about K_s·Q(z): 0.4% for K_s = 40 at z = 3.7.
+    pub final_z: f64,
     /// The support holds at most this fraction of the number of measurements, keeping the
     /// least-squares step overdetermined (in (0, 1], default 0.8).
     pub max_support_fraction: f64,
@@ -64,6 +70,7 @@ impl Default for ModelBasedParams {
             explore_iterations: 3,
             detection_z: 4.0,
             amplitude_z: 3.0,
+            final_z: 3.7,
             noise_floor: 1e-4,
             max_support_fraction: 0.8,
             amp: Some(ReflectorAmpParams {
@@ -99,6 +106,7 @@ impl ModelBasedParams {
         }
         check_tolerance("detection_z", self.detection_z)?;
         check_tolerance("amplitude_z", self.amplitude_z)?;
+        check_tolerance("final_z", self.final_z)?;
         check_tolerance("noise_floor", self.noise_floor)?;
         if !(self.max_support_fraction > 0.0 && self.max_support_fraction <= 1.0) {
             return Err(Error::param(
@@ -298,6 +306,20 @@ where
     }
     let budget = ((params.max_support_fraction * m as f64) as usize).max(1);
     let score = |v: f64| if params.nonnegative { v } else { v.abs() };
+    // The amplitude test: which voxels of a support have a least-squares amplitude of at least
+    // `z` standard errors, inflated for least squares on |S| of K measurements.
+    let significant = |voxels: &[usize], amp: &[T], r: &[T], z: f64| {
+        let dof = m.saturating_sub(voxels.len()).max(1);
+        let sigma_r = (dot(r, r) / dof as f64)
+            .sqrt()
+            .max(params.noise_floor * ynorm / (m as f64).sqrt());
+        let inflation = 1.0 / (1.0 - voxels.len() as f64 / m as f64).max(0.05).sqrt();
+        let norms = op.column_norms(voxels);
+        amp.iter()
+            .zip(&norms)
+            .map(|(a, c)| score(a.as_f64()) * c >= z * inflation * sigma_r)
+            .collect::<Vec<bool>>()
+    };
 
     // Without a warm start, message passing proposes the first support.
     let mut explore_iterations = params.explore_iterations;
@@ -439,16 +461,7 @@ where
         let rel = (dot(&r, &r)).sqrt() / ynorm;
         if it >= explore_iterations || params.stopping.rel_residual.is_some_and(|t| rel <= t) {
             // The amplitude test, then least squares on what remains.
-            let dof = m.saturating_sub(new_voxels.len()).max(1);
-            let sigma_r = (dot(&r, &r) / dof as f64)
-                .sqrt()
-                .max(params.noise_floor * ynorm / (m as f64).sqrt());
-            let norms = op.column_norms(&new_voxels);
-            let keep: Vec<bool> = new_amp
-                .iter()
-                .zip(&norms)
-                .map(|(a, c)| score(a.as_f64()) * c >= params.amplitude_z * sigma_r)
-                .collect();
+            let keep = significant(&new_voxels, &new_amp, &r, params.amplitude_z);
             if keep.iter().any(|k| !k) {
                 retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
                 r = refit(&new_voxels, &mut new_amp, &mut applies)?;
@@ -480,6 +493,18 @@ where
             other => other,
         };
         if let Some(t) = term {
+            // The final test, stricter and with the variance inflation; applied once, as a
+            // support refitted after it could not be re-tested without drifting (each pass
+            // raising σ_r and dropping more).
+            let keep = significant(&voxels, &amp, &r, params.final_z);
+            if keep.iter().any(|k| !k) {
+                retain_support(&keep, &mut voxels, &mut amp, &mut own, ks);
+                fit(op, &voxels, y, &mut amp, &params.inner, &mut applies, it)?;
+                x.fill(T::zero());
+                for (&v, &a) in voxels.iter().zip(&amp) {
+                    x[v] = a;
+                }
+            }
             let mut report = monitor.finish(it, t, &counted);
             report.forward_applies += applies.forward;
             report.adjoint_applies += applies.adjoint;
