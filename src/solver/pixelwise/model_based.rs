@@ -41,8 +41,9 @@ pub struct ModelBasedParams {
     /// √0.05) (default 3).
     pub amplitude_z: f64,
     /// The test of the final support, once, with the same standard errors: a return stays when
-    /// its amplitude is at least this many, and the rest is refitted (default 3.7). An empty pixel offers the best of its K_s depths, so its chance of
-    /// passing in noise is about K_s·Q(z): 0.4% for K_s = 40 at z = 3.7.
+    /// its amplitude is at least this many, and the rest is refitted (default 3.7). An empty
+    /// pixel offers the best of its K_s depths, so its chance of passing in noise is about
+    /// K_s·Q(z): 0.4% for K_s = 40 at z = 3.7.
     pub final_z: f64,
     /// The support holds at most this fraction of the number of measurements, keeping the
     /// least-squares step overdetermined (in (0, 1], default 0.8).
