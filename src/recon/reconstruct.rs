@@ -57,8 +57,8 @@ pub struct Reconstruction<T> {
 /// estimates are reduced to the returns they found: every positive voxel above median + 3σ of
 /// all entries (σ = 1.4826·MAD) and at least 5% of the strongest one. The generic solvers may
 /// keep several returns per pixel; the model-based solver (k per pixel, one by default) and TV
-/// give one per pixel themselves, and for them this only drops returns too weak to be real. The depth map keeps each pixel's
-/// strongest return.
+/// give one per pixel themselves, and for them this only drops returns too weak to be real. The
+/// depth map keeps each pixel's strongest return.
 ///
 /// **The [`Method::Auto`] rule** escalates from the cheapest method and stops at the first whose
 /// estimate explains the data (‖y − Ax‖ ≤ [`explained_tolerance`](super::explained_tolerance)

@@ -33,9 +33,8 @@ use crate::layout::{check_memory, expectation};
 /// --returns K), tv (TV on the depth map) and auto, which escalates from the cheapest:
 /// support-ls; then, when K ≥ M·N·K_s, model-based and cgls; otherwise tv, then model-based
 /// (and, for returns the one-reflector fit has no room for, model-based with k returns and
-/// fista). It keeps the first fit
-/// that explains the data (with noise, the best by an information criterion) and prints each
-/// stage it ran and why.
+/// fista). It keeps the first fit that explains the data (with noise, the best by an information
+/// criterion) and prints each stage it ran and why.
 ///
 /// With --truth SCENE.npy the estimate is compared with the true scene (exact depths,
 /// RMSE, misses, false detections, relative error; τ = 200 ps per bin).

@@ -47,8 +47,8 @@ pub struct TvDepthParams {
     /// When the fit after the continued rounds leaves a relative residual above 10⁻³, the
     /// neighbourhood prior runs again with rounds restarted from scratch, of at most this many
     /// iterations each (after a first run to message passing's own limit), and the fit with the
-    /// smaller residual is kept (default 20; 0 skips it). Continued rounds are several times faster on large
-    /// images, restarted ones reach a lower phase transition on small ones.
+    /// smaller residual is kept (default 20; 0 skips it). Continued rounds are several times
+    /// faster on large images, restarted ones reach a lower phase transition on small ones.
     pub neighbour_restart: usize,
     /// The rounds stop when a round changes the estimate (which pixels have a return, at which
     /// depth) in at most this fraction of the pixels (in [0, 1), default 0.002).
