@@ -361,6 +361,10 @@ where
     let mut r = fit(op, &voxels, y, &mut amp, &params.inner, &mut applies, 0)?;
     let mut u = vec![T::zero(); n];
     let mut prev = x.to_vec();
+    // With several returns per pixel, the Gram rows that take a picked return out of its pixel's
+    // correlations: computed once when every pixel has the same ones.
+    let shared_rows = (params.max_returns > 1 && op.uniform_pixel_gram())
+        .then(|| op.self_correlations(&(0..ks).collect::<Vec<_>>()));
     let mut it = 0;
     loop {
         it += 1;
@@ -414,10 +418,13 @@ where
                     found.push((p * ks + best.0, best.1, best.2));
                     if rank + 1 < params.max_returns {
                         // The next return is judged with this one's contribution taken out.
-                        let row = op.self_correlations(&[p * ks + best.0]);
+                        let row: std::borrow::Cow<'_, [f64]> = match &shared_rows {
+                            Some(rows) => rows[best.0 * ks..(best.0 + 1) * ks].into(),
+                            None => op.self_correlations(&[p * ks + best.0]).into(),
+                        };
                         let d = row[best.0];
                         if d > 0.0 {
-                            for (vj, o) in v.iter_mut().zip(&row) {
+                            for (vj, o) in v.iter_mut().zip(row.iter()) {
                                 *vj -= best.2 / d * o;
                             }
                         }
