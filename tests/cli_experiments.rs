@@ -451,6 +451,50 @@ fn unknown_solvers_are_refused_with_the_valid_names() {
 }
 
 #[test]
+fn scene_lists_and_presets_are_checked() {
+    let dir = TempDir::new("badscene");
+    let out = dir.path("out");
+    let err = fails(
+        &[
+            "compare",
+            "--tiny",
+            "--scene",
+            "paper,glass",
+            "--out",
+            s(&out),
+        ],
+        2,
+        &dir,
+    );
+    assert!(
+        err.contains("--scene") && err.contains("\"glass\""),
+        "{err}"
+    );
+    let err = fails(
+        &[
+            "compare",
+            "--tiny",
+            "--scene",
+            "paper,paper",
+            "--out",
+            s(&out),
+        ],
+        1,
+        &dir,
+    );
+    assert!(err.contains("--scene: paper is listed twice"), "{err}");
+    let err = fails(
+        &["compare", "--quick", "--research", "--out", s(&out)],
+        2,
+        &dir,
+    );
+    assert!(
+        err.contains("--research") && err.contains("--quick"),
+        "{err}"
+    );
+}
+
+#[test]
 fn impossible_sizes_are_refused_before_any_work() {
     let dir = TempDir::new("badsize");
     let out = dir.path("out");

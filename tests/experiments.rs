@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rdlidar::recon::Method;
 use rdlidar::report::experiment::{
-    run_compare, run_demo, Event, ExperimentConfig, ExperimentObserver, Row,
+    run_compare, run_demo, Event, ExperimentConfig, ExperimentObserver, Row, SceneKind,
 };
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -147,4 +147,89 @@ fn an_invalid_configuration_is_refused_before_the_folder_is_made() {
     let e = run_demo(&config, false, &mut (), &AtomicBool::new(false)).unwrap_err();
     assert!(e.to_string().contains("solvers"), "{e}");
     assert!(!dir.exists());
+}
+
+#[test]
+fn several_scenes_get_their_own_rows_summaries_and_figures() {
+    let dir = temp_dir("scenes");
+    let config = ExperimentConfig {
+        out: dir.clone(),
+        scenes: vec![SceneKind::Transparent, SceneKind::Paper],
+        pulse_lens: vec![211, 800],
+        snr_db: vec![None],
+        seeds: 1,
+        solvers: vec![Method::BackprojectionDebiased, Method::Cgls],
+        ..ExperimentConfig::compare_tiny()
+    };
+    let outcome = run_compare(&config, false, &mut (), &AtomicBool::new(false)).unwrap();
+    assert_eq!(outcome.planned, 8);
+    // Scenes in the configured order, each with every pulse length and solver.
+    let scenes: Vec<&str> = outcome.rows.iter().map(|r| r.scene.as_str()).collect();
+    assert_eq!(scenes[..4], ["transparent"; 4]);
+    assert_eq!(scenes[4..], ["paper"; 4]);
+    for r in &outcome.rows {
+        let returns = r.returns_exact.unwrap() + r.returns_false.unwrap();
+        assert!(returns > 0, "{r:?}");
+        if r.scene == "paper" {
+            assert_eq!(r.true_returns, r.lit, "{r:?}");
+        } else {
+            // 1 to 3 returns on every pixel of 6×6.
+            assert!(r.true_returns > r.lit && r.lit == 36, "{r:?}");
+        }
+    }
+    // CGLS is exact in the redundant regime: every return at its voxel.
+    let cgls = outcome
+        .rows
+        .iter()
+        .find(|r| r.scene == "transparent" && r.pulse_len == 800 && r.solver == "cgls")
+        .unwrap();
+    assert_eq!(cgls.returns_exact, Some(cgls.true_returns), "{cgls:?}");
+    for f in [
+        "pareto_paper.png",
+        "pareto_transparent.png",
+        "phase_paper_noise-free.png",
+        "phase_transparent_noise-free.png",
+    ] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    assert!(!dir.join("pareto.png").exists());
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    let transparent = summary.find("# compare: transparent scene").unwrap();
+    let paper = summary.find("# compare: paper scene").unwrap();
+    assert!(transparent < paper, "{summary}");
+    // Only the semi-transparent scene has the table of returns.
+    let returns = summary.find("returns found at their voxel").unwrap();
+    assert!(returns > transparent && returns < paper, "{summary}");
+    assert_eq!(summary.matches("returns found at their voxel").count(), 1);
+    // The resolved configuration lists both scenes and loads again.
+    let toml = std::fs::read_to_string(dir.join("config.toml")).unwrap();
+    assert!(
+        toml.contains(r#"scene = ["transparent", "paper"]"#),
+        "{toml}"
+    );
+    let file = rdlidar::report::experiment::ConfigFile::parse(&toml).unwrap();
+    let again = ExperimentConfig::compare_tiny().patched(file.compare.as_ref().unwrap());
+    assert_eq!(again.scenes, config.scenes);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn scene_lists_are_checked() {
+    let config = ExperimentConfig {
+        scenes: vec![SceneKind::Paper, SceneKind::Paper],
+        ..ExperimentConfig::compare_tiny()
+    };
+    let e = config.validate().unwrap_err().to_string();
+    assert!(e.contains("scene") && e.contains("twice"), "{e}");
+    let config = ExperimentConfig {
+        scenes: vec![],
+        ..config
+    };
+    assert!(config.validate().unwrap_err().to_string().contains("empty"));
+    let e = rdlidar::report::experiment::parse_scenes("paper,glass").unwrap_err();
+    assert!(e.to_string().contains("glass"), "{e}");
+    let research = ExperimentConfig::compare_research();
+    assert_eq!(research.size.critical_pulse_len(), 40921);
+    assert!(research.pulse_lens.contains(&81842) && research.snr_db.len() == 3);
+    assert!(research.solvers.contains(&Method::SupportLs));
 }

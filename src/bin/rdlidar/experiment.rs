@@ -36,9 +36,10 @@ pub struct ExperimentArgs {
     /// K_p 50,211,800).
     #[arg(long)]
     pub tiny: bool,
-    /// Scene: paper (the default), random, or transparent (1 to 3 returns per pixel).
-    #[arg(long, value_parser = parse_scene)]
-    pub scene: Option<ExpScene>,
+    /// Scene: paper (the default), random, or transparent (1 to 3 returns per pixel); several,
+    /// comma-separated, run one after the other with their own tables and figures.
+    #[arg(long, value_name = "LIST", value_parser = parse_scenes)]
+    pub scene: Option<ExpScenes>,
     /// Scene grid MxNxKS (at most 1024 rows and columns, 2^26 voxels).
     #[arg(long, value_name = "MxNxKS", value_parser = parse_size)]
     pub size: Option<Geometry>,
@@ -76,6 +77,25 @@ pub struct CompareArgs {
     /// The quick sweep: 6 pulse lengths, 2 seeds, 2 noise levels (under 5 minutes on 2 cores).
     #[arg(long, conflicts_with = "tiny")]
     pub quick: bool,
+    /// The sweep at a research size: 32x32x40, the paper and a semi-transparent scene, K_p
+    /// 2000 to 81842 (compressive, critical, 2x redundant), noise-free, 20 and 10 dB, 2 seeds,
+    /// every solver and support-ls, written to out-research/.
+    #[arg(long, conflicts_with_all = ["tiny", "quick"])]
+    pub research: bool,
+}
+
+/// Which preset an experiment starts from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Preset {
+    /// The experiment's own default.
+    #[default]
+    Default,
+    /// `--tiny`.
+    Tiny,
+    /// `compare --quick`.
+    Quick,
+    /// `compare --research`.
+    Research,
 }
 
 /// Values of the experiment flags (newtypes, so that clap takes each list as one value).
@@ -85,13 +105,13 @@ pub struct PulseLens(Vec<usize>);
 pub struct Solvers(Vec<Method>);
 #[derive(Debug, Clone, PartialEq)]
 pub struct NoiseLevels(Vec<NoiseLevel>);
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ExpScene(ExpSceneKind);
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExpScenes(Vec<ExpSceneKind>);
 
-fn parse_scene(text: &str) -> Result<ExpScene, String> {
-    text.parse()
-        .map(ExpScene)
-        .map_err(|e: rdlidar::Error| e.to_string())
+fn parse_scenes(text: &str) -> Result<ExpScenes, String> {
+    experiment::parse_scenes(text)
+        .map(ExpScenes)
+        .map_err(|e| e.to_string())
 }
 
 fn parse_pulse_lens(text: &str) -> Result<PulseLens, String> {
@@ -147,15 +167,17 @@ fn flag_of(key: &str) -> String {
 fn experiment_config(
     which: Experiment,
     a: &ExperimentArgs,
-    quick: bool,
+    preset: Preset,
     globals: &Globals,
 ) -> CliResult<(ExperimentConfig, Option<usize>, bool)> {
-    let mut config = match (which, a.tiny, quick) {
-        (Experiment::Demo, true, _) => ExperimentConfig::demo_tiny(),
-        (Experiment::Demo, false, _) => ExperimentConfig::demo(),
-        (Experiment::Compare, true, _) => ExperimentConfig::compare_tiny(),
-        (Experiment::Compare, false, true) => ExperimentConfig::compare_quick(),
-        (Experiment::Compare, false, false) => ExperimentConfig::compare(),
+    let preset = if a.tiny { Preset::Tiny } else { preset };
+    let mut config = match (which, preset) {
+        (Experiment::Demo, Preset::Tiny) => ExperimentConfig::demo_tiny(),
+        (Experiment::Demo, _) => ExperimentConfig::demo(),
+        (Experiment::Compare, Preset::Tiny) => ExperimentConfig::compare_tiny(),
+        (Experiment::Compare, Preset::Quick) => ExperimentConfig::compare_quick(),
+        (Experiment::Compare, Preset::Research) => ExperimentConfig::compare_research(),
+        (Experiment::Compare, Preset::Default) => ExperimentConfig::compare(),
     };
     let file = match &a.config {
         Some(path) => ConfigFile::load(path)?,
@@ -170,7 +192,7 @@ fn experiment_config(
     }
     let flags = ExperimentPatch {
         out: a.out.clone(),
-        scene: a.scene.map(|s| s.0),
+        scene: a.scene.as_ref().map(|v| v.0.clone()),
         size: a.size,
         lit_fraction: a.lit_fraction,
         pulse_lens: a.pulse_lens.as_ref().map(|v| v.0.clone()),
@@ -222,10 +244,10 @@ const TABLES: [&str; 5] = [
 pub fn run(
     which: Experiment,
     a: &ExperimentArgs,
-    quick: bool,
+    preset: Preset,
     globals: &Globals,
 ) -> CliResult<ExitCode> {
-    let (config, threads, quiet) = experiment_config(which, a, quick, globals)?;
+    let (config, threads, quiet) = experiment_config(which, a, preset, globals)?;
     rdlidar::io::check_output_dir(&config.out, a.force, "the results in it")?;
     if let Some(file) = &a.config {
         // With --force the tables replace files of the same name in the folder.
@@ -253,7 +275,7 @@ pub fn run(
         "rdlidar {}: {} scene {} (critical K_p {}), K_p {}, {}, {} seed(s) from {}, {}, {} \
          threads; {} runs",
         which.name(),
-        config.scene.name(),
+        config.scene_names(),
         config.size,
         config.size.critical_pulse_len(),
         kps.join(", "),

@@ -18,7 +18,7 @@ mod simulate;
 mod stress;
 
 use common::{errln, parse_threads, set_threads, CliResult, Failure, Globals, Precision};
-use experiment::{CompareArgs, Experiment, ExperimentArgs};
+use experiment::{CompareArgs, Experiment, ExperimentArgs, Preset};
 
 /// Compressive time-of-flight lidar by random demodulation.
 ///
@@ -100,15 +100,18 @@ enum Command {
     ///
     /// Default: the paper scene 16x16x16 (critical K_p 4081), K_p = 256 … 32768 (10 lengths),
     /// 3 seeds, noise-free, 20 dB and 10 dB SNR, every solver with its default iteration limit,
-    /// in f64. --quick: K_p = 512 … 16384 (6 lengths), 2 seeds, noise-free and 20 dB. Seed i
-    /// of the sweep is SEED + 10·i.
+    /// in f64. --quick: K_p = 512 … 16384 (6 lengths), 2 seeds, noise-free and 20 dB.
+    /// --research: 32x32x40 (critical K_p 40921), the paper and a semi-transparent scene, K_p =
+    /// 2000 … 81842, noise-free, 20 and 10 dB, 2 seeds, every solver and support-ls. Seed i of
+    /// the sweep is SEED + 10·i.
     ///
     /// Writes to --out (default out-compare/): results.csv, results.json and results.md (one
     /// row per run), summary.md (median over seeds of the relative error, exact-depth
-    /// percentage and time, solver x K_p, per noise level), config.toml, pareto.png (time
-    /// against error, every run, with the Pareto front) and phase_{noise}.png per noise level
-    /// (median error against K_p, the critical K_p marked). Existing folders, partial files
-    /// and Ctrl-C behave as for `demo`.
+    /// percentage, returns found, false detections and time, solver x K_p, per scene and noise
+    /// level), config.toml, pareto.png (time against error, every run, with the Pareto front)
+    /// and phase_{noise}.png per noise level (median error against K_p, the critical K_p
+    /// marked); with several scenes, pareto_{scene}.png and phase_{scene}_{noise}.png.
+    /// Existing folders, partial files and Ctrl-C behave as for `demo`.
     ///
     /// Example: `rdlidar compare --quick --solvers cgls,fista,model-based --snr-db none,30`
     Compare(CompareArgs),
@@ -145,7 +148,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         quiet: cli.quiet,
     };
     let Some(command) = cli.command else {
-        return experiment::run(Experiment::Demo, &cli.demo, false, &globals);
+        return experiment::run(Experiment::Demo, &cli.demo, Preset::Default, &globals);
     };
     if cli.demo != ExperimentArgs::default() {
         return Err(
@@ -161,8 +164,15 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
     }
     let done = |()| ExitCode::SUCCESS;
     match command {
-        Command::Demo(a) => experiment::run(Experiment::Demo, &a, false, &globals),
-        Command::Compare(a) => experiment::run(Experiment::Compare, &a.common, a.quick, &globals),
+        Command::Demo(a) => experiment::run(Experiment::Demo, &a, Preset::Default, &globals),
+        Command::Compare(a) => {
+            let preset = match (a.quick, a.research) {
+                (true, _) => Preset::Quick,
+                (_, true) => Preset::Research,
+                _ => Preset::Default,
+            };
+            experiment::run(Experiment::Compare, &a.common, preset, &globals)
+        }
         Command::Selfcheck => selfcheck::run(&globals),
         Command::Simulate(a) => simulate::run(&a, &globals).map(done),
         Command::Forward(a) => forward::run(&a, &globals).map(done),

@@ -38,8 +38,8 @@ pub fn run_seed(seed: u64, i: usize) -> u64 {
 pub struct ExperimentConfig {
     /// Output folder.
     pub out: PathBuf,
-    /// The scene.
-    pub scene: SceneKind,
+    /// The scenes, in the order they run for each seed (in TOML, `scene`: a name or a list).
+    pub scenes: Vec<SceneKind>,
     /// The grid M×N×K_s (in TOML, `"100x100x40"`).
     #[serde(serialize_with = "geometry_text")]
     pub size: Geometry,
@@ -72,6 +72,14 @@ fn geometry_text<S: Serializer>(g: &Geometry, s: S) -> std::result::Result<S::Ok
     s.serialize_str(&g.to_string())
 }
 
+/// One scene is written as its name, several as a list.
+fn scene_names<S: Serializer>(v: &[SceneKind], s: S) -> std::result::Result<S::Ok, S::Error> {
+    match v {
+        [one] => one.serialize(s),
+        many => s.collect_seq(many),
+    }
+}
+
 fn method_names<S: Serializer>(m: &[Method], s: S) -> std::result::Result<S::Ok, S::Error> {
     s.collect_seq(m.iter().map(|m| m.name()))
 }
@@ -91,114 +99,13 @@ fn noise_levels<S: Serializer>(v: &[NoiseLevel], s: S) -> std::result::Result<S:
 }
 
 impl ExperimentConfig {
-    /// The main job (`rdlidar demo`): the paper's scene 100×100×40, K_p = 10000, 20000, 30000,
-    /// noise-free, one seed, the nine methods of [`DEFAULT_SOLVERS`] in f32 with the demo's
-    /// budgets ([`ExperimentConfig::demo_budgets`]) and FISTA's step from 30 power iterations,
-    /// written to `out/`.
-    pub fn demo() -> Self {
-        ExperimentConfig {
-            out: PathBuf::from("out"),
-            scene: SceneKind::Paper,
-            size: Geometry {
-                m: 100,
-                n: 100,
-                ks: 40,
-            },
-            lit_fraction: 0.5,
-            pulse_lens: vec![10_000, 20_000, 30_000],
-            solvers: DEFAULT_SOLVERS.to_vec(),
-            snr_db: vec![None],
-            seeds: 1,
-            seed: 0,
-            precision: Precision::F32,
-            max_iter: ExperimentConfig::demo_budgets(),
-            power_iterations: Some(30),
-        }
-    }
-
-    /// The demo's iteration budgets: CGLS 15, FISTA 15 (and IHT 15, if added), CoSaMP 1 (each
-    /// of its iterations solves a least-squares problem on the merged support), model-based 6
-    /// and, for TV and auto, 4 (the limit of each of their model-based fits; TV's neighbourhood
-    /// rounds of message passing have their own limits). The backprojections have no
-    /// iterations. They keep the demo to a few minutes on two cores (docs/experiments.md has the
-    /// timings).
-    pub fn demo_budgets() -> IterationBudgets {
-        IterationBudgets::from_pairs(&[
-            (Method::Cgls, 15),
-            (Method::Fista, 15),
-            (Method::Iht, 15),
-            (Method::Cosamp, 1),
-            (Method::ModelBased, 6),
-            (Method::Tv, 4),
-            (Method::Auto, 4),
-        ])
-    }
-
-    /// The demo at a size a test runs in seconds: the paper scene 8×8×8 (critical K_p 505) with
-    /// K_p = 100, 300 and 1000 (compressive to redundant), written to `out-tiny/`.
-    pub fn demo_tiny() -> Self {
-        ExperimentConfig {
-            out: PathBuf::from("out-tiny"),
-            size: Geometry { m: 8, n: 8, ks: 8 },
-            pulse_lens: vec![100, 300, 1000],
-            ..ExperimentConfig::demo()
-        }
-    }
-
-    /// The full sweep (`rdlidar compare`): the paper scene 16×16×16 (critical K_p 4081), K_p
-    /// from 256 to 32768 (compressive, critical, redundant), 3 seeds, noise-free and 20 and
-    /// 10 dB SNR, the nine methods with their default iteration limits, in f64, written to
-    /// `out-compare/`.
-    pub fn compare() -> Self {
-        ExperimentConfig {
-            out: PathBuf::from("out-compare"),
-            scene: SceneKind::Paper,
-            size: Geometry {
-                m: 16,
-                n: 16,
-                ks: 16,
-            },
-            lit_fraction: 0.5,
-            pulse_lens: vec![256, 512, 1024, 2048, 3072, 4081, 6144, 8192, 16384, 32768],
-            solvers: DEFAULT_SOLVERS.to_vec(),
-            snr_db: vec![None, Some(20.0), Some(10.0)],
-            seeds: 3,
-            seed: 0,
-            precision: Precision::F64,
-            max_iter: IterationBudgets::none(),
-            power_iterations: None,
-        }
-    }
-
-    /// `compare --quick`: the same scene and solvers, K_p = 512 … 16384 (6 lengths around the
-    /// critical 4081), 2 seeds, noise-free and 20 dB.
-    pub fn compare_quick() -> Self {
-        ExperimentConfig {
-            pulse_lens: vec![512, 1024, 2048, 4081, 8192, 16384],
-            snr_db: vec![None, Some(20.0)],
-            seeds: 2,
-            ..ExperimentConfig::compare()
-        }
-    }
-
-    /// `compare --tiny`, for tests: the paper scene 6×6×6 (critical K_p 211), K_p = 50, 211 and
-    /// 800, 2 seeds, noise-free and 20 dB, written to `out-compare-tiny/`.
-    pub fn compare_tiny() -> Self {
-        ExperimentConfig {
-            out: PathBuf::from("out-compare-tiny"),
-            size: Geometry { m: 6, n: 6, ks: 6 },
-            pulse_lens: vec![50, 211, 800],
-            ..ExperimentConfig::compare_quick()
-        }
-    }
-
     /// This configuration with the fields `patch` sets replaced (budgets merged per method).
     pub fn patched(mut self, patch: &ExperimentPatch) -> Self {
         if let Some(v) = &patch.out {
             self.out = v.clone();
         }
-        if let Some(v) = patch.scene {
-            self.scene = v;
+        if let Some(v) = &patch.scene {
+            self.scenes = v.clone();
         }
         if let Some(v) = patch.size {
             self.size = v;
@@ -227,9 +134,24 @@ impl ExperimentConfig {
         self
     }
 
-    /// Number of problems simulated: pulse lengths × seeds × noise levels.
+    /// Number of problems simulated: scenes × pulse lengths × seeds × noise levels.
     pub fn problems(&self) -> usize {
-        self.pulse_lens.len() * self.seeds * self.snr_db.len()
+        self.scenes.len() * self.pulse_lens.len() * self.seeds * self.snr_db.len()
+    }
+
+    /// This configuration restricted to one of its scenes (for the per-scene tables and
+    /// figures).
+    pub fn for_scene(&self, scene: SceneKind) -> Self {
+        ExperimentConfig {
+            scenes: vec![scene],
+            ..self.clone()
+        }
+    }
+
+    /// The scenes' names joined by `+`, e.g. `paper+transparent`.
+    pub fn scene_names(&self) -> String {
+        let names: Vec<&str> = self.scenes.iter().map(|s| s.name()).collect();
+        names.join("+")
     }
 
     /// Number of reconstructions: problems × solvers.
@@ -237,8 +159,8 @@ impl ExperimentConfig {
         self.problems() * self.solvers.len()
     }
 
-    /// Checks every field, naming the first offending one (`pulse_lens`, `solvers`, `snr_db`,
-    /// `seeds`, `size`, `lit_fraction`, `out`).
+    /// Checks every field, naming the first offending one (`scene`, `pulse_lens`, `solvers`,
+    /// `snr_db`, `seeds`, `size`, `lit_fraction`, `out`).
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] naming the field: an empty or repeated list entry, a zero
@@ -254,6 +176,17 @@ impl ExperimentConfig {
         crate::limits::check_geometry(g)?;
         if g.ks > i32::MAX as usize {
             return Err(Error::param("size", format!("{g}: too many depth bins")));
+        }
+        if self.scenes.is_empty() {
+            return Err(Error::param("scene", "the list of scenes is empty"));
+        }
+        for (i, s) in self.scenes.iter().enumerate() {
+            if self.scenes[..i].contains(s) {
+                return Err(Error::param(
+                    "scene",
+                    format!("{} is listed twice", s.name()),
+                ));
+            }
         }
         if self.pulse_lens.is_empty() {
             return Err(Error::param(
@@ -359,7 +292,8 @@ impl ExperimentConfig {
         #[derive(Serialize)]
         struct Section<'a> {
             out: &'a Path,
-            scene: SceneKind,
+            #[serde(serialize_with = "scene_names")]
+            scene: &'a [SceneKind],
             #[serde(serialize_with = "geometry_text")]
             size: &'a Geometry,
             lit_fraction: f64,
@@ -381,7 +315,7 @@ impl ExperimentConfig {
         );
         let body = Section {
             out: &self.out,
-            scene: self.scene,
+            scene: &self.scenes,
             size: &self.size,
             lit_fraction: self.lit_fraction,
             pulse_lens: &self.pulse_lens,
@@ -407,8 +341,9 @@ impl ExperimentConfig {
 pub struct ExperimentPatch {
     /// Output folder.
     pub out: Option<PathBuf>,
-    /// The scene.
-    pub scene: Option<SceneKind>,
+    /// The scenes: one name or a list.
+    #[serde(default, deserialize_with = "de_scenes")]
+    pub scene: Option<Vec<SceneKind>>,
     /// The grid, `"MxNxKS"`.
     #[serde(default, deserialize_with = "de_geometry")]
     pub size: Option<Geometry>,
@@ -435,6 +370,32 @@ fn de_geometry<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<Option<Ge
     Geometry::parse(&text)
         .map(Some)
         .map_err(|e| D::Error::custom(e.to_string()))
+}
+
+fn de_scenes<'de, D: Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<Vec<SceneKind>>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum OneOrMany {
+        One(String),
+        Many(Vec<String>),
+    }
+    let names = match OneOrMany::deserialize(d)? {
+        OneOrMany::One(n) => vec![n],
+        OneOrMany::Many(v) => v,
+    };
+    if names.is_empty() {
+        return Err(D::Error::custom("the list of scenes is empty"));
+    }
+    names
+        .iter()
+        .map(|n| {
+            n.parse::<SceneKind>()
+                .map_err(|e| D::Error::custom(e.to_string()))
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map(Some)
 }
 
 fn de_methods<'de, D: Deserializer<'de>>(
@@ -570,6 +531,7 @@ mod tests {
             ExperimentConfig::compare(),
             ExperimentConfig::compare_quick(),
             ExperimentConfig::compare_tiny(),
+            ExperimentConfig::compare_research(),
         ] {
             c.validate().unwrap();
         }

@@ -48,7 +48,7 @@ pub fn check_depth_figure(config: &ExperimentConfig) -> Result<()> {
 }
 
 fn describe(config: &ExperimentConfig) -> String {
-    format!("{} {}", config.scene.name(), config.size)
+    format!("{} {}", config.scene_names(), config.size)
 }
 
 /// The true depth map and every solver's estimate of one problem, side by side with one colour

@@ -43,6 +43,7 @@
 mod config;
 mod console;
 mod figures;
+mod presets;
 mod staging;
 mod sweep;
 mod table;
@@ -55,9 +56,9 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 pub use config::{
-    noise_text, parse_noise_level, parse_noise_levels, parse_pulse_lens, parse_solvers, run_seed,
-    ConfigFile, ExperimentConfig, ExperimentPatch, IterationBudgets, NoiseLevel, Precision,
-    SceneKind, DEFAULT_SOLVERS, MAX_POWER_ITERATIONS, MAX_SEEDS,
+    noise_text, parse_noise_level, parse_noise_levels, parse_pulse_lens, parse_scenes,
+    parse_solvers, run_seed, ConfigFile, ExperimentConfig, ExperimentPatch, IterationBudgets,
+    NoiseLevel, Precision, SceneKind, DEFAULT_SOLVERS, MAX_POWER_ITERATIONS, MAX_SEEDS,
 };
 pub use console::Console;
 pub use figures::{
@@ -74,9 +75,11 @@ use crate::error::{Error, Result};
 use crate::lidar::Geometry;
 use crate::recon::Method;
 
-/// One simulated problem of a sweep: a pulse length, a seed and a noise level.
+/// One simulated problem of a sweep: a scene, a pulse length, a seed and a noise level.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Case {
+    /// The scene.
+    pub scene: SceneKind,
     /// Pulse length K_p.
     pub pulse_len: usize,
     /// Seed: pulse SEED, codes SEED+1, noise SEED+2, random scene SEED+3.
@@ -86,19 +89,22 @@ pub struct Case {
 }
 
 impl ExperimentConfig {
-    /// The problems of the sweep in the order they run: seeds, then noise levels, then pulse
-    /// lengths (so that a sweep stopped early has covered every pulse length for its first
-    /// seeds).
+    /// The problems of the sweep in the order they run: seeds, then scenes, then noise levels,
+    /// then pulse lengths (so that a sweep stopped early has covered every scene and pulse
+    /// length for its first seeds).
     pub fn cases(&self) -> Vec<Case> {
         let mut cases = Vec::with_capacity(self.problems());
         for i in 0..self.seeds {
-            for &snr_db in &self.snr_db {
-                for &pulse_len in &self.pulse_lens {
-                    cases.push(Case {
-                        pulse_len,
-                        seed: run_seed(self.seed, i),
-                        snr_db,
-                    });
+            for &scene in &self.scenes {
+                for &snr_db in &self.snr_db {
+                    for &pulse_len in &self.pulse_lens {
+                        cases.push(Case {
+                            scene,
+                            pulse_len,
+                            seed: run_seed(self.seed, i),
+                            snr_db,
+                        });
+                    }
                 }
             }
         }
@@ -146,6 +152,12 @@ pub struct Row {
     pub false_detections: Option<usize>,
     /// Pixels lit in the truth but empty in the estimate.
     pub missed: Option<usize>,
+    /// Returns (nonzero voxels) of the truth: more than `lit` in a semi-transparent scene.
+    pub true_returns: usize,
+    /// Returns of the estimate at the voxel of a true return.
+    pub returns_exact: Option<usize>,
+    /// Returns of the estimate at a voxel that is empty in the truth.
+    pub returns_false: Option<usize>,
     /// Root-mean-square depth error over the detected lit pixels, in bins.
     pub depth_rmse_bins: Option<f64>,
     /// ‖X − X̂‖ / ‖X‖ over the whole cubes.
@@ -348,13 +360,15 @@ pub const DEMO_COLUMNS: [Column; 11] = [
 ];
 
 /// The columns of the compare sweep's table.
-pub const COMPARE_COLUMNS: [Column; 13] = [
+pub const COMPARE_COLUMNS: [Column; 15] = [
+    Column::Scene,
     Column::Seed,
     Column::Snr,
     Column::Solver,
     Column::PulseLen,
     Column::Regime,
     Column::Exact,
+    Column::Returns,
     Column::FalseDetections,
     Column::Rmse,
     Column::RelativeError,
@@ -368,7 +382,9 @@ pub const COMPARE_COLUMNS: [Column; 13] = [
 /// solver), then, in `config.out`: `results.csv`, `results.json`, `results.md`, `config.toml`,
 /// one `depth_kp{K_p}.png` per problem (the true depth map and every solver's, side by side,
 /// with a colour bar in metres and a key for pixels without a return; problems of further seeds
-/// or noise levels add `_seed{S}` / `_snr{X}db` to the name) and `error_vs_time.png`.
+/// or noise levels add `_seed{S}` / `_snr{X}db` to the name) and `error_vs_time.png`. With
+/// several scenes, each scene has its own figures: `depth_{scene}_kp…` and
+/// `error_vs_time_{scene}.png`.
 ///
 /// The folder is created if needed; an existing non-empty folder is refused unless `force`.
 /// Rows are streamed to partial files while the sweep runs (see the module documentation).
@@ -390,39 +406,85 @@ pub fn run_demo(
     run.execute(config, force, observer, stop, |sweep, dir, files| {
         let several = config.seeds > 1 || config.snr_db.len() > 1;
         for d in &sweep.depths {
-            let mut name = format!("depth_kp{}", d.case.pulse_len);
-            if several {
-                name += &format!("_seed{}", d.case.seed);
-                if let Some(s) = d.case.snr_db {
-                    name += &format!("_snr{s}db");
-                }
-            }
+            let scene = config.for_scene(d.case.scene);
+            let name = format!(
+                "depth_{}kp{}",
+                scene_prefix(config, d.case.scene),
+                d.case.pulse_len
+            );
+            let name = match (several, d.case.snr_db) {
+                (false, _) => name,
+                (true, None) => format!("{name}_seed{}", d.case.seed),
+                (true, Some(s)) => format!("{name}_seed{}_snr{s}db", d.case.seed),
+            };
             let path = dir.join(name + ".png");
             let rows: Vec<&Row> = sweep
                 .rows
                 .iter()
+                .filter(|r| r.scene == d.case.scene.name())
                 .filter(|r| r.pulse_len == d.case.pulse_len && r.seed == d.case.seed)
                 .filter(|r| r.snr_db == d.case.snr_db)
                 .collect();
-            depth_figure(config, d, &rows)?.save_png(&path)?;
+            depth_figure(&scene, d, &rows)?.save_png(&path)?;
             files.push(path);
         }
-        if !sweep.rows.is_empty() {
-            let path = dir.join("error_vs_time.png");
-            error_vs_time(config, &sweep.rows)?.save_png(&path)?;
+        for (scene, rows) in per_scene(config, &sweep.rows) {
+            let path = dir.join(format!(
+                "error_vs_time{}.png",
+                scene_suffix(config, scene.scenes[0])
+            ));
+            error_vs_time(&scene, &rows)?.save_png(&path)?;
             files.push(path);
         }
         Ok(())
     })
 }
 
+/// `""` for a one-scene experiment, else the scene's name and `_`: the start of its files' names.
+fn scene_prefix(config: &ExperimentConfig, scene: SceneKind) -> String {
+    if config.scenes.len() > 1 {
+        format!("{}_", scene.name())
+    } else {
+        String::new()
+    }
+}
+
+/// `""` for a one-scene experiment, else `_` and the scene's name: the end of its files' names.
+fn scene_suffix(config: &ExperimentConfig, scene: SceneKind) -> String {
+    if config.scenes.len() > 1 {
+        format!("_{}", scene.name())
+    } else {
+        String::new()
+    }
+}
+
+/// For each scene with finished rows, the configuration restricted to it and its rows.
+fn per_scene(config: &ExperimentConfig, rows: &[Row]) -> Vec<(ExperimentConfig, Vec<Row>)> {
+    config
+        .scenes
+        .iter()
+        .map(|&s| {
+            let mine: Vec<Row> = rows
+                .iter()
+                .filter(|r| r.scene == s.name())
+                .cloned()
+                .collect();
+            (config.for_scene(s), mine)
+        })
+        .filter(|(_, rows)| !rows.is_empty())
+        .collect()
+}
+
 /// The sweep across regimes: `config` swept (by default the paper scene 16×16×16 from K_p = 256
 /// to 32768, several seeds and noise levels, every solver), then, in `config.out`:
-/// `results.csv`, `results.json`, `results.md` (one row per run), `summary.md` (per noise
-/// level, the median over seeds of ‖X − X̂‖/‖X‖ and of the exact-depth fraction, solver × K_p),
-/// `config.toml`, `pareto.png` (run time against error, every run, with the Pareto front) and
-/// one `phase_{noise}.png` per noise level (median error against K_p on a log axis, one line
-/// per solver, the critical K_p marked; `{noise}` is `noise-free` or e.g. `20db`).
+/// `results.csv`, `results.json`, `results.md` (one row per run), `summary.md` (per scene and
+/// noise level, the median over seeds of ‖X − X̂‖/‖X‖, of the exact-depth fraction — and of
+/// the returns found at their voxel, for a semi-transparent scene — and of the wall time,
+/// solver × K_p), `config.toml`, `pareto.png` (run time against error, every run, with the
+/// Pareto front) and one `phase_{noise}.png` per noise level (median error against K_p on a log
+/// axis, one line per solver, the critical K_p marked; `{noise}` is `noise-free` or e.g.
+/// `20db`). With several scenes, each has its own figures: `pareto_{scene}.png` and
+/// `phase_{scene}_{noise}.png`.
 ///
 /// # Errors
 /// As [`run_demo`].
@@ -438,29 +500,38 @@ pub fn run_compare(
         keep_depths: false,
     };
     run.execute(config, force, observer, stop, |sweep, dir, files| {
-        let path = dir.join("summary.md");
-        crate::io::write_bytes_atomic(&path, summary_markdown(config, &sweep.rows).as_bytes())?;
-        files.push(path);
-        if !sweep.rows.is_empty() {
-            let path = dir.join("pareto.png");
-            pareto_chart(config, &sweep.rows)?.save_png(&path)?;
-            files.push(path);
-            for &level in &config.snr_db {
+        let summary: Vec<String> = config
+            .scenes
+            .iter()
+            .map(|&s| {
                 let rows: Vec<Row> = sweep
                     .rows
                     .iter()
-                    .filter(|r| r.snr_db == level)
+                    .filter(|r| r.scene == s.name())
                     .cloned()
                     .collect();
+                summary_markdown(&config.for_scene(s), &rows)
+            })
+            .collect();
+        let path = dir.join("summary.md");
+        crate::io::write_bytes_atomic(&path, summary.join("\n").as_bytes())?;
+        files.push(path);
+        for (scene, rows) in per_scene(config, &sweep.rows) {
+            let kind = scene.scenes[0];
+            let path = dir.join(format!("pareto{}.png", scene_suffix(config, kind)));
+            pareto_chart(&scene, &rows)?.save_png(&path)?;
+            files.push(path);
+            for &level in &config.snr_db {
+                let rows: Vec<Row> = rows.iter().filter(|r| r.snr_db == level).cloned().collect();
                 if rows.is_empty() {
                     continue;
                 }
-                let name = match level {
-                    None => "phase_noise-free.png".to_string(),
-                    Some(s) => format!("phase_{s}db.png"),
+                let noise = match level {
+                    None => "noise-free".to_string(),
+                    Some(s) => format!("{s}db"),
                 };
-                let path = dir.join(name);
-                phase_chart(config, level, &rows)?.save_png(&path)?;
+                let path = dir.join(format!("phase_{}{noise}.png", scene_prefix(config, kind)));
+                phase_chart(&scene, level, &rows)?.save_png(&path)?;
                 files.push(path);
             }
         }

@@ -26,7 +26,7 @@ struct Problem<T: Real> {
 /// Simulates `case` through [`simulate`], exactly as `rdlidar simulate` does with the same seed.
 fn simulate_case<T: Real>(config: &ExperimentConfig, case: &Case) -> Result<Problem<T>> {
     let spec = SimulationSpec {
-        scene: match config.scene {
+        scene: match case.scene {
             SceneKind::Paper => SceneSpec::Paper,
             SceneKind::Random => SceneSpec::Random {
                 lit_fraction: config.lit_fraction,
@@ -58,7 +58,7 @@ fn run_one<T: Real>(
         m => config.max_iter.get(m),
     };
     let mut row = Row {
-        scene: config.scene.name().into(),
+        scene: case.scene.name().into(),
         size: g.to_string(),
         precision: T::NAME.into(),
         seed: case.seed,
@@ -75,6 +75,9 @@ fn run_one<T: Real>(
         exact_pct: None,
         false_detections: None,
         missed: None,
+        true_returns: problem.truth.nnz(),
+        returns_exact: None,
+        returns_false: None,
         depth_rmse_bins: None,
         relative_error: None,
         time_s: 0.0,
@@ -103,6 +106,9 @@ fn run_one<T: Real>(
             row.exact_pct = Some(100.0 * m.exact_fraction);
             row.false_detections = Some(m.false_detections);
             row.missed = Some(m.missed);
+            row.true_returns = m.true_returns;
+            row.returns_exact = Some(m.returns_exact);
+            row.returns_false = Some(m.returns_false);
             row.depth_rmse_bins = Some(m.depth_rmse_bins);
             row.relative_error = Some(m.relative_error);
             if let Some(rep) = &r.report {

@@ -10,7 +10,7 @@ use super::config::{noise_text, ExperimentConfig, NoiseLevel};
 use super::Row;
 
 /// The columns of `results.csv`, in order (the field names of [`Row`]).
-pub const CSV_COLUMNS: [&str; 26] = [
+pub const CSV_COLUMNS: [&str; 29] = [
     "scene",
     "size",
     "precision",
@@ -28,6 +28,9 @@ pub const CSV_COLUMNS: [&str; 26] = [
     "exact_pct",
     "false_detections",
     "missed",
+    "true_returns",
+    "returns_exact",
+    "returns_false",
     "depth_rmse_bins",
     "relative_error",
     "time_s",
@@ -83,6 +86,9 @@ pub fn csv_line(r: &Row) -> String {
         num(r.exact_pct),
         opt(&r.false_detections),
         opt(&r.missed),
+        r.true_returns.to_string(),
+        opt(&r.returns_exact),
+        opt(&r.returns_false),
         num(r.depth_rmse_bins),
         num(r.relative_error),
         format!("{:?}", r.time_s),
@@ -99,6 +105,8 @@ pub fn csv_line(r: &Row) -> String {
 /// A column of the printed and Markdown tables.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Column {
+    /// The scene.
+    Scene,
     /// The seed.
     Seed,
     /// The noise level.
@@ -111,6 +119,8 @@ pub enum Column {
     Regime,
     /// Lit pixels at the exact depth: count and percentage.
     Exact,
+    /// Returns of the estimate at the voxel of a true return, of the true returns.
+    Returns,
     /// False detections.
     FalseDetections,
     /// Depth RMSE in bins.
@@ -131,12 +141,14 @@ pub enum Column {
 impl Column {
     fn title(self) -> &'static str {
         match self {
+            Column::Scene => "scene",
             Column::Seed => "seed",
             Column::Snr => "SNR",
             Column::Solver => "solver",
             Column::PulseLen => "K_p",
             Column::Regime => "regime",
             Column::Exact => "exact depth",
+            Column::Returns => "returns",
             Column::FalseDetections => "false det.",
             Column::Rmse => "depth RMSE (bins)",
             Column::RelativeError => "rel. error",
@@ -149,12 +161,14 @@ impl Column {
 
     fn width(self) -> usize {
         let w = match self {
+            Column::Scene => 11,
             Column::Seed => 4,
             Column::Snr => 10,
             Column::Solver => 30,
             Column::PulseLen => 6,
             Column::Regime => 11,
             Column::Exact => 14,
+            Column::Returns => 11,
             Column::FalseDetections => 10,
             Column::Rmse => 17,
             Column::RelativeError => 10,
@@ -169,7 +183,7 @@ impl Column {
     fn numeric(self) -> bool {
         !matches!(
             self,
-            Column::Solver | Column::Regime | Column::Termination | Column::Snr
+            Column::Scene | Column::Solver | Column::Regime | Column::Termination | Column::Snr
         )
     }
 
@@ -177,6 +191,7 @@ impl Column {
         let failed = r.error.is_some();
         let dash = || "-".to_string();
         match self {
+            Column::Scene => r.scene.clone(),
             Column::Seed => r.seed.to_string(),
             Column::Snr => match r.snr_db {
                 None => "noise-free".into(),
@@ -195,6 +210,9 @@ impl Column {
                 (Some(e), Some(p)) => format!("{e} ({p:.1}%)"),
                 _ => dash(),
             },
+            Column::Returns => r
+                .returns_exact
+                .map_or_else(dash, |e| format!("{e}/{}", r.true_returns)),
             Column::FalseDetections => r.false_detections.map_or_else(dash, |v| v.to_string()),
             Column::Rmse => r.depth_rmse_bins.map_or_else(dash, |v| format!("{v:.3}")),
             Column::RelativeError => r.relative_error.map_or_else(dash, |v| {
@@ -304,9 +322,10 @@ pub(crate) fn medians(
     )
 }
 
-/// `summary.md` of the compare sweep: for each noise level, two solver × K_p tables — the
-/// median over seeds of ‖X − X̂‖/‖X‖ and of the exact-depth percentage — and the median wall
-/// time per solver.
+/// `summary.md` of the compare sweep for one scene (`config.scenes[0]`; `rows` are its runs):
+/// for each noise level, solver × K_p tables of the median over seeds of ‖X − X̂‖/‖X‖, of the
+/// exact-depth percentage, of the returns found at their voxel in percent (only when the scene
+/// has more returns than lit pixels), of the false detections and of the wall time.
 pub fn summary_markdown(config: &ExperimentConfig, rows: &[Row]) -> String {
     let g = config.size;
     let mut kps = config.pulse_lens.clone();
@@ -314,7 +333,7 @@ pub fn summary_markdown(config: &ExperimentConfig, rows: &[Row]) -> String {
     let mut s = format!(
         "# compare: {} scene {g}, critical K_p = {}, {} seed(s), {}\n\n\
          Medians over the seeds of the finished runs (`-`: no finished run).\n",
-        config.scene.name(),
+        config.scene_names(),
         g.critical_pulse_len(),
         config.seeds,
         config.precision
@@ -328,20 +347,29 @@ pub fn summary_markdown(config: &ExperimentConfig, rows: &[Row]) -> String {
         }
         format!("{h}\n{rule}\n")
     };
+    let multi_return = rows.iter().any(|r| r.true_returns > r.lit);
+    type Value = fn(&Row) -> Option<f64>;
+    let mut tables: Vec<(&str, usize, bool, Value)> = vec![
+        ("relative error ‖X − X̂‖/‖X‖", 4, true, |r| {
+            r.relative_error
+        }),
+        ("lit pixels at the exact depth (%)", 1, false, |r| {
+            r.exact_pct
+        }),
+    ];
+    if multi_return {
+        tables.push(("returns found at their voxel (%)", 1, false, |r| {
+            r.returns_exact
+                .map(|e| 100.0 * e as f64 / r.true_returns.max(1) as f64)
+        }));
+    }
+    tables.push(("false detections (pixels)", 1, false, |r| {
+        r.false_detections.map(|v| v as f64)
+    }));
+    tables.push(("wall time (s)", 4, false, |r| Some(r.time_s)));
     for &level in &config.snr_db {
         s += &format!("\n## {}\n", noise_text(level));
-        for (title, digits, scientific, value) in [
-            (
-                "relative error ‖X − X̂‖/‖X‖",
-                4usize,
-                true,
-                (|r: &Row| r.relative_error) as fn(&Row) -> Option<f64>,
-            ),
-            ("lit pixels at the exact depth (%)", 1, false, |r: &Row| {
-                r.exact_pct
-            }),
-            ("wall time (s)", 4, false, |r: &Row| Some(r.time_s)),
-        ] {
+        for &(title, digits, scientific, value) in &tables {
             s += &format!("\n{title}, by K_p:\n\n");
             s += &header("solver");
             for m in &config.solvers {
@@ -459,6 +487,9 @@ mod tests {
             exact_pct: Some(75.0),
             false_detections: Some(1),
             missed: Some(2),
+            true_returns: 40,
+            returns_exact: Some(30),
+            returns_false: Some(3),
             depth_rmse_bins: Some(0.5),
             relative_error: Some(0.25),
             time_s: 0.125,
@@ -493,7 +524,7 @@ mod tests {
 
     #[test]
     fn markdown_rows_line_up_with_the_header() {
-        let cols = super::super::DEMO_COLUMNS;
+        let cols = super::super::COMPARE_COLUMNS;
         let mut r = row();
         r.error = None;
         let h = markdown_header(&cols);
@@ -506,6 +537,8 @@ mod tests {
         assert!(
             line.contains("auto (tv)")
                 && line.contains("30 (75.0%)")
+                && line.contains(" 30/40 |")
+                && line.contains("| paper ")
                 && line.contains("|          4 |       6 |")
         );
     }

@@ -239,6 +239,18 @@ pub fn parse_solvers(text: &str) -> Result<Vec<Method>> {
     names.iter().map(|n| parse_method(n, "solvers")).collect()
 }
 
+/// Parses a comma-separated list of scene names (`paper,transparent`).
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`scene`) for an unknown name or an empty list.
+pub fn parse_scenes(text: &str) -> Result<Vec<SceneKind>> {
+    let names = list_items(text);
+    if names.is_empty() {
+        return Err(Error::param("scene", "the list of scenes is empty"));
+    }
+    names.iter().map(|n| n.parse()).collect()
+}
+
 /// A noise level: `None` is noise-free, `Some(s)` white Gaussian noise at s dB SNR.
 pub type NoiseLevel = Option<f64>;
 
