@@ -11,7 +11,7 @@ use crate::operator::{LinearOperator, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{Report, Termination};
 
-use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
+use super::refit::{refit_support, refit_support_to, REFIT_MAX_ITER, REFIT_ROUNDS};
 
 /// Rounds of [`support_pursuit`] at most.
 pub(super) const PURSUIT_ROUNDS: usize = 12;
@@ -37,6 +37,12 @@ const POLISH_BELOW: f64 = 1e-3;
 
 /// A round must lower the residual by at least this fraction, or the pursuit has stalled.
 const MIN_PROGRESS: f64 = 0.05;
+
+/// The unexplained returns' cross-talk may hide true returns while there are more than K / this
+/// of them (counted in returns of the held voxels' mean energy): then a round adds as many
+/// candidates as the support holds even when fewer stand out; otherwise only those that stand
+/// out join.
+const HIDDEN_RATIO: f64 = 100.0;
 
 /// The relative residual ‖y − Ax‖/‖y‖ at or below which an estimate explains noise-free data:
 /// 10⁻⁶, or 30 machine epsilons where that is larger (f32).
@@ -175,9 +181,9 @@ pub(super) fn support_pursuit<T: Real>(
             })
             .collect();
         candidates.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-        // Those that stand out of the cross-talk join; when the support already holds more, as
-        // many as it holds, so that it can double each round while unexplained cross-talk
-        // still hides true returns.
+        // Those that stand out of the cross-talk join; while the unexplained returns are many
+        // and the support already holds more, as many as it holds, so that it can double each
+        // round while their cross-talk still hides true returns.
         let standing = candidates.iter().filter(|c| c.1 >= level).count();
         if standing == 0 {
             end = PursuitEnd::NoCandidate;
@@ -188,7 +194,12 @@ pub(super) fn support_pursuit<T: Real>(
             end = PursuitEnd::TooLarge;
             break;
         }
-        candidates.truncate(standing.max(held).min(cap - held));
+        let joining = if unexplained_returns(op, &x, &r) * HIDDEN_RATIO > k as f64 {
+            standing.max(held)
+        } else {
+            standing
+        };
+        candidates.truncate(joining.min(cap - held));
         // Start each newcomer at its correlation over its column's squared norm.
         let newcomers: Vec<usize> = candidates.iter().map(|c| c.0).collect();
         let norms = op.column_norms(&newcomers);
@@ -208,6 +219,14 @@ pub(super) fn support_pursuit<T: Real>(
         r = residual(op, y, &x, &mut report);
         let mut new_rel = dot(&r, &r).sqrt() / ynorm;
         if new_rel <= POLISH_BELOW || new_rel > (1.0 - MIN_PROGRESS) * rel {
+            // The polish: least squares to the explained tolerance, the amplitude test, then
+            // least squares on what is left as far as round-off allows. Testing before the
+            // last fit spares it the voxels that the test drops.
+            if let Some(rep) = refit_support_to(op, y, &mut x, REFIT_MAX_ITER, 1, tol)? {
+                report.absorb_applies(&rep);
+            }
+            r = residual(op, y, &x, &mut report);
+            prune(op, &mut x, &r, ynorm);
             if let Some(rep) = refit_support(op, y, &mut x, REFIT_MAX_ITER, REFIT_ROUNDS)? {
                 report.absorb_applies(&rep);
             }
@@ -239,6 +258,22 @@ pub(super) fn support_pursuit<T: Real>(
         relative_residual: rel,
         end,
     })
+}
+
+/// The residual's energy in returns of the held voxels' mean energy (amplitude² times column
+/// norm²): about how many returns are still unexplained. Infinite when nothing is held.
+fn unexplained_returns<T: Real>(op: &RdOperator<T>, x: &[T], r: &[T]) -> f64 {
+    let support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
+    let norms = op.column_norms(&support);
+    let held: f64 = support
+        .iter()
+        .zip(&norms)
+        .map(|(&v, a)| (x[v].as_f64() * a).powi(2))
+        .sum();
+    if held <= 0.0 {
+        return f64::INFINITY;
+    }
+    dot(r, r) * support.len() as f64 / held
 }
 
 /// The amplitude test: zeroes the voxels whose amplitude times column norm is below

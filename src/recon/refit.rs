@@ -31,6 +31,25 @@ pub(super) fn refit_support<T: Real>(
     max_iter: usize,
     rounds: usize,
 ) -> Result<Option<Report>> {
+    refit_support_to(op, y, x, max_iter, rounds, REFIT_TARGET)
+}
+
+/// The relative residual ‖y − A_S·b‖/‖y‖ at which [`refit_support`] stops: as far as round-off
+/// allows.
+pub(super) const REFIT_TARGET: f64 = 1e-12;
+
+/// [`refit_support`] to the relative residual `target` instead of [`REFIT_TARGET`].
+///
+/// # Errors
+/// As [`refit_support`].
+pub(super) fn refit_support_to<T: Real>(
+    op: &RdOperator<T>,
+    y: &[T],
+    x: &mut [T],
+    max_iter: usize,
+    rounds: usize,
+    target: f64,
+) -> Result<Option<Report>> {
     let mut support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
     if support.is_empty() || 2 * support.len() > y.len() {
         return Ok(None);
@@ -39,7 +58,7 @@ pub(super) fn refit_support<T: Real>(
         damp: 0.0,
         stopping: Stopping {
             max_iter,
-            rel_residual: Some(1e-12),
+            rel_residual: Some(target),
             ..Stopping::default()
         },
     };
