@@ -372,19 +372,28 @@ fn de_geometry<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<Option<Ge
         .map_err(|e| D::Error::custom(e.to_string()))
 }
 
+/// One value or a list of them, as a list.
+fn one_or_many<'de, D, T>(d: D) -> std::result::Result<Vec<T>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum OneOrMany<T> {
+        One(T),
+        Many(Vec<T>),
+    }
+    Ok(match OneOrMany::deserialize(d)? {
+        OneOrMany::One(v) => vec![v],
+        OneOrMany::Many(v) => v,
+    })
+}
+
 fn de_scenes<'de, D: Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<Option<Vec<SceneKind>>, D::Error> {
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum OneOrMany {
-        One(String),
-        Many(Vec<String>),
-    }
-    let names = match OneOrMany::deserialize(d)? {
-        OneOrMany::One(n) => vec![n],
-        OneOrMany::Many(v) => v,
-    };
+    let names: Vec<String> = one_or_many(d)?;
     if names.is_empty() {
         return Err(D::Error::custom("the list of scenes is empty"));
     }
@@ -421,16 +430,7 @@ fn de_noise_levels<'de, D: Deserializer<'de>>(
         Db(f64),
         Text(String),
     }
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum OneOrMany {
-        One(Level),
-        Many(Vec<Level>),
-    }
-    let levels = match OneOrMany::deserialize(d)? {
-        OneOrMany::One(l) => vec![l],
-        OneOrMany::Many(v) => v,
-    };
+    let levels: Vec<Level> = one_or_many(d)?;
     levels
         .into_iter()
         .map(|l| match l {
