@@ -310,3 +310,37 @@ fn at_20_db_auto_finds_every_depth_with_at_most_one_percent_of_empty_pixels_lit(
         );
     }
 }
+
+#[test]
+fn in_the_compressive_regime_auto_skips_the_one_reflector_fits_when_the_pursuit_sees_several_returns(
+) {
+    use rdlidar::lidar::add_gaussian_snr;
+    let g = Geometry::new(16, 16, 24).unwrap();
+    let truth = semi_transparent_scene::<f64>(g, 1..=3, 2).unwrap();
+    // About 5 measurements per return, 20 dB: nothing explains the data.
+    let kp = 5 * truth.nnz() - (g.ks - 1);
+    assert!(kp < g.critical_pulse_len(), "compressive");
+    let op = problem::<f64>(g, kp, 3);
+    let mut y = measure(&op, &truth);
+    add_gaussian_snr(&mut y, 20.0, 4).unwrap();
+    let options = ReconstructOptions::default();
+    let auto = reconstruct(&op, &y, Method::Auto, &options).unwrap();
+    let tv = reconstruct(&op, &y, Method::Tv, &options).unwrap();
+    let (a, t) = (
+        compare(&truth, &auto.scene, 200e-12).unwrap(),
+        compare(&truth, &tv.scene, 200e-12).unwrap(),
+    );
+    assert!(
+        auto.stages[0].verdict.contains("hold several returns"),
+        "{:?}",
+        auto.stages
+    );
+    assert!(
+        auto.stages.iter().all(|s| s.method != Method::Tv),
+        "{:?}",
+        auto.stages
+    );
+    // The one-reflector TV scene holds under a quarter of the returns; the kept pursuit 86%.
+    assert!(a.returns_exact as f64 >= 0.8 * a.true_returns as f64, "{a}");
+    assert!(a.returns_exact > 2 * t.returns_exact, "auto {a} / TV {t}");
+}

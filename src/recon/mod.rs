@@ -11,7 +11,7 @@ mod pursuit;
 mod reconstruct;
 mod refit;
 
-pub use auto::{Stage, TV_RESIDUAL_MARGIN};
+pub use auto::{Stage, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
 pub use method::{
     estimate_returns, Method, PeakThreshold, ReconstructOptions, MAX_RETURNS_ESTIMATE,
 };

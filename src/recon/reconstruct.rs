@@ -72,16 +72,21 @@ pub struct Reconstruction<T> {
 ///    within 5%, [`Method::Cgls`] with its returns refitted by least squares on their support.
 ///    With noise nothing explains the data, and the sparse fit with the lowest information
 ///    criterion K·ln(‖r‖²/‖y‖²) + |S|·ln K is kept;
-/// 3. otherwise (compressive) [`Method::Tv`], whose first fit is the model-based one; unless it
-///    explains the data, [`Method::ModelBased`] alone, and TV is kept if it fits about as well
-///    as the model-based scene ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If the
-///    support pursuit fitted the data more than twice as well as the better one-reflector scene,
-///    the scene has more than one return per pixel and the pursuit's estimate is kept;
-/// 4. if the one-reflector fit's residual still shows returns at other depths of at least 5% of
-///    its lit pixels, [`Method::ModelBased`] with k returns per pixel (k from the pursuit's
-///    estimate, [`estimate_returns`](super::estimate_returns), at least 2), then
-///    [`Method::Fista`] (debiased); the first that explains the data is kept, otherwise the fit
-///    with the lowest information criterion.
+/// 3. otherwise (compressive), if at least
+///    [`SEVERAL_RETURNS_SHARE`](super::SEVERAL_RETURNS_SHARE) of the pursuit's lit pixels hold
+///    several returns, the scene is not one reflector per pixel: straight to step 5. Otherwise
+///    [`Method::Tv`], whose first fit is the model-based one; unless it explains the data,
+///    [`Method::ModelBased`] alone, and TV is kept if it fits about as well as the model-based
+///    scene ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If the support pursuit fitted
+///    the data more than twice as well as the better one-reflector scene, the scene has more
+///    than one return per pixel and the pursuit's estimate is kept;
+/// 4. if the one-reflector fit's residual still shows returns at other depths in at least 5% of
+///    its lit pixels, step 5 (with the one-reflector fit among the candidates);
+/// 5. several returns per pixel: [`Method::ModelBased`] with k returns per pixel (k from the
+///    pursuit's estimate, [`estimate_returns`](super::estimate_returns), at least 2); then,
+///    only if the residual of the better of it and the pursuit still shows returns in 5% of its
+///    lit pixels, [`Method::Fista`] (debiased). The first that explains the data is kept,
+///    otherwise the fit with the lowest information criterion.
 ///
 /// [`Reconstruction::stages`] lists what ran, each stage's residual, returns, applications and
 /// time, what was kept and why.

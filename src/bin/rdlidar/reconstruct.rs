@@ -31,9 +31,9 @@ use crate::layout::{check_memory, expectation};
 /// debiased backprojection), support-ls (greedy support pursuit with least squares), amp
 /// (message passing with the one-reflector prior), model-based (one reflector per pixel, or
 /// --returns K), tv (TV on the depth map) and auto, which escalates from the cheapest:
-/// support-ls; then, when K ≥ M·N·K_s, model-based and cgls; otherwise tv, then model-based
-/// (and, for returns the one-reflector fit has no room for, model-based with k returns and
-/// fista). It keeps the first fit that explains the data (with noise, the best by an information
+/// support-ls; then, when K ≥ M·N·K_s, model-based and cgls; otherwise tv, then model-based;
+/// and where several returns per pixel show (in the pursuit's support or in what the
+/// one-reflector fit leaves), model-based with k returns and fista. It keeps the first fit that explains the data (with noise, the best by an information
 /// criterion) and prints each stage it ran and why.
 ///
 /// With --truth SCENE.npy the estimate is compared with the true scene (exact depths,
