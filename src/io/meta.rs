@@ -130,6 +130,10 @@ pub struct SimulationMeta {
     pub scene: SceneMeta,
     /// "binary" or "ternary".
     pub code_alphabet: String,
+    /// How codes.npy holds the codes: "int8" (M, N, K), or "packed", uint8 (M, N, ⌈K/8⌉) as
+    /// `np.packbits(S > 0, axis=-1)` writes ±1 codes (a leading G axis for several ADCs).
+    #[serde(default = "int8_format")]
+    pub codes_format: String,
     /// The probability of a zero code of ternary codes.
     pub ternary_zero_prob: Option<f64>,
     /// The architecture.
@@ -212,6 +216,7 @@ impl SimulationMeta {
                 lit_pixels,
             },
             code_alphabet: alphabet.into(),
+            codes_format: int8_format(),
             ternary_zero_prob: spec.ternary_zero_prob,
             architecture: ArchitectureMeta {
                 kind: arch.kind().into(),
@@ -237,4 +242,9 @@ impl SimulationMeta {
             },
         }
     }
+}
+
+/// The codes format of files written before packed codes existed.
+fn int8_format() -> String {
+    "int8".into()
 }

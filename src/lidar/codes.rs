@@ -41,6 +41,23 @@ fn tail_mask(pixels: usize) -> u8 {
     }
 }
 
+/// Transposes an 8×8 bit matrix held in a `u64`: the bit of row r, column c (bit 8r + c) moves
+/// to bit 8c + r. Three rounds of swaps of ever larger blocks across the diagonal.
+fn transpose8(mut x: u64) -> u64 {
+    let t = (x ^ (x >> 7)) & 0x00AA_00AA_00AA_00AA;
+    x ^= t ^ (t << 7);
+    let t = (x ^ (x >> 14)) & 0x0000_CCCC_0000_CCCC;
+    x ^= t ^ (t << 14);
+    let t = (x ^ (x >> 28)) & 0x0000_0000_F0F0_F0F0;
+    x ^= t ^ (t << 28);
+    x
+}
+
+/// Bytes per pixel of ±1 codes of `len` samples in numpy's `packbits` layout: ⌈len / 8⌉.
+pub fn packed_len(len: usize) -> usize {
+    len.div_ceil(8)
+}
+
 fn check_dims(pixels: usize, len: usize) -> Result<()> {
     if pixels == 0 || len == 0 {
         return Err(Error::param(
@@ -235,6 +252,95 @@ impl Codes {
             plus,
             minus,
         })
+    }
+
+    /// ±1 codes from the bytes `np.packbits(S > 0, axis=-1)` makes of a `(pixels, len)` array S:
+    /// [`packed_len`]`(len)` bytes per pixel, pixel after pixel; in each byte the earliest sample
+    /// is the most significant bit (numpy's default, big-endian bit order); a set bit is +1, a
+    /// clear one −1; the pad bits after the last sample are zero.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if `pixels` or `len` is zero, if `bytes` does not hold
+    /// `pixels · ⌈len/8⌉` bytes, or naming the first pixel whose pad bits are not all zero.
+    pub fn from_packbits(bytes: &[u8], pixels: usize, len: usize) -> Result<Self> {
+        check_dims(pixels, len)?;
+        let nb = packed_len(len);
+        if Some(bytes.len()) != pixels.checked_mul(nb) {
+            return Err(Error::param(
+                "codes",
+                format!(
+                    "packed codes of {pixels} pixels × {len} samples take {pixels} × {nb} bytes, \
+                     got {}",
+                    bytes.len()
+                ),
+            ));
+        }
+        let pad = nb * 8 - len;
+        if pad > 0 {
+            let mask = (1u8 << pad) - 1;
+            if let Some(p) = (0..pixels).find(|p| bytes[p * nb + nb - 1] & mask != 0) {
+                return Err(Error::param(
+                    "codes",
+                    format!(
+                        "pixel {p}: the {pad} pad bit(s) after sample {} are not zero \
+                         (np.packbits writes zeros there)",
+                        len - 1
+                    ),
+                ));
+            }
+        }
+        let groups = pixels.div_ceil(8);
+        let mut plus = vec![0u8; groups * len];
+        for (g, dst) in plus.chunks_exact_mut(len).enumerate() {
+            let width = (pixels - 8 * g).min(8);
+            for j in 0..nb {
+                // Row r: the byte of pixel 8g + r, bit c = sample 8j + c.
+                let x = (0..width).fold(0u64, |x, r| {
+                    x | u64::from(bytes[(8 * g + r) * nb + j].reverse_bits()) << (8 * r)
+                });
+                // Byte c of the transpose: sample 8j + c, bit r = pixel 8g + r.
+                let t = transpose8(x).to_le_bytes();
+                let take = (len - 8 * j).min(8);
+                dst[8 * j..8 * j + take].copy_from_slice(&t[..take]);
+            }
+        }
+        Ok(Codes {
+            pixels,
+            len,
+            plus,
+            minus: None,
+        })
+    }
+
+    /// The bytes `np.packbits(S > 0, axis=-1)` makes of these codes S as a `(pixels, len)`
+    /// array (see [`Codes::from_packbits`]): one bit per entry.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for codes with 0 entries (ternary, or a coded aperture's
+    /// masked pixels), which one bit per entry cannot hold.
+    pub fn to_packbits(&self) -> Result<Vec<u8>> {
+        if self.minus.is_some() {
+            return Err(Error::param(
+                "codes",
+                "packed codes hold ±1 entries only, and these codes have 0 entries \
+                 (ternary codes or a coded aperture): write them as int8",
+            ));
+        }
+        let (len, nb) = (self.len, packed_len(self.len));
+        let mut out = vec![0u8; self.pixels * nb];
+        for (g, src) in self.plus.chunks_exact(len).enumerate() {
+            let width = (self.pixels - 8 * g).min(8);
+            for j in 0..nb {
+                let take = (len - 8 * j).min(8);
+                let mut b = [0u8; 8];
+                b[..take].copy_from_slice(&src[8 * j..8 * j + take]);
+                let t = transpose8(u64::from_le_bytes(b));
+                for r in 0..width {
+                    out[(8 * g + r) * nb + j] = ((t >> (8 * r)) as u8).reverse_bits();
+                }
+            }
+        }
+        Ok(out)
     }
 
     /// The codes as a dense `(pixels, len)` array (for small problems and file output).

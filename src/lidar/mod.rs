@@ -20,7 +20,7 @@ mod support;
 pub use architectures::{
     aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles, Architecture, TileSize,
 };
-pub use codes::{CodeAlphabet, Codes};
+pub use codes::{packed_len, CodeAlphabet, Codes};
 pub use geometry::{Geometry, Regime};
 pub use noise::{
     add_gaussian, add_gaussian_snr, add_photon_noise, mean_power, quantize, sigma_for_snr,

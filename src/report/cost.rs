@@ -60,6 +60,9 @@ pub struct MemoryCost {
     pub codes_packed_bytes: u64,
     /// The codes as int8, one byte per entry (`codes.npy`): M·N·K bytes.
     pub codes_int8_bytes: u64,
+    /// The codes as `np.packbits` writes them (`codes.npy` of `simulate --codes-format
+    /// packed`): M·N·⌈K/8⌉ bytes.
+    pub codes_packbits_bytes: u64,
     /// The codes as a dense float matrix, the operand of a general matrix product.
     pub codes_dense_bytes: PerPrecision<u64>,
     /// The pulse, K_p values.
@@ -379,6 +382,7 @@ impl Cost {
         let memory = MemoryCost {
             codes_packed_bytes: mul(pixels.div_ceil(8), k, "the packed codes")?,
             codes_int8_bytes: codes_int8,
+            codes_packbits_bytes: mul(pixels, k.div_ceil(8), "the packed codes file")?,
             codes_dense_bytes: both(codes_int8, "the dense codes")?,
             pulse_bytes: both(kp, "the pulse")?,
             measurements_bytes: both(k, "the measurements")?,
@@ -516,6 +520,10 @@ impl std::fmt::Display for Cost {
             m.codes_packed_bytes,
         ))?;
         f.write_str(&one("codes, int8 (codes.npy)", m.codes_int8_bytes))?;
+        f.write_str(&one(
+            "codes, packed (codes.npy, packbits)",
+            m.codes_packbits_bytes,
+        ))?;
         f.write_str(&two(
             "codes, dense float (a GEMM operand)",
             m.codes_dense_bytes,

@@ -92,8 +92,8 @@ pub struct MeasurementFiles {
     /// Pulse file (K_p,), float32 or float64, ≥ 0.
     #[arg(long, value_name = "P")]
     pub pulse: PathBuf,
-    /// Codes file (M, N, K), int8 (or float) in {-1, 0, 1}; `adjoint` also reads G code sets
-    /// (G, M, N, K).
+    /// Codes file (M, N, K), int8 (or float) in {-1, 0, 1}, or uint8 (M, N, ⌈K/8⌉) ±1 codes as
+    /// `np.packbits(S > 0, axis=-1)` writes them; `adjoint` also reads G code sets (G, M, N, …).
     #[arg(long, value_name = "S")]
     pub codes: PathBuf,
     /// Measurements file (K,), float32 or float64; `adjoint` also reads one row per ADC

@@ -28,7 +28,8 @@ pub struct ForwardArgs {
     /// Pulse file (K_p,), float32 or float64, ≥ 0.
     #[arg(long, value_name = "P")]
     pub pulse: PathBuf,
-    /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}.
+    /// Codes file (M, N, K), or (G, M, N, K) for G code sets; int8 (or float) in {-1, 0, 1}, or
+    /// uint8 ±1 codes packed as `np.packbits(S > 0, axis=-1)` writes them (last axis ⌈K/8⌉).
     #[arg(long, value_name = "S")]
     pub codes: PathBuf,
     /// Scene file (M, N, K_s), float32 or float64.

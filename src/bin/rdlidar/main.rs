@@ -26,7 +26,8 @@ use experiment::{CompareArgs, Experiment, ExperimentArgs, Preset};
 /// paper's experiment with every solver, a table on stdout and tables and figures in out/.
 ///
 /// Arrays are exchanged as C-order NumPy `.npy` files: scene (M, N, K_s) float32/float64, pulse
-/// (K_p,) float32/float64 ≥ 0, codes (M, N, K) int8 in {-1, 0, 1}, measurements (K,)
+/// (K_p,) float32/float64 ≥ 0, codes (M, N, K) int8 in {-1, 0, 1} or ±1 codes packed as
+/// `np.packbits(S > 0, axis=-1)` writes them (uint8 (M, N, ⌈K/8⌉)), measurements (K,)
 /// float32/float64, with K = K_p + K_s − 1. Errors are printed as one line `error: ...` naming
 /// the file or flag; the exit status is 1 (2 for usage errors) and no output file is left behind.
 /// A closed pipe on stdout ends a command quietly with status 141. Sizes and counts have bounds

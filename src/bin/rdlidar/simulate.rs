@@ -6,13 +6,25 @@ use clap::ValueEnum;
 use ndarray_npy::WritableElement;
 use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
 use rdlidar::io::{self, StagedFile};
-use rdlidar::lidar::{simulate, Architecture, Geometry, SceneSpec, SimulationSpec, TileSize};
+use rdlidar::lidar::{
+    packed_len, simulate, Architecture, Geometry, SceneSpec, SimulationSpec, TileSize,
+};
 use rdlidar::Real;
 
 use crate::common::{
     npy_dtype, outln, parse_adcs, parse_pulse_len, parse_size, parse_tile, with_precision,
     CliResult, Globals, Precision,
 };
+
+/// How `simulate` writes codes.npy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CodesFormat {
+    /// int8 (M, N, K) (or (G, M, N, K)), entries −1, 0, +1.
+    Int8,
+    /// uint8 (M, N, ⌈K/8⌉) (or (G, M, N, ⌈K/8⌉)), eight samples to a byte exactly as
+    /// `np.packbits(S > 0, axis=-1)` writes them: ±1 codes only.
+    Packed,
+}
 
 /// The scenes `simulate` generates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -38,9 +50,10 @@ impl SceneKind {
 
 /// Generate a scene, a pulse and codes, and simulate the measurements.
 ///
-/// Writes DIR/scene.npy (M, N, K_s), pulse.npy (K_p,), codes.npy (M, N, K) int8,
-/// meas.npy (K,) and meta.json (geometry, K_p, K, seeds, scene kind, code alphabet, regime and
-/// critical K_p, noise, PRNG, crate version), with K = K_p + K_s − 1.
+/// Writes DIR/scene.npy (M, N, K_s), pulse.npy (K_p,), codes.npy (M, N, K) int8 (with
+/// --codes-format packed: uint8 (M, N, ⌈K/8⌉) as `np.packbits(S > 0, axis=-1)` writes them),
+/// meas.npy (K,) and meta.json (geometry, K_p, K, seeds, scene kind, code alphabet and format,
+/// regime and critical K_p, noise, PRNG, crate version), with K = K_p + K_s − 1.
 ///
 /// Seeds (all ChaCha8): the pulse is drawn from SEED, the codes from SEED+1, the noise from
 /// SEED+2 and the random and transparent scenes from SEED+3. The same arguments give the same
@@ -106,6 +119,11 @@ pub struct SimulateArgs {
     /// reaches the ADC; the others' codes are written as 0.
     #[arg(long, value_name = "F")]
     pub aperture: Option<f64>,
+    /// How to write codes.npy: int8 (M, N, K), or packed, uint8 (M, N, ⌈K/8⌉) as
+    /// `np.packbits(S > 0, axis=-1)` writes ±1 codes, 8× smaller (read back with
+    /// `np.unpackbits(b, axis=-1, count=K)`). Every subcommand that reads codes takes both.
+    #[arg(long, value_enum, value_name = "FORMAT", default_value_t = CodesFormat::Int8)]
+    pub codes_format: CodesFormat,
 }
 
 /// Checks the flags that the generators would otherwise reject later, by name, and returns the
@@ -157,6 +175,24 @@ fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
             .into());
         }
     }
+    if a.codes_format == CodesFormat::Packed {
+        if a.ternary_zero_prob.is_some() {
+            return Err(
+                "--codes-format packed holds ±1 codes only, not --ternary-zero-prob \
+                        codes with zeros: use --codes-format int8"
+                    .to_string()
+                    .into(),
+            );
+        }
+        if a.aperture.is_some() {
+            return Err(
+                "--codes-format packed holds ±1 codes only, not the zero codes of \
+                        --aperture's masked pixels: use --codes-format int8"
+                    .to_string()
+                    .into(),
+            );
+        }
+    }
     let architecture = match (a.adcs, a.tiles, a.aperture) {
         (_, Some(t), _) => Architecture::Tiles(t),
         (_, _, Some(f)) => Architecture::Aperture(f),
@@ -201,7 +237,11 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         e @ rdlidar::Error::TooLarge { .. } => e.to_string(),
         other => format!("--scene {}: {other}", a.scene.name()),
     })?;
-    let meta = SimulationMeta::new(&sim);
+    let mut meta = SimulationMeta::new(&sim);
+    let packed = a.codes_format == CodesFormat::Packed;
+    if packed {
+        meta.codes_format = "packed".into();
+    }
     let mut json =
         serde_json::to_string_pretty(&meta).map_err(|e| format!("cannot format meta.json: {e}"))?;
     json.push('\n');
@@ -212,9 +252,10 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
     };
     let meas = ndarray::ArrayView::from_shape(ndarray::IxDyn(&meas_shape), &sim.meas[..])
         .map_err(|e| format!("cannot shape the measurements: {e}"))?;
+    let last = if packed { packed_len(k) } else { k };
     let codes_shape = match spec.architecture {
-        Architecture::MultiAdc(n) => vec![n, g.m, g.n, k],
-        _ => vec![g.m, g.n, k],
+        Architecture::MultiAdc(n) => vec![n, g.m, g.n, last],
+        _ => vec![g.m, g.n, last],
     };
 
     let dir = &a.out;
@@ -232,12 +273,16 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         let staged: Vec<StagedFile> = vec![
             io::stage_array(f_scene, sim.scene.data())?,
             io::stage_array(f_pulse, &ndarray::ArrayView1::from(sim.pulse.as_slice()))?,
-            match (spec.architecture, &sim.active) {
-                (Architecture::MultiAdc(_), _) => {
+            match (spec.architecture, &sim.active, packed) {
+                (Architecture::MultiAdc(_), _, false) => {
                     io::stage_code_sets(f_codes, grid, &sim.code_sets)?
                 }
-                (_, Some(active)) => io::stage_masked_codes(f_codes, grid, codes, active)?,
-                _ => io::stage_codes(f_codes, grid, codes)?,
+                (Architecture::MultiAdc(_), _, true) => {
+                    io::stage_packed_code_sets(f_codes, grid, &sim.code_sets, true)?
+                }
+                (_, Some(active), _) => io::stage_masked_codes(f_codes, grid, codes, active)?,
+                (_, None, false) => io::stage_codes(f_codes, grid, codes)?,
+                (_, None, true) => io::stage_packed_codes(f_codes, grid, codes)?,
             },
             io::stage_array(f_meas, &meas)?,
             io::stage_bytes(f_meta, json.as_bytes())?,
@@ -255,13 +300,18 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
     }
     let dt = npy_dtype::<T>();
     outln!(
-        "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, codes.npy {} int8, \
+        "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, codes.npy {} {}, \
          meas.npy {} {dt}, meta.json",
         dir.display(),
         g.m,
         g.n,
         g.ks,
         io::shape_text(&codes_shape),
+        if packed {
+            "uint8 (packed bits)"
+        } else {
+            "int8"
+        },
         io::shape_text(&meas_shape),
     );
     outln!(

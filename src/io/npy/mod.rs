@@ -48,8 +48,9 @@ pub use read::{
     read_scene, ShapeExpectation,
 };
 pub use write::{
-    stage_array, stage_code_sets, stage_codes, stage_masked_codes, write_array, write_code_sets,
-    write_codes, write_depth, write_masked_codes, write_measurements, write_pulse, write_scene,
+    stage_array, stage_code_sets, stage_codes, stage_masked_codes, stage_packed_code_sets,
+    stage_packed_codes, write_array, write_code_sets, write_codes, write_depth, write_masked_codes,
+    write_measurements, write_packed_code_sets, write_packed_codes, write_pulse, write_scene,
 };
 
 /// The element type of a `.npy` file, from its header's `descr`.
@@ -61,6 +62,8 @@ pub enum NpyDtype {
     Float64,
     /// `int8` (`|i1`).
     Int8,
+    /// `uint8` (`|u1`): codes packed eight samples to a byte, as `np.packbits` writes them.
+    Uint8,
     /// `int32` (`<i4` or `>i4`).
     Int32,
     /// Anything else, described in NumPy's words where possible (e.g. `"int64"`, `"bool"`).
@@ -82,6 +85,7 @@ impl NpyDtype {
             "f4" => NpyDtype::Float32,
             "f8" => NpyDtype::Float64,
             "i1" | "b" => NpyDtype::Int8,
+            "u1" | "B" => NpyDtype::Uint8,
             "i4" => NpyDtype::Int32,
             _ => NpyDtype::Other(describe_descr(descr)),
         };
@@ -95,6 +99,7 @@ impl NpyDtype {
             NpyDtype::Float32 => "float32",
             NpyDtype::Float64 => "float64",
             NpyDtype::Int8 => "int8",
+            NpyDtype::Uint8 => "uint8",
             NpyDtype::Int32 => "int32",
             NpyDtype::Other(s) => s,
         }
@@ -104,7 +109,7 @@ impl NpyDtype {
         match self {
             NpyDtype::Float32 | NpyDtype::Int32 => Some(4),
             NpyDtype::Float64 => Some(8),
-            NpyDtype::Int8 => Some(1),
+            NpyDtype::Int8 | NpyDtype::Uint8 => Some(1),
             NpyDtype::Other(_) => None,
         }
     }
@@ -325,6 +330,7 @@ macro_rules! element {
 element!(f32);
 element!(f64);
 element!(i8);
+element!(u8);
 element!(i32);
 
 /// Reads the data of an opened file as elements `E` (the dtype and the file's length have been

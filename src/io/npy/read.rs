@@ -5,7 +5,7 @@ use std::path::Path;
 use ndarray::{Array2, ArrayD, Ix1, Ix2, Ix3};
 
 use crate::error::{Error, Result};
-use crate::lidar::{Codes, Pulse, Scene};
+use crate::lidar::{packed_len, Codes, Pulse, Scene};
 use crate::real::Real;
 
 use super::super::file_error;
@@ -175,19 +175,28 @@ impl ShapeExpectation {
 }
 
 /// Reads codes: an int8 (or float32/float64) array of shape (M, N, K) with values in {−1, 0, 1},
-/// K = K_p + K_s − 1. Returns (M, N) and the packed codes (binary when no entry is 0, ternary
-/// otherwise).
+/// K = K_p + K_s − 1, or ±1 codes packed as `np.packbits(S > 0, axis=-1)` writes them, a uint8
+/// array of shape (M, N, ⌈K/8⌉) (see [`Codes::from_packbits`]). Returns (M, N) and the packed
+/// codes (binary when no entry is 0, ternary otherwise).
 ///
 /// # Errors
 /// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
 /// dtype or number of dimensions, an empty axis, a grid other than `expect.grid`, a last axis other
-/// than K, or a value outside {−1, 0, 1} (named by its index); [`Error::InvalidParameter`] if
-/// `expect` has a zero pulse length or zero depth bins.
+/// than K (⌈K/8⌉ for packed codes), a value outside {−1, 0, 1} (named by its index), or packed
+/// codes whose pad bits after sample K − 1 are not zero (named by the pixel);
+/// [`Error::InvalidParameter`] if `expect` has a zero pulse length or zero depth bins.
 pub fn read_codes(
     path: impl AsRef<Path>,
     expect: &ShapeExpectation,
 ) -> Result<((usize, usize), Codes)> {
     let path = path.as_ref();
+    if let Some((shape, sets)) = read_packed_codes(path, expect, 3)? {
+        let codes = sets
+            .into_iter()
+            .next()
+            .ok_or_else(|| file_error(path, "no codes"))?;
+        return Ok(((shape[0], shape[1]), codes));
+    }
     let (shape, codes) = read_dense_codes(path, expect, 3, "(M, N, K)")?;
     let (m, n, k) = (shape[0], shape[1], shape[2]);
     let flat = codes
@@ -199,8 +208,9 @@ pub fn read_codes(
 
 /// Reads G code sets, one per ADC of a multi-ADC array: an int8 (or float32/float64) array of
 /// shape (G, M, N, K) with values in {−1, 0, 1}, K = K_p + K_s − 1, whose slice g is the
-/// (M, N, K) codes of set g. Returns (M, N) and the G packed code sets, in order (each binary
-/// when it has no 0 entry, ternary otherwise).
+/// (M, N, K) codes of set g, or packed ±1 codes, uint8 of shape (G, M, N, ⌈K/8⌉). Returns
+/// (M, N) and the G packed code sets, in order (each binary when it has no 0 entry, ternary
+/// otherwise).
 ///
 /// Only four-dimensional files are accepted; a single code set (M, N, K) is read by
 /// [`read_codes`].
@@ -213,6 +223,9 @@ pub fn read_code_sets(
     expect: &ShapeExpectation,
 ) -> Result<((usize, usize), Vec<Codes>)> {
     let path = path.as_ref();
+    if let Some((shape, sets)) = read_packed_codes(path, expect, 4)? {
+        return Ok(((shape[1], shape[2]), sets));
+    }
     let (shape, codes) = read_dense_codes(path, expect, 4, "(G, M, N, K)")?;
     let (sets, m, n, k) = (shape[0], shape[1], shape[2], shape[3]);
     let flat = codes
@@ -225,15 +238,80 @@ pub fn read_code_sets(
     Ok(((m, n), packed))
 }
 
-/// Reads and checks a codes file of `ndim` dimensions whose last three axes are (M, N, K): the
-/// dtype, the number of dimensions, empty axes, the grid, K and the values. Returns the shape and
-/// the values as int8, in C order.
-fn read_dense_codes(
+/// Reads a uint8 codes file of `ndim` dimensions whose last three axes are (M, N, ⌈K/8⌉), as
+/// `np.packbits(S > 0, axis=-1)` writes ±1 codes: `None` for a file of another dtype, otherwise
+/// the shape and the code sets (one for three dimensions, G for four), after the same checks as
+/// [`read_dense_codes`] and that every pad bit is zero.
+fn read_packed_codes(
     path: &Path,
     expect: &ShapeExpectation,
     ndim: usize,
-    axes: &str,
-) -> Result<(Vec<usize>, ArrayD<i8>)> {
+) -> Result<Option<(Vec<usize>, Vec<Codes>)>> {
+    check_expectation(expect)?;
+    let opened = open_npy(path)?;
+    if opened.header.dtype != NpyDtype::Uint8 {
+        return Ok(None);
+    }
+    let h = opened.header.clone();
+    let axes = if ndim == 4 {
+        "(G, M, N, ⌈K/8⌉)"
+    } else {
+        "(M, N, ⌈K/8⌉)"
+    };
+    check_ndim(path, "packed codes (uint8)", &h, ndim, axes)?;
+    let (m, n, nb) = (h.shape[ndim - 3], h.shape[ndim - 2], h.shape[ndim - 1]);
+    check_grid(path, &h.shape, (m, n), expect)?;
+    let k = expect.samples();
+    let want = packed_len(k);
+    if nb != want {
+        return Err(file_error(
+            path,
+            format!(
+                "packed codes (uint8) shape {} does not fit: the last axis must be ⌈K/8⌉ = \
+                 ⌈{k}/8⌉ = {want} bytes for K = K_p + K_s − 1 = {} + {} − 1 = {k} samples \
+                 (pulse length {}, {} depth bins), found {nb}",
+                shape_text(&h.shape),
+                expect.pulse_len,
+                expect.depth_bins,
+                expect.pulse_len,
+                expect.depth_bins
+            ),
+        ));
+    }
+    let a = read_data::<u8>(path, opened)?;
+    let bytes = a
+        .as_slice()
+        .ok_or_else(|| file_error(path, "cannot read the packed codes in C order"))?;
+    let pad = 8 * nb - k;
+    let per_set = m * n * nb;
+    if pad > 0 {
+        let mask = (1u8 << pad) - 1;
+        if let Some(at) = (0..bytes.len() / nb).find(|p| bytes[p * nb + nb - 1] & mask != 0) {
+            let pixel = at % (m * n);
+            let index = if ndim == 4 {
+                format!("({}, {}, {})", at / (m * n), pixel / n, pixel % n)
+            } else {
+                format!("({}, {})", pixel / n, pixel % n)
+            };
+            return Err(file_error(
+                path,
+                format!(
+                    "packed codes: the {pad} pad bit(s) after sample {} of pixel {index} are \
+                     not zero (np.packbits writes zeros there; is K = {k} right?)",
+                    k - 1
+                ),
+            ));
+        }
+    }
+    let sets = bytes
+        .chunks_exact(per_set)
+        .map(|set| Codes::from_packbits(set, m * n, k).map_err(|e| file_error(path, e.to_string())))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Some((h.shape, sets)))
+}
+
+/// Refuses an expectation with a zero pulse length or zero depth bins.
+fn check_expectation(expect: &ShapeExpectation) -> Result<()> {
     if expect.pulse_len == 0 || expect.depth_bins == 0 {
         return Err(Error::param(
             "expect",
@@ -243,6 +321,44 @@ fn read_dense_codes(
             ),
         ));
     }
+    Ok(())
+}
+
+/// Checks the (M, N) of a codes file against the scene's grid, if known.
+fn check_grid(
+    path: &Path,
+    shape: &[usize],
+    (m, n): (usize, usize),
+    expect: &ShapeExpectation,
+) -> Result<()> {
+    if let Some((gm, gn)) = expect.grid {
+        if (m, n) != (gm, gn) {
+            return Err(file_error(
+                path,
+                format!(
+                    "codes shape {} has {m}x{n} pixels, the scene has {gm}x{gn}",
+                    shape_text(shape)
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The dtypes a codes file may have, for error messages.
+const CODE_DTYPES: &str =
+    "int8 (or float32/float64 holding −1, 0, 1), or uint8 bits as np.packbits writes them";
+
+/// Reads and checks a codes file of `ndim` dimensions whose last three axes are (M, N, K): the
+/// dtype, the number of dimensions, empty axes, the grid, K and the values. Returns the shape and
+/// the values as int8, in C order.
+fn read_dense_codes(
+    path: &Path,
+    expect: &ShapeExpectation,
+    ndim: usize,
+    axes: &str,
+) -> Result<(Vec<usize>, ArrayD<i8>)> {
+    check_expectation(expect)?;
     let opened = open_npy(path)?;
     let h = opened.header.clone();
     let role = "codes";
@@ -250,26 +366,11 @@ fn read_dense_codes(
         h.dtype,
         NpyDtype::Int8 | NpyDtype::Float32 | NpyDtype::Float64
     ) {
-        return Err(wrong_dtype(
-            path,
-            role,
-            &h.dtype,
-            "int8 (or float32/float64 holding −1, 0, 1)",
-        ));
+        return Err(wrong_dtype(path, role, &h.dtype, CODE_DTYPES));
     }
     check_ndim(path, role, &h, ndim, axes)?;
     let (m, n, k) = (h.shape[ndim - 3], h.shape[ndim - 2], h.shape[ndim - 1]);
-    if let Some((gm, gn)) = expect.grid {
-        if (m, n) != (gm, gn) {
-            return Err(file_error(
-                path,
-                format!(
-                    "codes shape {} has {m}x{n} pixels, the scene has {gm}x{gn}",
-                    shape_text(&h.shape)
-                ),
-            ));
-        }
-    }
+    check_grid(path, &h.shape, (m, n), expect)?;
     let want = expect.samples();
     if k != want {
         return Err(file_error(
@@ -304,14 +405,7 @@ fn read_dense_codes(
         }
         NpyDtype::Float32 => float_codes(read_data::<f32>(path, opened)?, bad_value)?,
         NpyDtype::Float64 => float_codes(read_data::<f64>(path, opened)?, bad_value)?,
-        ref other => {
-            return Err(wrong_dtype(
-                path,
-                role,
-                other,
-                "int8 (or float32/float64 holding −1, 0, 1)",
-            ))
-        }
+        ref other => return Err(wrong_dtype(path, role, other, CODE_DTYPES)),
     };
     Ok((h.shape, codes))
 }

@@ -9,7 +9,7 @@ use ndarray_npy::npy::header::{Header, Layout};
 use ndarray_npy::{WritableElement, WriteNpyExt};
 
 use crate::error::{Error, Result};
-use crate::lidar::{Codes, Scene};
+use crate::lidar::{packed_len, Codes, Scene};
 use crate::real::Real;
 
 use super::super::{file_error, StagedFile};
@@ -226,8 +226,98 @@ fn check_grid(context: &str, grid: (usize, usize), codes: &Codes) -> Result<()> 
 
 /// Creates the temporary file of an int8 array of shape `shape` and writes its header.
 fn start_codes_file(path: &Path, shape: Vec<usize>) -> Result<StagedFile> {
+    start_file::<i8>(path, shape)
+}
+
+/// Writes ±1 codes as numpy's `packbits` writes them: a uint8 array of shape (M, N, ⌈K/8⌉),
+/// atomically. `np.unpackbits(b, axis=-1, count=K)` gives back S > 0; see
+/// [`Codes::from_packbits`] for the bit order.
+///
+/// # Errors
+/// As [`stage_packed_codes`], or [`Error::File`] if the file cannot be renamed into place.
+pub fn write_packed_codes(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    codes: &Codes,
+) -> Result<()> {
+    stage_packed_codes(path, grid, codes)?.commit()
+}
+
+/// Writes ±1 codes as a uint8 array of shape (M, N, ⌈K/8⌉) (see [`write_packed_codes`]) under a
+/// temporary name and syncs it; see [`stage_array`].
+///
+/// # Errors
+/// [`Error::ShapeMismatch`] if `grid` does not have the codes' number of pixels;
+/// [`Error::InvalidParameter`] for codes with 0 entries, which one bit cannot hold;
+/// [`Error::File`] naming `path` if the file cannot be created, written or synced.
+pub fn stage_packed_codes(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    codes: &Codes,
+) -> Result<StagedFile> {
+    stage_packed_code_sets(path, grid, std::slice::from_ref(codes), false)
+}
+
+/// Writes G sets of ±1 codes as a uint8 array of shape (G, M, N, ⌈K/8⌉), atomically: slice g
+/// holds `sets[g]` as [`write_packed_codes`] writes one set.
+///
+/// # Errors
+/// As [`stage_code_sets`], and [`Error::InvalidParameter`] for codes with 0 entries.
+pub fn write_packed_code_sets<C: Borrow<Codes>>(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    sets: &[C],
+) -> Result<()> {
+    stage_packed_code_sets(path, grid, sets, true)?.commit()
+}
+
+/// Writes packed code sets under a temporary name, with a leading axis of G when `stacked`.
+///
+/// # Errors
+/// As [`write_packed_code_sets`].
+pub fn stage_packed_code_sets<C: Borrow<Codes>>(
+    path: impl AsRef<Path>,
+    grid: (usize, usize),
+    sets: &[C],
+    stacked: bool,
+) -> Result<StagedFile> {
+    let path = path.as_ref();
+    let first = sets
+        .first()
+        .ok_or_else(|| Error::param("sets", "need at least one code set"))?
+        .borrow();
+    for (i, set) in sets.iter().enumerate() {
+        let set = set.borrow();
+        check_grid("write_packed_code_sets", grid, set)?;
+        if set.len() != first.len() {
+            return Err(Error::shape(
+                format!("write_packed_code_sets: samples of set {i} vs set 0"),
+                first.len(),
+                set.len(),
+            ));
+        }
+    }
+    let (m, n) = grid;
+    let mut shape = vec![m, n, packed_len(first.len())];
+    if stacked {
+        shape.insert(0, sets.len());
+    }
+    let mut staged = start_file::<u8>(path, shape)?;
+    for set in sets {
+        let bytes = set.borrow().to_packbits()?;
+        staged
+            .writer()
+            .write_all(&bytes)
+            .map_err(|e| file_error(path, format!("cannot write: {e}")))?;
+    }
+    staged.sync()?;
+    Ok(staged)
+}
+
+/// Creates the temporary file of an array of `E` of shape `shape` and writes its header.
+fn start_file<E: WritableElement>(path: &Path, shape: Vec<usize>) -> Result<StagedFile> {
     let header = Header {
-        type_descriptor: <i8 as WritableElement>::type_descriptor(),
+        type_descriptor: E::type_descriptor(),
         layout: Layout::Standard,
         shape,
     };
