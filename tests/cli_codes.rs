@@ -170,7 +170,7 @@ fn packed_code_sets_of_several_adcs_read_as_the_int8_ones() {
         bytes(&int8.join("meas.npy")),
         bytes(&packed.join("meas.npy"))
     );
-    for what in ["forward", "adjoint"] {
+    for what in ["forward", "adjoint", "auto"] {
         let (a, b) = (
             tmp.path(&format!("{what}-a.npy")),
             tmp.path(&format!("{what}-b.npy")),

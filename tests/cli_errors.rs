@@ -368,7 +368,7 @@ fn reconstruct_refuses_bad_flags_and_files_and_writes_nothing() {
         ),
         (
             vec![("--codes", multi_codes.as_str())],
-            vec![multi_codes.as_str(), "2 code sets", "one code set"],
+            vec![multi_codes.as_str(), "2 code sets", "those of one ADC"],
         ),
         (
             vec![("--png", missing_dir_png.as_str())],

@@ -18,9 +18,11 @@ use crate::real::Real;
 
 use super::codes::Codes;
 use super::geometry::Geometry;
+use super::measurement::MultiAdcOperator;
 use super::rdop::RdOperator;
 
-/// G fused operators with a common pulse and independent codes, stacked: y = [A₁x; …; A_Gx].
+/// G fused operators with a common pulse and independent codes, stacked: y = [A₁x; …; A_Gx]
+/// (see [`MultiAdcOperator`]).
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for an empty list of code sets; the errors of
@@ -29,15 +31,8 @@ pub fn multi_adc<T: Real>(
     geom: Geometry,
     pulse: &[T],
     codes: Vec<Arc<Codes>>,
-) -> Result<VStack<RdOperator<T>>> {
-    if codes.is_empty() {
-        return Err(Error::param("adcs", "need at least one code set"));
-    }
-    let ops = codes
-        .into_iter()
-        .map(|c| RdOperator::new(geom, pulse.to_vec(), c))
-        .collect::<Result<Vec<_>>>()?;
-    VStack::new(ops)
+) -> Result<MultiAdcOperator<T>> {
+    MultiAdcOperator::new(geom, pulse, codes)
 }
 
 /// The voxel indices (pixel-major, depth fastest) of the pixels `pixels`.

@@ -105,6 +105,18 @@ pub enum Regime {
     Redundant,
 }
 
+impl Regime {
+    /// The regime of `measurements` against `unknowns`: compressive with fewer measurements,
+    /// critical with as many, redundant with more.
+    pub fn of(measurements: usize, unknowns: usize) -> Regime {
+        match measurements.cmp(&unknowns) {
+            std::cmp::Ordering::Less => Regime::Compressive,
+            std::cmp::Ordering::Equal => Regime::Critical,
+            std::cmp::Ordering::Greater => Regime::Redundant,
+        }
+    }
+}
+
 impl std::fmt::Display for Regime {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {

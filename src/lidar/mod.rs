@@ -8,6 +8,7 @@ mod architectures;
 mod codes;
 mod geometry;
 mod kernels;
+mod measurement;
 mod noise;
 mod pulse;
 mod rdop;
@@ -22,6 +23,7 @@ pub use architectures::{
 };
 pub use codes::{packed_len, CodeAlphabet, Codes};
 pub use geometry::{Geometry, Regime};
+pub use measurement::{LidarOperator, MultiAdcOperator};
 pub use noise::{
     add_gaussian, add_gaussian_snr, add_photon_noise, mean_power, quantize, sigma_for_snr,
     unmodulated_light, FullScale, NoiseModel, NoiseReport, NoiseStage, QuantizationReport,

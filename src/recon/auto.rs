@@ -2,8 +2,7 @@
 //! data themselves rather than from the regime alone.
 
 use crate::error::Result;
-use crate::lidar::RdOperator;
-use crate::operator::LinearOperator;
+use crate::lidar::LidarOperator;
 use crate::real::Real;
 use crate::solver::{Report, Termination};
 
@@ -116,7 +115,7 @@ fn nonzeros<T: Real>(x: &[T]) -> usize {
 
 /// Runs a method and extracts its returns, measuring the residual of what it reports.
 fn attempt<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     method: Method,
     options: &ReconstructOptions,
@@ -140,7 +139,7 @@ fn attempt<T: Real>(
 
 /// The rule of [`Method::Auto`]; see [`reconstruct`](super::reconstruct).
 pub(super) fn auto<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     options: &ReconstructOptions,
 ) -> Result<Auto<T>> {
@@ -314,7 +313,7 @@ fn several_returns_share<T: Real>(x: &[T], ks: usize) -> f64 {
 /// explains the data, the lowest [`bic`] of the pursuit, the one-reflector fit `others` and
 /// these is kept.
 fn several_returns<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     options: &ReconstructOptions,
     (pursuit, end): (Tried<T>, PursuitEnd),
@@ -394,7 +393,7 @@ const HIDDEN_Z: f64 = 3.5;
 /// a voxel other than their return: returns the fit has no room for. Returns (such pixels, lit
 /// pixels).
 fn hidden_returns<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     x: &[T],
     report: Option<&mut Report>,

@@ -4,8 +4,8 @@
 use std::str::FromStr;
 
 use crate::error::{Error, Result};
-use crate::lidar::{RdOperator, NO_RETURN};
-use crate::operator::{LinearOperator, PowerIteration};
+use crate::lidar::{LidarOperator, NO_RETURN};
+use crate::operator::PowerIteration;
 use crate::real::Real;
 use crate::solver::{
     cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, CglsParams, CosampParams,
@@ -296,7 +296,7 @@ pub(super) fn model_params(options: &ReconstructOptions) -> ModelBasedParams {
 /// The backprojections' estimates have one return per pixel at most; the iterative ones still
 /// need [`returns`](super::peaks::returns).
 pub(super) fn run<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     method: Method,
     options: &ReconstructOptions,
@@ -488,7 +488,7 @@ pub fn estimate_returns<T: Real>(x: &[T], ks: usize) -> usize {
 /// support the support pursuit ([`Method::SupportLs`]) settles on, which counts every return of
 /// a pixel with several; clamped to [1, K/3], which keeps CoSaMP's least squares on up to 3s
 /// columns overdetermined.
-fn estimate_sparsity<T: Real>(op: &RdOperator<T>, y: &[T]) -> Result<usize> {
+fn estimate_sparsity<T: Real>(op: &dyn LidarOperator<T>, y: &[T]) -> Result<usize> {
     let bp = backproject(op, y, true, PeakThreshold::Robust)?;
     let found = bp.peaks.iter().filter(|&&p| p != NO_RETURN).count();
     let pursuit = support_pursuit(op, y, PURSUIT_ROUNDS)?;

@@ -10,6 +10,7 @@ mod peaks;
 mod pursuit;
 mod reconstruct;
 mod refit;
+mod tiled;
 
 pub use auto::{Stage, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
 pub use method::{
@@ -21,3 +22,4 @@ pub use pursuit::explained_tolerance;
 pub use reconstruct::{
     is_piecewise_smooth, reconstruct, Reconstruction, SMOOTH_BINS, SMOOTH_FRACTION,
 };
+pub use tiled::{tile_places, TilePlace, TileReconstruction, TiledArray, TiledReconstruction};

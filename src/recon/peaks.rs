@@ -2,7 +2,7 @@
 //! normalization and threshold rules.
 
 use crate::error::{Error, Result};
-use crate::lidar::{Geometry, RdOperator};
+use crate::lidar::{Geometry, LidarOperator};
 use crate::real::Real;
 use crate::solver::{backprojection, Backprojection, Threshold};
 
@@ -39,24 +39,24 @@ impl PeakThreshold {
 /// The (plain or debiased) backprojection with the lidar normalization and the given threshold
 /// rule.
 pub(super) fn backproject<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     debiased: bool,
     threshold: PeakThreshold,
 ) -> Result<crate::solver::BackprojectionResult<T>> {
     let p = op.pulse();
+    // Every column is the pulse modulated by `code_sets` code sets of ±1 (or 0) entries.
+    let sets = op.code_sets() as f64;
     let (filter, normalization) = if debiased {
-        let z = op.zero_mean();
+        let z = crate::lidar::zero_mean(p);
         // Σ (p − mean p)·p: the lag-0 correlation of the matched filter with the pulse.
-        let norm: f64 = z
-            .pulse()
-            .iter()
-            .zip(p)
-            .map(|(a, b)| a.as_f64() * b.as_f64())
-            .sum();
-        (Some(z), norm)
+        let norm: f64 = z.iter().zip(p).map(|(a, b)| a.as_f64() * b.as_f64()).sum();
+        (Some(op.zero_mean_operator()), sets * norm)
     } else {
-        (None, p.iter().map(|v| v.as_f64().powi(2)).sum())
+        (
+            None,
+            sets * p.iter().map(|v| v.as_f64().powi(2)).sum::<f64>(),
+        )
     };
     if !(normalization.is_finite() && normalization > 0.0) {
         return Err(Error::param(
@@ -71,7 +71,7 @@ pub(super) fn backproject<T: Real>(
         threshold: threshold.rule(),
     };
     match &filter {
-        Some(z) => backprojection(z, y, &params),
+        Some(z) => backprojection(z.as_ref(), y, &params),
         None => backprojection(op, y, &params),
     }
 }

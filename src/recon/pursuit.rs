@@ -5,9 +5,8 @@
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::lidar::RdOperator;
+use crate::lidar::LidarOperator;
 use crate::linalg::{dot, median, robust_sigma};
-use crate::operator::{LinearOperator, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{Report, Termination};
 
@@ -93,7 +92,7 @@ pub(super) struct Pursuit<T> {
 
 /// ‖y − Ax‖ / ‖y‖ in f64, with the sparse forward when `x` is sparse; counts one application.
 pub(super) fn relative_residual<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     x: &[T],
     report: &mut Report,
@@ -126,7 +125,7 @@ pub(super) fn relative_residual<T: Real>(
 /// left, when a round gains less than [`MIN_PROGRESS`], when the support would exceed
 /// [`PURSUIT_MAX_FRACTION`] of the measurements, or after `max_rounds`.
 pub(super) fn support_pursuit<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     max_rounds: usize,
 ) -> Result<Pursuit<T>> {
@@ -265,7 +264,7 @@ pub(super) fn support_pursuit<T: Real>(
 
 /// The residual's energy in returns of the held voxels' mean energy (amplitude² times column
 /// norm²): about how many returns are still unexplained. Infinite when nothing is held.
-fn unexplained_returns<T: Real>(op: &RdOperator<T>, x: &[T], r: &[T]) -> f64 {
+fn unexplained_returns<T: Real>(op: &dyn LidarOperator<T>, x: &[T], r: &[T]) -> f64 {
     let support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
     let norms = op.column_norms(&support);
     let held: f64 = support
@@ -282,7 +281,7 @@ fn unexplained_returns<T: Real>(op: &RdOperator<T>, x: &[T], r: &[T]) -> f64 {
 /// The amplitude test: zeroes the voxels whose amplitude times column norm is below
 /// [`AMPLITUDE_Z`] standard deviations of the residual `r` (at least 100 machine epsilons of the
 /// measurements' RMS, which bounds the dynamic range of noise-free fits).
-fn prune<T: Real>(op: &RdOperator<T>, x: &mut [T], r: &[T], ynorm: f64) {
+fn prune<T: Real>(op: &dyn LidarOperator<T>, x: &mut [T], r: &[T], ynorm: f64) {
     let k = r.len();
     let support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
     let dof = k.saturating_sub(support.len()).max(1);
@@ -298,7 +297,7 @@ fn prune<T: Real>(op: &RdOperator<T>, x: &mut [T], r: &[T], ynorm: f64) {
 }
 
 /// y − Ax with the sparse forward, counted as a support apply.
-fn residual<T: Real>(op: &RdOperator<T>, y: &[T], x: &[T], report: &mut Report) -> Vec<T> {
+fn residual<T: Real>(op: &dyn LidarOperator<T>, y: &[T], x: &[T], report: &mut Report) -> Vec<T> {
     let mut ax = vec![T::zero(); y.len()];
     op.apply_sparse(x, &mut ax);
     report.support_applies += 1;

@@ -11,8 +11,7 @@
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
-use crate::lidar::{DepthMap, RdOperator, Regime, Scene, NO_RETURN};
-use crate::operator::LinearOperator;
+use crate::lidar::{DepthMap, LidarOperator, Regime, Scene, NO_RETURN};
 use crate::real::Real;
 use crate::solver::Report;
 
@@ -96,7 +95,7 @@ pub struct Reconstruction<T> {
 /// finite; [`Error::InvalidParameter`] for a zero `max_iter` or an all-zero pulse; the solvers'
 /// own errors (e.g. [`Error::Breakdown`]).
 pub fn reconstruct<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     method: Method,
     options: &ReconstructOptions,
@@ -116,7 +115,7 @@ pub fn reconstruct<T: Real>(
         ));
     }
     let g = op.geometry();
-    let regime = g.regime(op.pulse().len());
+    let regime = op.regime();
     let (x, method_used, report, stages) = if method == Method::Auto {
         let a = auto(op, y, options)?;
         (a.x, a.method_used, a.report, a.stages)

@@ -2,8 +2,7 @@
 //! refit of [`Method::Auto`](super::Method::Auto)'s support stage.
 
 use crate::error::Result;
-use crate::lidar::RdOperator;
-use crate::operator::LinearOperator;
+use crate::lidar::LidarOperator;
 use crate::real::Real;
 use crate::solver::{cgls, CglsParams, Report, Stopping};
 
@@ -25,7 +24,7 @@ pub(super) const REFIT_ROUNDS: usize = 3;
 /// # Errors
 /// The least squares' errors ([`crate::Error::Breakdown`]).
 pub(super) fn refit_support<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     x: &mut [T],
     max_iter: usize,
@@ -43,7 +42,7 @@ pub(super) const REFIT_TARGET: f64 = 1e-12;
 /// # Errors
 /// As [`refit_support`].
 pub(super) fn refit_support_to<T: Real>(
-    op: &RdOperator<T>,
+    op: &dyn LidarOperator<T>,
     y: &[T],
     x: &mut [T],
     max_iter: usize,

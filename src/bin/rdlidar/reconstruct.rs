@@ -1,21 +1,24 @@
 //! `rdlidar reconstruct`: a depth map and a scene from files, by any solver.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use ndarray_npy::WritableElement;
 use rdlidar::io::{self, StagedFile};
-use rdlidar::lidar::{depth_bin_m, Geometry, RdOperator, DEFAULT_TAU_S};
+use rdlidar::lidar::{
+    depth_bin_m, Architecture, DepthMap, MultiAdcOperator, RdOperator, Scene, TileSize,
+    DEFAULT_TAU_S,
+};
 use rdlidar::recon::{
-    compare, reconstruct, Method, PeakThreshold, ReconstructOptions, MAX_RETURNS_ESTIMATE,
+    compare, reconstruct, Method, PeakThreshold, ReconstructOptions, Reconstruction,
+    TileReconstruction, TiledArray, MAX_RETURNS_ESTIMATE,
 };
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, outln, parse_positive, with_precision, CliResult, Globals,
-    MeasurementFiles,
+    check_out_file, npy_dtype, outln, parse_positive, parse_tile, with_precision, CliResult,
+    Globals, MeasurementFiles,
 };
-use crate::layout::{check_memory, expectation};
+use crate::layout::{architecture_of, check_memory, expectation, read_measurements, Layout};
 
 /// Reconstruct the scene from measurements: a depth map and the returns found.
 ///
@@ -35,6 +38,12 @@ use crate::layout::{check_memory, expectation};
 /// and where several returns per pixel show (in the pursuit's support or in what the
 /// one-reflector fit leaves), model-based with k returns and fista. It keeps the first fit that explains the data (with noise, the best by an information
 /// criterion) and prints each stage it ran and why.
+///
+/// Every architecture of `simulate`: G code sets (G, M, N, K) with measurements (G, K) are
+/// reconstructed through the stacked operator of the G ADCs (every solver, auto too); with
+/// --tiles AxB the measurements (T, K) hold one row per tile, and each tile is reconstructed
+/// on its own grid, in parallel (a line per tile as it finishes), then stitched; a coded
+/// aperture's codes (zero codes for blocked pixels) read as one code set.
 ///
 /// With --truth SCENE.npy the estimate is compared with the true scene (exact depths,
 /// RMSE, misses, false detections, relative error; τ = 200 ps per bin).
@@ -76,6 +85,10 @@ pub struct ReconstructArgs {
     /// of its lit pixels do not exceed).
     #[arg(long, value_name = "K|auto", value_parser = parse_returns, default_value = "1")]
     pub returns: MaxReturns,
+    /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`): the measurements
+    /// are (T, K), one row per tile, and the tiles are reconstructed independently.
+    #[arg(long, value_name = "AxB", value_parser = parse_tile)]
+    pub tiles: Option<TileSize>,
 }
 
 /// A `--returns` value: a count, or `None` for auto.
@@ -140,21 +153,12 @@ fn reconstruct_files<T: Real + WritableElement>(
     let p = io::read_pulse::<T>(&a.files.pulse)?;
     let kp = p.len();
     let expect = expectation(kp, a.files.depth_bins)?;
-    let y = io::read_measurements::<T>(&a.files.meas, Some(&expect))?;
-    let h = io::read_header(&a.files.codes)?;
-    if h.shape.len() == 4 {
-        return Err(format!(
-            "{}: codes of shape {} are {} code sets; reconstruct needs one code set (M, N, K)",
-            a.files.codes.display(),
-            io::shape_text(&h.shape),
-            h.shape[0]
-        )
-        .into());
-    }
+    let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
+    let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
     check_memory::<T>("reconstruct", &a.files.codes, &expect, 10)?;
-    let ((m, n), codes) = io::read_codes(&a.files.codes, &expect)?;
-    let g = Geometry::new(m, n, a.files.depth_bins).map_err(|e| format!("--depth-bins: {e}"))?;
+    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins)?;
+    let g = layout.geometry;
     let truth = match &a.truth {
         Some(path) => {
             let t = io::read_scene::<T>(path)?;
@@ -170,7 +174,6 @@ fn reconstruct_files<T: Real + WritableElement>(
         }
         None => None,
     };
-    let op = RdOperator::new(g, p.into_inner(), Arc::new(codes))?;
     let options = ReconstructOptions {
         max_iter: a.max_iter,
         progress: !globals.quiet,
@@ -180,8 +183,39 @@ fn reconstruct_files<T: Real + WritableElement>(
         debias: !a.no_debias,
         max_returns: a.returns.0,
     };
-    let r = reconstruct(&op, &y, a.solver, &options)
-        .map_err(|e| format!("--solver {}: {e}", a.solver))?;
+    let pulse = p.into_inner();
+    let solver = |e: rdlidar::Error| format!("--solver {}: {e}", a.solver);
+    let r = match arch {
+        Architecture::MultiAdc(_) => {
+            let op = MultiAdcOperator::new(g, &pulse, layout.code_sets.clone())?;
+            Outcome::single(
+                reconstruct(&op, &y, a.solver, &options).map_err(solver)?,
+                kp,
+            )
+        }
+        Architecture::Tiles(t) => {
+            let tiled = TiledArray::new(g, &pulse, &layout.code_sets[0], t)?;
+            let count = tiled.places().len();
+            let done = std::sync::atomic::AtomicUsize::new(0);
+            let report = |tile: &TileReconstruction<T>| {
+                let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                if !globals.quiet {
+                    eprintln!("{}", tile_line(tile, n, count));
+                }
+            };
+            let r = tiled
+                .reconstruct(&y, a.solver, &options, &report)
+                .map_err(solver)?;
+            Outcome::tiled(r, t, kp)
+        }
+        _ => {
+            let op = RdOperator::new(g, pulse, layout.code_sets[0].clone())?;
+            Outcome::single(
+                reconstruct(&op, &y, a.solver, &options).map_err(solver)?,
+                kp,
+            )
+        }
+    };
     let metrics = match (&truth, &a.truth) {
         (Some(t), Some(path)) => Some(
             compare(t, &r.scene, DEFAULT_TAU_S)
@@ -198,7 +232,7 @@ fn reconstruct_files<T: Real + WritableElement>(
     if let Some(png) = &a.png {
         let bin_m = depth_bin_m(DEFAULT_TAU_S)?;
         let options = rdlidar::report::plot::DepthOptions::new(bin_m, "m")
-            .title(format!("{} ({})", r.method_used, g));
+            .title(format!("{} ({})", r.method, g));
         let truth_depth = truth.as_ref().map(|t| t.depth_map().depth);
         let panels: Vec<(&str, &ndarray::Array2<i32>)> = match &truth_depth {
             Some(d) => vec![("truth", d), ("estimate", &r.depth.depth)],
@@ -210,40 +244,22 @@ fn reconstruct_files<T: Real + WritableElement>(
     }
     let written = io::commit_all(staged)?;
 
-    let chosen = if a.solver == Method::Auto {
-        format!(
-            "{} (auto: {} regime, K_p {kp}, critical K_p {})",
-            r.method_used,
-            r.regime,
-            g.critical_pulse_len()
-        )
-    } else {
-        format!("{} ({} regime)", r.method_used, r.regime)
-    };
-    let iterations = match &r.report {
-        Some(rep) => format!(
-            "{} iterations, termination {:?}, {} forward, {} adjoint and {} support applications",
-            rep.iterations,
-            rep.termination,
-            rep.forward_applies,
-            rep.adjoint_applies,
-            rep.support_applies
-        ),
-        None => "one adjoint application".to_string(),
-    };
     let files: Vec<String> = written.iter().map(|f| f.display().to_string()).collect();
     outln!(
-        "reconstruct {g} from K = {}: solver {chosen}; {iterations}; {:.3} s; {} of {} pixels \
-         with a return; wrote {} (depth int32, scene {}).",
+        "reconstruct {g} from {} measurements{}: solver {}; {}; {:.3} s; {} of {} pixels with a \
+         return; wrote {} (depth int32, scene {}).",
         y.len(),
-        r.elapsed.as_secs_f64(),
+        layout.note(),
+        r.chosen,
+        r.iterations,
+        r.seconds,
         r.depth.lit(),
         g.pixels(),
         files.join(", "),
         npy_dtype::<T>()
     );
-    for (i, stage) in r.stages.iter().enumerate() {
-        outln!("  auto stage {}: {stage}", i + 1);
+    for line in &r.details {
+        outln!("  {line}");
     }
     if let Some(m) = metrics {
         outln!("versus the truth: {m}");
@@ -268,4 +284,114 @@ fn check_distinct_outputs(a: &ReconstructArgs) -> CliResult {
         }
     }
     Ok(())
+}
+
+/// What `reconstruct` reports of a reconstruction, whatever the architecture.
+struct Outcome<T> {
+    scene: Scene<T>,
+    depth: DepthMap<T>,
+    /// The method (for a tiled array, the tiles' methods).
+    method: String,
+    /// The method with the regime, as the summary line gives it.
+    chosen: String,
+    /// Iterations and applications.
+    iterations: String,
+    seconds: f64,
+    /// auto's stages, or the tiles' methods.
+    details: Vec<String>,
+}
+
+impl<T: Real> Outcome<T> {
+    fn single(r: Reconstruction<T>, kp: usize) -> Self {
+        let g = r.scene.geometry();
+        let chosen = if r.stages.is_empty() {
+            format!("{} ({} regime)", r.method_used, r.regime)
+        } else {
+            format!(
+                "{} (auto: {} regime, K_p {kp}, critical K_p {})",
+                r.method_used,
+                r.regime,
+                g.critical_pulse_len()
+            )
+        };
+        let iterations = match &r.report {
+            Some(rep) => format!(
+                "{} iterations, termination {:?}, {} forward, {} adjoint and {} support \
+                 applications",
+                rep.iterations,
+                rep.termination,
+                rep.forward_applies,
+                rep.adjoint_applies,
+                rep.support_applies
+            ),
+            None => "one adjoint application".to_string(),
+        };
+        let details = r
+            .stages
+            .iter()
+            .enumerate()
+            .map(|(i, stage)| format!("auto stage {}: {stage}", i + 1))
+            .collect();
+        Outcome {
+            method: r.method_used.to_string(),
+            chosen,
+            iterations,
+            seconds: r.elapsed.as_secs_f64(),
+            details,
+            scene: r.scene,
+            depth: r.depth,
+        }
+    }
+
+    fn tiled(r: rdlidar::recon::TiledReconstruction<T>, tile: TileSize, kp: usize) -> Self {
+        let used: Vec<String> = r
+            .methods_used()
+            .iter()
+            .map(|(m, n)| format!("{m} on {n}"))
+            .collect();
+        let method = used.join(", ");
+        let largest = r
+            .tiles
+            .iter()
+            .map(|t| t.place.geometry)
+            .max_by_key(|g| g.pixels());
+        let chosen = format!(
+            "{method} of {} tiles of {tile} ({} regime per tile, K_p {kp}{})",
+            r.tiles.len(),
+            r.regime(),
+            largest.map_or(String::new(), |g| format!(
+                ", critical K_p {} for the largest tile",
+                g.critical_pulse_len()
+            ))
+        );
+        let (f, adj, s) = r.applies();
+        let iterations = format!("{f} forward, {adj} adjoint and {s} support applications in all");
+        Outcome {
+            method,
+            chosen,
+            iterations,
+            seconds: r.elapsed.as_secs_f64(),
+            details: Vec::new(),
+            scene: r.scene,
+            depth: r.depth,
+        }
+    }
+}
+
+/// The line printed as a tile finishes: where it is, what ran and how long it took.
+fn tile_line<T: Real>(t: &TileReconstruction<T>, done: usize, count: usize) -> String {
+    let (p, r) = (&t.place, &t.reconstruction);
+    format!(
+        "tile {done}/{count} (#{}, rows {}..{}, columns {}..{}): {}, {} of {} pixels with a \
+         return, {:.2} s",
+        p.index,
+        p.row,
+        p.row + p.geometry.m,
+        p.col,
+        p.col + p.geometry.n,
+        r.method_used,
+        r.depth.lit(),
+        p.geometry.pixels(),
+        r.elapsed.as_secs_f64()
+    )
 }

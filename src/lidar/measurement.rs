@@ -1,0 +1,228 @@
+//! What the lidar reconstructions need of a measurement operator, and the operator of G ADCs.
+//!
+//! [`LidarOperator`] is the interface of `recon`: a [`VoxelOperator`] over an M×N×K_s grid that
+//! knows its pulse, applies sparse scenes cheaply and backprojects with the zero-mean pulse.
+//! [`RdOperator`] (one ADC) implements it, and so does [`MultiAdcOperator`]: G ADCs, each
+//! pixel modulated by G code sets, y = [A₁x; …; A_Gx] with G·K measurements.
+
+use std::sync::Arc;
+
+use crate::error::{Error, Result};
+use crate::operator::{LinearOperator, VStack, VoxelOperator};
+use crate::real::Real;
+
+use super::codes::Codes;
+use super::geometry::{Geometry, Regime};
+use super::rdop::RdOperator;
+
+/// A lidar measurement operator over an M×N×K_s grid of voxels (pixel-major, depth fastest):
+/// what reconstruction needs beyond a [`VoxelOperator`].
+pub trait LidarOperator<T: Real>: VoxelOperator<T> {
+    /// The scene grid.
+    fn geometry(&self) -> Geometry;
+
+    /// The transmitted pulse p (K_p samples).
+    fn pulse(&self) -> &[T];
+
+    /// How many code sets modulate every pixel (G ADCs sampling the same pulse): 1 for one
+    /// ADC. Every column of the operator is the pulse modulated by that many code sets, so
+    /// the backprojection's matched-filter gain is that many times the one-ADC gain.
+    fn code_sets(&self) -> usize {
+        1
+    }
+
+    /// y = A·x through the nonzero entries of x only (O(nnz·K_p)), for sparse iterates.
+    ///
+    /// # Panics
+    /// On wrong buffer lengths.
+    fn apply_sparse(&self, x: &[T], y: &mut [T]);
+
+    /// The same operator with the zero-mean pulse p − mean(p): its adjoint is the debiased
+    /// backprojection (DESIGN.md §4).
+    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_>;
+
+    /// The regime of the measurements against the unknowns (eq. 8–9, with every ADC's rows).
+    fn regime(&self) -> Regime {
+        Regime::of(self.nrows(), self.geometry().voxels())
+    }
+}
+
+impl<T: Real> LidarOperator<T> for RdOperator<T> {
+    fn geometry(&self) -> Geometry {
+        RdOperator::geometry(self)
+    }
+    fn pulse(&self) -> &[T] {
+        RdOperator::pulse(self)
+    }
+    fn apply_sparse(&self, x: &[T], y: &mut [T]) {
+        RdOperator::apply_sparse(self, x, y)
+    }
+    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
+        Box::new(self.zero_mean())
+    }
+}
+
+/// G ADCs: every pixel is modulated by G independent code sets and set g has its own ADC; the
+/// G fused operators share the pulse and their measurements are stacked, y = [A₁x; …; A_Gx]
+/// (G·K rows, ADC by ADC). Every lidar solver runs on it: it is a [`LidarOperator`] whose
+/// correlations, pixel Gram blocks and column norms are the sums over the code sets, and whose
+/// restriction to a support stacks the G support operators.
+#[derive(Debug)]
+pub struct MultiAdcOperator<T: Real> {
+    parts: Vec<RdOperator<T>>,
+    geom: Geometry,
+    k: usize,
+}
+
+impl<T: Real> MultiAdcOperator<T> {
+    /// G fused operators over `geom` with the common pulse `pulse` and the code sets `codes`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for an empty list of code sets; the errors of
+    /// [`RdOperator::new`] for code sets that do not fit the geometry and pulse.
+    pub fn new(geom: Geometry, pulse: &[T], codes: Vec<Arc<Codes>>) -> Result<Self> {
+        if codes.is_empty() {
+            return Err(Error::param("adcs", "need at least one code set"));
+        }
+        let parts = codes
+            .into_iter()
+            .map(|c| RdOperator::new(geom, pulse.to_vec(), c))
+            .collect::<Result<Vec<_>>>()?;
+        let k = parts[0].nrows();
+        Ok(MultiAdcOperator { parts, geom, k })
+    }
+
+    /// The G one-ADC operators, in the order of their measurement rows.
+    pub fn parts(&self) -> &[RdOperator<T>] {
+        &self.parts
+    }
+
+    /// Each part with its block of `k` rows of `rows`.
+    fn each_rows<'a>(
+        &'a self,
+        rows: &'a [T],
+    ) -> impl Iterator<Item = (&'a RdOperator<T>, &'a [T])> {
+        self.parts.iter().zip(rows.chunks_exact(self.k))
+    }
+
+    /// Sums `f(part, rows of part, out)` over the parts into `x`.
+    fn sum_over(&self, y: &[T], x: &mut [T], f: impl Fn(&RdOperator<T>, &[T], &mut [T])) {
+        let mut acc = vec![0.0f64; x.len()];
+        let mut part = vec![T::zero(); x.len()];
+        for (op, rows) in self.each_rows(y) {
+            f(op, rows, &mut part);
+            acc.iter_mut()
+                .zip(&part)
+                .for_each(|(a, v)| *a += v.as_f64());
+        }
+        x.iter_mut().zip(&acc).for_each(|(o, a)| *o = T::of_f64(*a));
+    }
+}
+
+impl<T: Real> LinearOperator<T> for MultiAdcOperator<T> {
+    fn nrows(&self) -> usize {
+        self.k * self.parts.len()
+    }
+
+    fn ncols(&self) -> usize {
+        self.geom.voxels()
+    }
+
+    fn forward_kernel(&self, x: &[T], y: &mut [T], _: &mut [T]) {
+        for (op, rows) in self.parts.iter().zip(y.chunks_exact_mut(self.k)) {
+            op.apply(x, rows);
+        }
+    }
+
+    fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
+        self.sum_over(y, x, |op, rows, out| op.apply_adjoint(rows, out));
+    }
+
+    /// The G support operators stacked: both directions cost O(G·|columns|·K_p).
+    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
+        let parts = self
+            .parts
+            .iter()
+            .map(|op| op.restrict_columns(columns.clone()))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Box::new(VStack::new(parts)?))
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "MultiAdcOperator({} ADCs, {}, K_p {})",
+            self.parts.len(),
+            self.geom,
+            self.parts[0].pulse().len()
+        )
+    }
+}
+
+impl<T: Real> VoxelOperator<T> for MultiAdcOperator<T> {
+    fn column_len(&self) -> usize {
+        self.geom.ks
+    }
+
+    /// The sum over the code sets of the debiased correlations.
+    fn correlate(&self, r: &[T], u: &mut [T]) {
+        self.sum_over(r, u, |op, rows, out| op.correlate(rows, out));
+    }
+
+    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
+        sum_rows(self.parts.iter().map(|op| op.self_correlations(voxels)))
+    }
+
+    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
+        sum_rows(self.parts.iter().map(|op| op.pixel_gram(pixel)))
+    }
+
+    fn uniform_pixel_gram(&self) -> bool {
+        self.parts.iter().all(|op| op.uniform_pixel_gram())
+    }
+
+    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
+        sum_rows(self.parts.iter().map(|op| {
+            let mut n = op.column_norms(columns);
+            n.iter_mut().for_each(|v| *v *= *v);
+            n
+        }))
+        .into_iter()
+        .map(f64::sqrt)
+        .collect()
+    }
+}
+
+impl<T: Real> LidarOperator<T> for MultiAdcOperator<T> {
+    fn geometry(&self) -> Geometry {
+        self.geom
+    }
+
+    fn pulse(&self) -> &[T] {
+        self.parts[0].pulse()
+    }
+
+    fn code_sets(&self) -> usize {
+        self.parts.len()
+    }
+
+    fn apply_sparse(&self, x: &[T], y: &mut [T]) {
+        crate::operator::check_len("apply_sparse: output y", self.nrows(), y.len());
+        for (op, rows) in self.parts.iter().zip(y.chunks_exact_mut(self.k)) {
+            op.apply_sparse(x, rows);
+        }
+    }
+
+    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
+        let parts: Vec<&RdOperator<T>> = self.parts.iter().map(|op| op.zero_mean()).collect();
+        Box::new(VStack::new(parts).expect("the parts share their shape"))
+    }
+}
+
+/// The elementwise sum of equally long rows.
+fn sum_rows(rows: impl Iterator<Item = Vec<f64>>) -> Vec<f64> {
+    rows.reduce(|mut a, b| {
+        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+        a
+    })
+    .unwrap_or_default()
+}

@@ -1,0 +1,274 @@
+//! Reconstruction of a tiled array (the paper's §3): the M×N array is split into tiles of A×B
+//! pixels with one ADC each, so the operator is block-diagonal and every tile is an independent
+//! lidar problem on its own 2-D grid. [`TiledArray::reconstruct`] solves the tiles in parallel, each
+//! with its true neighbourhood (TV's prior works inside a tile), and stitches the depth maps
+//! and scenes.
+
+use std::time::{Duration, Instant};
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::lidar::{Codes, DepthMap, Geometry, RdOperator, Regime, Scene, TileSize};
+use crate::real::Real;
+
+use super::method::{Method, ReconstructOptions};
+use super::reconstruct::{reconstruct, Reconstruction};
+
+/// Where a tile lies in the array: its first pixel row and column and its own grid (edge tiles
+/// are clipped).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TilePlace {
+    /// Index of the tile, row-major over the tiles (the row of its measurements).
+    pub index: usize,
+    /// First pixel row of the tile in the array.
+    pub row: usize,
+    /// First pixel column of the tile in the array.
+    pub col: usize,
+    /// The tile's grid: its pixel rows and columns, and K_s.
+    pub geometry: Geometry,
+}
+
+impl TilePlace {
+    /// The array's pixel indices (row-major) of the tile's pixels, in the tile's row-major
+    /// order: the order of [`tiles`](crate::lidar::tiles).
+    pub fn pixels(&self, array: Geometry) -> Vec<usize> {
+        let g = self.geometry;
+        (0..g.m)
+            .flat_map(|i| (0..g.n).map(move |j| (self.row + i) * array.n + self.col + j))
+            .collect()
+    }
+}
+
+/// The tiles of A×B pixels of an array, row-major, edge tiles clipped.
+///
+/// # Errors
+/// Only the errors of [`Geometry::new`] (none for a valid array).
+pub fn tile_places(array: Geometry, tile: TileSize) -> Result<Vec<TilePlace>> {
+    let mut out = Vec::new();
+    for row in (0..array.m).step_by(tile.m) {
+        for col in (0..array.n).step_by(tile.n) {
+            let geometry = Geometry::new(
+                tile.m.min(array.m - row),
+                tile.n.min(array.n - col),
+                array.ks,
+            )?;
+            out.push(TilePlace {
+                index: out.len(),
+                row,
+                col,
+                geometry,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// One tile's reconstruction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TileReconstruction<T> {
+    /// Where the tile lies.
+    pub place: TilePlace,
+    /// The tile's reconstruction on its own grid.
+    pub reconstruction: Reconstruction<T>,
+}
+
+/// What [`reconstruct_tiles`] returns: the stitched estimate and every tile's reconstruction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TiledReconstruction<T> {
+    /// Every return found, stitched into the M×N×K_s array.
+    pub scene: Scene<T>,
+    /// Its depth map (each pixel's strongest return).
+    pub depth: DepthMap<T>,
+    /// The tiles, in row-major order.
+    pub tiles: Vec<TileReconstruction<T>>,
+    /// Wall-clock time of the whole reconstruction.
+    pub elapsed: Duration,
+}
+
+impl<T> TiledReconstruction<T> {
+    /// How many tiles each method produced (for [`Method::Auto`], the stage it kept), in the
+    /// order of [`Method::ALL`].
+    pub fn methods_used(&self) -> Vec<(Method, usize)> {
+        Method::ALL
+            .iter()
+            .map(|&m| {
+                let n = self
+                    .tiles
+                    .iter()
+                    .filter(|t| t.reconstruction.method_used == m)
+                    .count();
+                (m, n)
+            })
+            .filter(|&(_, n)| n > 0)
+            .collect()
+    }
+
+    /// The regime of a tile's measurements against its unknowns (every tile has K samples;
+    /// the largest tile has the most unknowns).
+    pub fn regime(&self) -> Regime {
+        self.tiles
+            .iter()
+            .map(|t| t.reconstruction.regime)
+            .min_by_key(|r| match r {
+                Regime::Compressive => 0,
+                Regime::Critical => 1,
+                Regime::Redundant => 2,
+            })
+            .unwrap_or(Regime::Compressive)
+    }
+
+    /// The sum over the tiles of the forward, adjoint and support applications.
+    pub fn applies(&self) -> (usize, usize, usize) {
+        self.tiles
+            .iter()
+            .filter_map(|t| t.reconstruction.report.as_ref())
+            .fold((0, 0, 0), |(f, a, s), r| {
+                (
+                    f + r.forward_applies,
+                    a + r.adjoint_applies,
+                    s + r.support_applies,
+                )
+            })
+    }
+}
+
+/// A tiled array (the paper's §3): one code set for the M×N array, one ADC per tile of A×B
+/// pixels (row-major tiles, edge tiles clipped), as `simulate --tiles` writes it.
+#[derive(Debug, Clone, Copy)]
+pub struct TiledArray<'a, T> {
+    array: Geometry,
+    pulse: &'a [T],
+    codes: &'a Codes,
+    tile: TileSize,
+}
+
+impl<'a, T: Real> TiledArray<'a, T> {
+    /// The array `array` with the pulse `pulse`, the codes `codes` of all its pixels and tiles of
+    /// `tile` pixels.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if `codes` do not have the array's pixels.
+    pub fn new(array: Geometry, pulse: &'a [T], codes: &'a Codes, tile: TileSize) -> Result<Self> {
+        if codes.pixels() != array.pixels() {
+            return Err(Error::shape(
+                "tiled array: code pixels vs M·N",
+                array.pixels(),
+                codes.pixels(),
+            ));
+        }
+        Ok(TiledArray {
+            array,
+            pulse,
+            codes,
+            tile,
+        })
+    }
+
+    /// The tiles, row-major.
+    pub fn places(&self) -> Vec<TilePlace> {
+        tile_places(self.array, self.tile).expect("tiles of a valid array are valid")
+    }
+
+    /// Samples per tile (one ADC each): K = K_p + K_s − 1.
+    pub fn samples(&self) -> usize {
+        self.codes.len()
+    }
+
+    /// The one-ADC operator of a tile on the tile's own grid, with its pixels' codes.
+    ///
+    /// # Errors
+    /// The errors of [`RdOperator::new`].
+    pub fn tile_operator(&self, place: &TilePlace) -> Result<RdOperator<T>> {
+        let codes = self.codes.select_pixels(&place.pixels(self.array))?;
+        RdOperator::new(place.geometry, self.pulse.to_vec(), codes.into())
+    }
+
+    /// Reconstructs every tile from `y`, the T rows of K measurements (row-major tile order),
+    /// and stitches them. Each tile is an independent problem with its own 2-D grid: the tiles
+    /// run in parallel, each by [`reconstruct`] with `method` and `options` (no progress bar
+    /// inside a tile), and `on_tile` is called as each finishes (from its worker thread). Only
+    /// the tiles being solved hold their codes beside the array's.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if `y` does not hold one row of K samples per tile; the errors
+    /// of [`RdOperator::new`] and [`reconstruct`], naming the first tile that failed.
+    pub fn reconstruct(
+        &self,
+        y: &[T],
+        method: Method,
+        options: &ReconstructOptions,
+        on_tile: &(dyn Fn(&TileReconstruction<T>) + Sync),
+    ) -> Result<TiledReconstruction<T>> {
+        let start = Instant::now();
+        let places = self.places();
+        let k = self.samples();
+        if Some(y.len()) != places.len().checked_mul(k) {
+            return Err(Error::shape(
+                format!(
+                    "tiled reconstruction: measurements vs {} tiles of {} × K = {k}",
+                    places.len(),
+                    self.tile
+                ),
+                places.len() * k,
+                y.len(),
+            ));
+        }
+        let inner = ReconstructOptions {
+            progress: false,
+            ..*options
+        };
+        let tiles = places
+            .par_iter()
+            .map(|place| {
+                let name = |e: Error| {
+                    let g = place.geometry;
+                    Error::param(
+                        "tile",
+                        format!(
+                            "tile {} (rows {}..{}, columns {}..{}): {e}",
+                            place.index,
+                            place.row,
+                            place.row + g.m,
+                            place.col,
+                            place.col + g.n
+                        ),
+                    )
+                };
+                let op = self.tile_operator(place).map_err(name)?;
+                let rows = &y[place.index * k..(place.index + 1) * k];
+                let reconstruction = reconstruct(&op, rows, method, &inner).map_err(name)?;
+                let done = TileReconstruction {
+                    place: *place,
+                    reconstruction,
+                };
+                on_tile(&done);
+                Ok(done)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let scene = stitch(self.array, &tiles)?;
+        let depth = scene.depth_map();
+        Ok(TiledReconstruction {
+            scene,
+            depth,
+            tiles,
+            elapsed: start.elapsed(),
+        })
+    }
+}
+
+/// The tiles' scenes put in their places of the array.
+fn stitch<T: Real>(array: Geometry, tiles: &[TileReconstruction<T>]) -> Result<Scene<T>> {
+    let ks = array.ks;
+    let mut x = vec![T::zero(); array.voxels()];
+    for t in tiles {
+        let src = t.reconstruction.scene.data();
+        let src = src
+            .as_slice()
+            .ok_or_else(|| Error::param("tile", "a tile's scene is not contiguous"))?;
+        for (i, p) in t.place.pixels(array).into_iter().enumerate() {
+            x[p * ks..(p + 1) * ks].copy_from_slice(&src[i * ks..(i + 1) * ks]);
+        }
+    }
+    Scene::from_vec(array, x)
+}
