@@ -191,3 +191,59 @@ fn architectures_whose_files_and_flags_disagree_are_refused_before_any_work() {
     write_npy(&bad, &short).unwrap();
     check(reconstruct(&single, &outs, (&c1, &bad), &[]), &[s(&bad)]);
 }
+
+#[test]
+fn a_coded_apertures_blocked_pixels_are_unobserved_and_can_be_filled() {
+    let tmp = TempDir::new("arch-aperture");
+    let run = tmp.path("run");
+    simulate(&run, "12x10x8", "300", &["--aperture", "0.6"]);
+    let (codes, meas) = (run.join("codes.npy"), run.join("meas.npy"));
+    let out = reconstruct(&run, &tmp.0, (&codes, &meas), &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    let c: Array3<i8> = read_npy(&codes).unwrap();
+    let blocked: Vec<bool> = c
+        .outer_iter()
+        .flat_map(|row| {
+            row.outer_iter()
+                .map(|px| px.iter().all(|&v| v == 0))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let n_blocked = blocked.iter().filter(|&&b| b).count();
+    assert_eq!(n_blocked, 48, "60% of 120 pixels reach the ADC");
+    assert!(
+        text.contains(&format!(
+            "on the {} observed pixels: exact depth 100.0%",
+            120 - n_blocked
+        )),
+        "{text}"
+    );
+    assert!(text.contains("48 pixels unobserved"), "{text}");
+    let d: Array2<i32> = read_npy(tmp.path("d.npy")).unwrap();
+    let t = truth_depth(&run);
+    for ((&e, &td), &b) in d.iter().zip(&t).zip(&blocked) {
+        assert_eq!(e, if b { -2 } else { td });
+    }
+    // Filled from the neighbours: no pixel left unobserved, most lit ones at their depth.
+    std::fs::remove_file(tmp.path("d.npy")).unwrap();
+    std::fs::remove_file(tmp.path("x.npy")).unwrap();
+    let out = reconstruct(&run, &tmp.0, (&codes, &meas), &["--fill-unobserved"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("filled from their neighbours"), "{text}");
+    let d: Array2<i32> = read_npy(tmp.path("d.npy")).unwrap();
+    assert!(d.iter().all(|&v| v >= -1));
+    let hidden_lit = t
+        .iter()
+        .zip(&blocked)
+        .filter(|(&v, &b)| b && v >= 0)
+        .count();
+    let right = d
+        .iter()
+        .zip(&t)
+        .zip(&blocked)
+        .filter(|((&e, &v), &b)| b && v >= 0 && e == v)
+        .count();
+    assert!(2 * right > hidden_lit, "{right} of {hidden_lit}: {text}");
+}

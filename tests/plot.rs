@@ -9,7 +9,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rdlidar::report::plot::{
     depth_panels, line_plot, scatter_plot, series_colour, viridis, Chart, DepthOptions,
-    LegendPosition, Marker, Rgb, Series, SeriesStyle, NO_RETURN_COLOUR, PALETTE,
+    LegendPosition, Marker, Rgb, Series, SeriesStyle, NO_RETURN_COLOUR, PALETTE, UNOBSERVED_COLOUR,
 };
 use rdlidar::Error;
 
@@ -105,6 +105,31 @@ fn ramp_map() -> Array2<i32> {
 
 // ---------------------------------------------------------------------------------------------
 // Depth panels
+
+#[test]
+fn unobserved_pixels_have_their_own_colour_and_key() {
+    let a = ramp_map();
+    // Bin 10's column unobserved in the estimate.
+    let b = a.mapv(|v| {
+        if v == 10 {
+            rdlidar::lidar::UNOBSERVED
+        } else {
+            v
+        }
+    });
+    let opts = DepthOptions::new(0.5, "m");
+    let fig = depth_panels(&[("truth", &a), ("estimate", &b)], &opts).unwrap();
+    assert_eq!(fig.colour_of(-2), UNOBSERVED_COLOUR);
+    assert_ne!(UNOBSERVED_COLOUR, NO_RETURN_COLOUR);
+    let img = Image::decode(&fig.encode_png());
+    // 16 pixels of the column, drawn 9 x 9, and the key (22 x 16).
+    let unobserved = img.count_of(UNOBSERVED_COLOUR);
+    assert_eq!(unobserved, 16 * 81 + 22 * 16);
+    // Without unobserved pixels there is no such key.
+    let plain = depth_panels(&[("truth", &a)], &opts).unwrap();
+    let img = Image::decode(&plain.encode_png());
+    assert_eq!(img.count_of(UNOBSERVED_COLOUR), 0);
+}
 
 #[test]
 fn depth_panels_draw_near_far_and_no_return_colours() {
@@ -239,7 +264,7 @@ fn depth_panels_reject_bad_input() {
         }) => assert_eq!((expected, found), (30, 31)),
         other => panic!("expected a shape mismatch, got {other:?}"),
     }
-    let negative = a.mapv(|v| if v == 7 { -2 } else { v });
+    let negative = a.mapv(|v| if v == 7 { -3 } else { v });
     param_err(depth_panels(&[("n", &negative)], &opts), "depth");
     for s in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         param_err(

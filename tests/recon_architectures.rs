@@ -287,3 +287,101 @@ fn a_tiled_array_refuses_measurements_and_codes_that_do_not_fit() {
         12
     );
 }
+
+#[test]
+fn codes_know_which_pixels_reach_an_adc() {
+    let codes = Codes::random_binary(11, 30, 2).unwrap();
+    assert_eq!(codes.observed_pixels(), vec![true; 11]);
+    let mut dense = codes.to_dense();
+    for p in [0, 7, 8, 10] {
+        dense.row_mut(p).fill(0);
+    }
+    dense[[7, 29]] = -1; // one nonzero code is enough to be observed
+    let masked = Codes::from_dense(dense.view()).unwrap();
+    let want: Vec<bool> = (0..11).map(|p| ![0, 8, 10].contains(&p)).collect();
+    assert_eq!(masked.observed_pixels(), want);
+}
+
+#[test]
+fn blocked_pixels_are_unobserved_and_observed_ones_exact() {
+    let g = Geometry::new(9, 8, 6).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    let kp = 400;
+    let p = Pulse::<f64>::bernoulli(kp, 1).unwrap().into_inner();
+    let codes = Codes::random_binary(g.pixels(), g.samples(kp), 2).unwrap();
+    let active: Vec<usize> = (0..g.pixels()).filter(|p| p % 3 != 1).collect();
+    let mut dense = codes.to_dense();
+    for p in (0..g.pixels()).filter(|p| p % 3 == 1) {
+        dense.row_mut(p).fill(0);
+    }
+    let op = RdOperator::new(
+        g,
+        p.clone(),
+        Arc::new(Codes::from_dense(dense.view()).unwrap()),
+    )
+    .unwrap();
+    // The measurements of the coded aperture as the architecture builds it.
+    let aperture = rdlidar::lidar::coded_aperture(g, &p, &codes, &active).unwrap();
+    let mut y = vec![0.0; aperture.nrows()];
+    aperture.apply(truth.as_slice(), &mut y);
+    for method in [Method::Auto, Method::Tv, Method::Backprojection] {
+        let r = reconstruct(&op, &y, method, &ReconstructOptions::default()).unwrap();
+        let td = truth.depth_map().depth;
+        for (i, (&d, &t)) in r.depth.depth.iter().zip(&td).enumerate() {
+            if i % 3 == 1 {
+                assert_eq!(d, rdlidar::lidar::UNOBSERVED, "{method}: pixel {i}");
+            } else if method != Method::Backprojection {
+                assert_eq!(d, t, "{method}: pixel {i}");
+            }
+        }
+        assert_eq!(r.depth.unobserved(), g.pixels() - active.len());
+        assert!(r.depth.lit() + r.depth.unobserved() <= g.pixels());
+    }
+}
+
+#[test]
+fn unobserved_pixels_are_filled_from_their_neighbours() {
+    use rdlidar::lidar::{DepthMap, NO_RETURN, UNOBSERVED};
+    // A plane at depth 4 on the left, empty on the right; holes inside the plane (a 3x3 block,
+    // filled inwards), on the border between the two, and in the empty part.
+    let depth = ndarray::Array2::from_shape_fn((7, 8), |(_, j)| if j < 5 { 4 } else { NO_RETURN });
+    let amplitude = depth.mapv(|d| if d >= 0 { 0.5f64 } else { 0.0 });
+    let mut map = DepthMap { depth, amplitude };
+    let truth = map.clone();
+    let holes = [
+        (1, 1),
+        (1, 2),
+        (1, 3),
+        (2, 1),
+        (2, 2),
+        (2, 3),
+        (3, 1),
+        (3, 2),
+        (3, 3),
+        (5, 7),
+    ];
+    for &(i, j) in &holes {
+        map.depth[[i, j]] = UNOBSERVED;
+        map.amplitude[[i, j]] = 0.0;
+    }
+    assert_eq!(map.unobserved(), holes.len());
+    let filled = map.fill_unobserved();
+    assert_eq!(filled, 9);
+    assert_eq!(map.unobserved(), 0);
+    assert_eq!(map.depth, truth.depth);
+    assert!(map
+        .amplitude
+        .iter()
+        .zip(&truth.amplitude)
+        .all(|(a, b)| (a - b).abs() < 1e-12));
+    // Nothing observed: nothing to fill from.
+    let mut blind = DepthMap::<f64> {
+        depth: ndarray::Array2::from_elem((3, 3), UNOBSERVED),
+        amplitude: ndarray::Array2::zeros((3, 3)),
+    };
+    assert_eq!(blind.fill_unobserved(), 0);
+    assert_eq!(blind.unobserved(), 9);
+    // The scene of a map with unobserved pixels has nothing there.
+    let scene = blind.to_scene(4).unwrap();
+    assert_eq!(scene.nnz(), 0);
+}

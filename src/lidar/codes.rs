@@ -343,6 +343,25 @@ impl Codes {
         Ok(out)
     }
 
+    /// Per pixel, whether any of its codes is nonzero: a pixel whose codes are all zero (blocked
+    /// by a coded aperture) reaches no ADC. All true for ±1 codes.
+    pub fn observed_pixels(&self) -> Vec<bool> {
+        let Some(minus) = &self.minus else {
+            return vec![true; self.pixels];
+        };
+        let mut out = Vec::with_capacity(self.pixels);
+        for (plus, minus) in self
+            .plus
+            .chunks_exact(self.len)
+            .zip(minus.chunks_exact(self.len))
+        {
+            let any = plus.iter().zip(minus).fold(0u8, |acc, (p, m)| acc | p | m);
+            let width = (self.pixels - out.len()).min(8);
+            out.extend((0..width).map(|r| any & (1 << r) != 0));
+        }
+        out
+    }
+
     /// The codes as a dense `(pixels, len)` array (for small problems and file output).
     pub fn to_dense(&self) -> Array2<i8> {
         Array2::from_shape_fn((self.pixels, self.len), |(p, k)| self.get(p, k))

@@ -41,6 +41,13 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
     /// backprojection (DESIGN.md §4).
     fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_>;
 
+    /// Per pixel, whether it reaches an ADC (some code of it is nonzero); `None` when every
+    /// pixel does. Pixels that reach none (blocked by a coded aperture) cannot be
+    /// reconstructed: their depth is [`UNOBSERVED`](super::UNOBSERVED).
+    fn observed_pixels(&self) -> Option<Vec<bool>> {
+        None
+    }
+
     /// The regime of the measurements against the unknowns (eq. 8–9, with every ADC's rows).
     fn regime(&self) -> Regime {
         Regime::of(self.nrows(), self.geometry().voxels())
@@ -59,6 +66,10 @@ impl<T: Real> LidarOperator<T> for RdOperator<T> {
     }
     fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
         Box::new(self.zero_mean())
+    }
+    fn observed_pixels(&self) -> Option<Vec<bool>> {
+        let observed = self.codes().observed_pixels();
+        observed.iter().any(|&o| !o).then_some(observed)
     }
 }
 
@@ -215,6 +226,18 @@ impl<T: Real> LidarOperator<T> for MultiAdcOperator<T> {
     fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
         let parts: Vec<&RdOperator<T>> = self.parts.iter().map(|op| op.zero_mean()).collect();
         Box::new(VStack::new(parts).expect("the parts share their shape"))
+    }
+
+    /// A pixel is observed when any code set reaches it.
+    fn observed_pixels(&self) -> Option<Vec<bool>> {
+        let mut all = vec![false; self.geom.pixels()];
+        for op in &self.parts {
+            match op.observed_pixels() {
+                None => return None,
+                Some(o) => all.iter_mut().zip(o).for_each(|(a, b)| *a |= b),
+            }
+        }
+        all.iter().any(|&o| !o).then_some(all)
     }
 }
 

@@ -32,7 +32,7 @@ pub use noise::{
 pub use pulse::{zero_mean, Pulse};
 pub use rdop::{composed_operator, ForwardPath, RdOperator};
 pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};
-pub use scene::{DepthMap, Scene, NO_RETURN};
+pub use scene::{DepthMap, Scene, NO_RETURN, UNOBSERVED};
 pub use scenes::{
     attenuate, composite_nearest, paper_scene, paper_surfaces, random_opaque_scene,
     semi_transparent_scene,

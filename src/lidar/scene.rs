@@ -11,6 +11,11 @@ use super::geometry::Geometry;
 /// Depth bin marking a pixel with no return.
 pub const NO_RETURN: i32 = -1;
 
+/// The depth of a pixel that was not observed: a pixel whose codes are all zero (blocked by a
+/// coded aperture) reaches no ADC, so nothing can be said of it. Distinct from [`NO_RETURN`],
+/// which is an observed pixel with nothing in it.
+pub const UNOBSERVED: i32 = -2;
+
 /// A reflectivity cube `x[m, n, j]` (C order, depth last), the unknown of the lidar model.
 ///
 /// Its flat slice ([`Scene::as_slice`]) is the operator's input vector: index
@@ -91,6 +96,30 @@ impl<T: Real> Scene<T> {
         self.data.as_slice().expect("scenes are C-contiguous")
     }
 
+    /// The scene with the columns of the pixels whose entry of `keep` (row-major, one per
+    /// pixel) is false set to zero: what an instrument that observes only the kept pixels can
+    /// be judged against.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if `keep` does not have one entry per pixel.
+    pub fn masked_pixels(&self, keep: &[bool]) -> Result<Self> {
+        let g = self.geometry();
+        if keep.len() != g.pixels() {
+            return Err(Error::shape(
+                "masked_pixels: keep vs pixels",
+                g.pixels(),
+                keep.len(),
+            ));
+        }
+        let mut x = self.as_slice().to_vec();
+        for (column, &k) in x.chunks_mut(g.ks).zip(keep) {
+            if !k {
+                column.fill(T::zero());
+            }
+        }
+        Scene::from_vec(g, x)
+    }
+
     /// Number of nonzero voxels.
     pub fn nnz(&self) -> usize {
         self.data.iter().filter(|v| **v != T::zero()).count()
@@ -146,13 +175,13 @@ impl<T: Real> DepthMap<T> {
         let g = Geometry::new(m, n, ks)?;
         let mut x = Array3::zeros((g.m, g.n, g.ks));
         for ((i, j), &d) in self.depth.indexed_iter() {
-            if d == NO_RETURN {
+            if d == NO_RETURN || d == UNOBSERVED {
                 continue;
             }
             if d < 0 || d as usize >= ks {
                 return Err(Error::param(
                     "depth",
-                    format!("depth bin {d} at pixel ({i}, {j}) is outside [-1, {ks})"),
+                    format!("depth bin {d} at pixel ({i}, {j}) is outside [-2, {ks})"),
                 ));
             }
             x[[i, j, d as usize]] = self.amplitude[[i, j]];
@@ -162,6 +191,92 @@ impl<T: Real> DepthMap<T> {
 
     /// Number of pixels with a return.
     pub fn lit(&self) -> usize {
-        self.depth.iter().filter(|&&d| d != NO_RETURN).count()
+        self.depth.iter().filter(|&&d| d >= 0).count()
+    }
+
+    /// Number of pixels marked [`UNOBSERVED`].
+    pub fn unobserved(&self) -> usize {
+        self.depth.iter().filter(|&&d| d == UNOBSERVED).count()
+    }
+
+    /// Marks the pixels whose entry of `observed` (row-major, one per pixel) is false as
+    /// [`UNOBSERVED`], with amplitude 0.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if `observed` does not have one entry per pixel.
+    pub fn mark_unobserved(&mut self, observed: &[bool]) -> Result<()> {
+        if observed.len() != self.depth.len() {
+            return Err(Error::shape(
+                "mark_unobserved: observed vs pixels",
+                self.depth.len(),
+                observed.len(),
+            ));
+        }
+        let cells = self.depth.iter_mut().zip(self.amplitude.iter_mut());
+        for ((d, a), &seen) in cells.zip(observed) {
+            if !seen {
+                *d = UNOBSERVED;
+                *a = T::zero();
+            }
+        }
+        Ok(())
+    }
+
+    /// Fills the [`UNOBSERVED`] pixels from their neighbours, as a spatially regularized
+    /// reconstruction would: in rounds, each unobserved pixel with at least one decided
+    /// 8-neighbour (observed, or filled in an earlier round) takes the median depth and the mean
+    /// amplitude of its lit neighbours when at least half of its decided neighbours are lit,
+    /// and [`NO_RETURN`] otherwise. Rounds go on until every pixel is decided (a map with no
+    /// observed pixel is left as it is). Returns how many pixels were filled with a return.
+    pub fn fill_unobserved(&mut self) -> usize {
+        let (m, n) = self.depth.dim();
+        let mut filled = 0;
+        loop {
+            let mut updates = Vec::new();
+            for ((i, j), &d) in self.depth.indexed_iter() {
+                if d != UNOBSERVED {
+                    continue;
+                }
+                let mut depths = Vec::new();
+                let (mut decided, mut amp) = (0usize, 0.0f64);
+                for di in -1i64..=1 {
+                    for dj in -1i64..=1 {
+                        let (a, b) = (i as i64 + di, j as i64 + dj);
+                        if (di, dj) == (0, 0) || a < 0 || b < 0 || a >= m as i64 || b >= n as i64 {
+                            continue;
+                        }
+                        let (a, b) = (a as usize, b as usize);
+                        match self.depth[[a, b]] {
+                            UNOBSERVED => {}
+                            NO_RETURN => decided += 1,
+                            e => {
+                                decided += 1;
+                                depths.push(e);
+                                amp += self.amplitude[[a, b]].as_f64();
+                            }
+                        }
+                    }
+                }
+                if decided == 0 {
+                    continue;
+                }
+                let fill = if 2 * depths.len() >= decided {
+                    let count = depths.len();
+                    depths.sort_unstable();
+                    (depths[(count - 1) / 2], T::of_f64(amp / count as f64))
+                } else {
+                    (NO_RETURN, T::zero())
+                };
+                updates.push(((i, j), fill));
+            }
+            if updates.is_empty() {
+                return filled;
+            }
+            for (at, (d, a)) in updates {
+                filled += usize::from(d >= 0);
+                self.depth[at] = d;
+                self.amplitude[at] = a;
+            }
+        }
     }
 }

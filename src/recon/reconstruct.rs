@@ -34,7 +34,8 @@ pub struct Reconstruction<T> {
     /// and the one-reflector solvers; the generic solvers may keep several).
     pub scene: Scene<T>,
     /// Its depth map ([`Scene::depth_map`]): depth bin and amplitude per pixel, [`NO_RETURN`]
-    /// where there is none.
+    /// where there is none, [`UNOBSERVED`](crate::lidar::UNOBSERVED) for pixels that reach no
+    /// ADC (all-zero codes: a coded aperture's blocked pixels).
     pub depth: DepthMap<T>,
     /// The method that produced the estimate: the one asked for, or the stage [`Method::Auto`]
     /// kept.
@@ -126,7 +127,10 @@ pub fn reconstruct<T: Real>(
         (x, method, report, Vec::new())
     };
     let scene = Scene::from_vec(g, x)?;
-    let depth = scene.depth_map();
+    let mut depth = scene.depth_map();
+    if let Some(observed) = op.observed_pixels() {
+        depth.mark_unobserved(&observed)?;
+    }
     Ok(Reconstruction {
         scene,
         depth,

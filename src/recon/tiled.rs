@@ -247,7 +247,11 @@ impl<'a, T: Real> TiledArray<'a, T> {
             })
             .collect::<Result<Vec<_>>>()?;
         let scene = stitch(self.array, &tiles)?;
-        let depth = scene.depth_map();
+        let mut depth = scene.depth_map();
+        let observed = self.codes.observed_pixels();
+        if observed.iter().any(|&o| !o) {
+            depth.mark_unobserved(&observed)?;
+        }
         Ok(TiledReconstruction {
             scene,
             depth,

@@ -6,7 +6,7 @@ use ndarray_npy::WritableElement;
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
     depth_bin_m, Architecture, DepthMap, MultiAdcOperator, RdOperator, Scene, TileSize,
-    DEFAULT_TAU_S,
+    DEFAULT_TAU_S, UNOBSERVED,
 };
 use rdlidar::recon::{
     compare, reconstruct, Method, PeakThreshold, ReconstructOptions, Reconstruction,
@@ -43,7 +43,9 @@ use crate::layout::{architecture_of, check_memory, expectation, read_measurement
 /// reconstructed through the stacked operator of the G ADCs (every solver, auto too); with
 /// --tiles AxB the measurements (T, K) hold one row per tile, and each tile is reconstructed
 /// on its own grid, in parallel (a line per tile as it finishes), then stitched; a coded
-/// aperture's codes (zero codes for blocked pixels) read as one code set.
+/// aperture's codes (zero codes for blocked pixels) read as one code set, and its blocked
+/// pixels are unobserved: −2 in the depth map, judged apart under --truth, and filled from
+/// their neighbours with --fill-unobserved.
 ///
 /// With --truth SCENE.npy the estimate is compared with the true scene (exact depths,
 /// RMSE, misses, false detections, relative error; τ = 200 ps per bin).
@@ -56,7 +58,8 @@ pub struct ReconstructArgs {
     /// Reconstruction method.
     #[arg(long, value_name = "NAME", value_parser = parse_method)]
     pub solver: Method,
-    /// Output depth map (M, N), int32, −1 = no return.
+    /// Output depth map (M, N), int32, −1 = no return, −2 = unobserved (a pixel with all-zero
+    /// codes, blocked by a coded aperture).
     #[arg(long, value_name = "D")]
     pub out_depth: PathBuf,
     /// Output scene (M, N, K_s), float32 or float64 as --precision.
@@ -85,6 +88,12 @@ pub struct ReconstructArgs {
     /// of its lit pixels do not exceed).
     #[arg(long, value_name = "K|auto", value_parser = parse_returns, default_value = "1")]
     pub returns: MaxReturns,
+    /// Fill the depth map's unobserved pixels (a coded aperture's blocked pixels, −2) from their
+    /// neighbours: the median depth of their lit 8-neighbours where at least half of the
+    /// decided neighbours are lit, no return (−1) otherwise, repeated inwards over larger
+    /// holes. The scene keeps only the returns the solver found.
+    #[arg(long)]
+    pub fill_unobserved: bool,
     /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`): the measurements
     /// are (T, K), one row per tile, and the tiles are reconstructed independently.
     #[arg(long, value_name = "AxB", value_parser = parse_tile)]
@@ -216,13 +225,56 @@ fn reconstruct_files<T: Real + WritableElement>(
             )
         }
     };
-    let metrics = match (&truth, &a.truth) {
-        (Some(t), Some(path)) => Some(
-            compare(t, &r.scene, DEFAULT_TAU_S)
-                .map_err(|e| format!("{} (--truth): {e}", path.display()))?,
-        ),
-        _ => None,
+    // A coded aperture's blocked pixels reach no ADC: they are unobserved (−2 in the depth
+    // map), judged apart from the observed ones, and filled from their neighbours on request.
+    let mut r = r;
+    let observed: Vec<bool> = r.depth.depth.iter().map(|&d| d != UNOBSERVED).collect();
+    let unobserved = observed.iter().filter(|&&o| !o).count();
+    let filled = if a.fill_unobserved && unobserved > 0 {
+        Some(r.depth.fill_unobserved())
+    } else {
+        None
     };
+    let mut metrics = Vec::new();
+    if let (Some(t), Some(path)) = (&truth, &a.truth) {
+        let at_truth = |e: rdlidar::Error| format!("{} (--truth): {e}", path.display());
+        if unobserved == 0 {
+            let m = compare(t, &r.scene, DEFAULT_TAU_S).map_err(at_truth)?;
+            metrics.push(format!("versus the truth: {m}"));
+        } else {
+            let seen = t.masked_pixels(&observed).map_err(at_truth)?;
+            let m = compare(&seen, &r.scene, DEFAULT_TAU_S).map_err(at_truth)?;
+            let td = t.depth_map().depth;
+            let hidden: Vec<(i32, i32)> = td
+                .iter()
+                .zip(&r.depth.depth)
+                .zip(&observed)
+                .filter(|(_, &o)| !o)
+                .map(|((&d, &e), _)| (d, e))
+                .collect();
+            let lit = hidden.iter().filter(|(d, _)| *d >= 0).count();
+            metrics.push(format!(
+                "versus the truth on the {} observed pixels: {m}",
+                observed.len() - unobserved
+            ));
+            let mut line = format!(
+                "{unobserved} pixels unobserved (all-zero codes), {lit} of them lit in the truth"
+            );
+            if filled.is_some() {
+                let exact = hidden.iter().filter(|(d, e)| *d >= 0 && d == e).count();
+                let near = hidden
+                    .iter()
+                    .filter(|(d, e)| *d >= 0 && *e >= 0 && (d - e).abs() <= 1)
+                    .count();
+                let false_fills = hidden.iter().filter(|(d, e)| *d < 0 && *e >= 0).count();
+                line.push_str(&format!(
+                    "; filled from their neighbours: {exact} of the {lit} lit at the exact \
+                     depth, {near} within a bin, {false_fills} filled where the truth is empty"
+                ));
+            }
+            metrics.push(line);
+        }
+    }
     // Stage every output, then rename them into place together; on an error the staged files
     // are dropped, which removes them.
     let mut staged: Vec<StagedFile> = vec![
@@ -261,8 +313,11 @@ fn reconstruct_files<T: Real + WritableElement>(
     for line in &r.details {
         outln!("  {line}");
     }
-    if let Some(m) = metrics {
-        outln!("versus the truth: {m}");
+    if let Some(n) = filled {
+        outln!("  filled {n} of the {unobserved} unobserved pixels with a return from their neighbours");
+    }
+    for line in &metrics {
+        outln!("{line}");
     }
     Ok(())
 }

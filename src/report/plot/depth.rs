@@ -18,6 +18,10 @@ use super::{Bitmap, MAX_SIDE};
 /// [`viridis`] comes near.
 pub const NO_RETURN_COLOUR: Rgb = Rgb::hex(0xd4d4d4);
 
+/// The colour of pixels that were not observed ([`crate::lidar::UNOBSERVED`], −2): the pixels a
+/// coded aperture blocks.
+pub const UNOBSERVED_COLOUR: Rgb = Rgb::hex(0xf2c4c4);
+
 /// The colour bar and layout of [`depth_panels`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct DepthOptions {
@@ -107,7 +111,7 @@ impl DepthFigure {
         self.range
     }
 
-    /// The colour of depth bin `bin` ([`NO_RETURN_COLOUR`] for −1).
+    /// The colour of depth bin `bin` ([`NO_RETURN_COLOUR`] for −1, [`UNOBSERVED_COLOUR`] for −2).
     pub fn colour_of(&self, bin: i32) -> Rgb {
         colour_in(self.range, bin)
     }
@@ -128,7 +132,9 @@ impl DepthFigure {
 }
 
 fn colour_in(range: (f64, f64), bin: i32) -> Rgb {
-    if bin < 0 {
+    if bin == crate::lidar::UNOBSERVED {
+        UNOBSERVED_COLOUR
+    } else if bin < 0 {
         NO_RETURN_COLOUR
     } else {
         viridis((bin as f64 - range.0) / (range.1 - range.0))
@@ -151,9 +157,11 @@ const TARGET_SIDE: f64 = 275.0;
 /// Draws depth maps side by side, each under its title, with a shared colour bar in depth units
 /// and a key for pixels without a return.
 ///
-/// Each map holds depth bins, [`crate::lidar::NO_RETURN`] (−1) for pixels without a return;
-/// all maps must have the same shape. Returns are coloured by [`viridis`] over the bin range
-/// (near is dark, far is bright); pixels without a return are [`NO_RETURN_COLOUR`].
+/// Each map holds depth bins, [`crate::lidar::NO_RETURN`] (−1) for pixels without a return
+/// and [`crate::lidar::UNOBSERVED`] (−2) for pixels that were not observed; all maps must have
+/// the same shape. Returns are coloured by [`viridis`] over the bin range (near is dark, far is
+/// bright); pixels without a return are [`NO_RETURN_COLOUR`], unobserved ones
+/// [`UNOBSERVED_COLOUR`] (with a key of their own when there are any).
 ///
 /// ```
 /// use ndarray::Array2;
@@ -174,7 +182,7 @@ const TARGET_SIDE: f64 = 275.0;
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for no maps (`panels`), an empty map or a depth below −1
-/// (`depth`), a `units_per_bin` that is not finite and positive, a zero or oversized `upscale`,
+/// (`depth`; −2 is allowed), a `units_per_bin` that is not finite and positive, a zero or oversized `upscale`,
 /// a reversed `range`, or a figure too large (`width`, `height`); [`Error::ShapeMismatch`] when
 /// the maps' shapes differ.
 pub fn depth_panels(
@@ -202,11 +210,12 @@ pub fn depth_panels(
             return Err(Error::shape(what, n, map.ncols()));
         }
         for &b in map.iter() {
-            if b < -1 {
+            if b < crate::lidar::UNOBSERVED {
                 return Err(Error::param(
                     "depth",
                     format!(
-                        "map {k} (`{title}`) has depth {b}; bins are >= 0, or -1 for no return"
+                        "map {k} (`{title}`) has depth {b}; bins are >= 0, -1 for no return \
+                         or -2 for unobserved"
                     ),
                 ));
             }
@@ -267,7 +276,12 @@ pub fn depth_panels(
             format!("{s} per bin over bins {lo} to {hi} overflows"),
         ));
     }
-    let bar_h_min = ph.max(180) - KEY_H - 26;
+    // A key for pixels without a return, and one for unobserved pixels if there are any.
+    let unobserved = panels
+        .iter()
+        .any(|(_, map)| map.iter().any(|&b| b == crate::lidar::UNOBSERVED));
+    let keys_h = if unobserved { 2 * KEY_H + 6 } else { KEY_H };
+    let bar_h_min = ph.max(180) - keys_h - 26;
     let ticks = RangedCoordf64::from(v0..v1).key_points((bar_h_min / 40).clamp(2, 10) as usize);
     let step = ticks
         .windows(2)
@@ -283,7 +297,11 @@ pub fn depth_panels(
     // The sizes of the texts, then the layout.
     let title_w = TITLE.width(&options.title)?;
     let bar_label_w = TEXT.width(&bar_label)?;
-    let key_label_w = TEXT.width("no return")?;
+    let key_label_w = TEXT.width("no return")?.max(if unobserved {
+        TEXT.width("unobserved")?
+    } else {
+        0
+    });
     let tick_w = TICKS.widest(tick_labels.iter().map(String::as_str))?;
     let col_w = TEXT.widest(panels.iter().map(|p| p.0))?.max(pw);
 
@@ -293,9 +311,9 @@ pub fn depth_panels(
         TITLE.height() + 14
     };
     let top = PAD + title_h + TEXT.height() + 6;
-    let legend_h = ph.max(180).max(bar_label_w + KEY_H + 26 + 20);
+    let legend_h = ph.max(180).max(bar_label_w + keys_h + 26 + 20);
     let bar_x = PAD + panels.len() as i32 * (col_w + GAP) - GAP + 30;
-    let bar_h = legend_h - KEY_H - 26;
+    let bar_h = legend_h - keys_h - 26;
     let label_area = TICK_LEN + 6 + tick_w + 10 + TEXT.height();
     let width = (bar_x + BAR_W + label_area)
         .max(bar_x + BAR_W + 8 + key_label_w)
@@ -377,22 +395,28 @@ pub fn depth_panels(
         let label_x = bar_x + BAR_W + TICK_LEN + 6 + tick_w + 10;
         TEXT.put_upwards(root, &bar_label, INK, (label_x, top + bar_h / 2))?;
 
-        // The key for pixels without a return.
-        let key_y = top + legend_h - KEY_H;
-        let fill = RGBColor::from(NO_RETURN_COLOUR).filled();
-        drawn(root.draw(&Rectangle::new(
-            [(bar_x, key_y), (bar_x + BAR_W, key_y + KEY_H)],
-            fill,
-        )))?;
-        frame(root, (bar_x, key_y), (BAR_W, KEY_H))?;
-        let text_y = key_y + (KEY_H - TEXT.cap()) / 2;
-        TEXT.put(
-            root,
-            "no return",
-            INK,
-            (bar_x + BAR_W + 8, text_y),
-            HPos::Left,
-        )
+        // The keys: pixels without a return, then unobserved pixels if any.
+        let mut key_y = top + legend_h - keys_h;
+        let keys: &[(Rgb, &str)] = if unobserved {
+            &[
+                (NO_RETURN_COLOUR, "no return"),
+                (UNOBSERVED_COLOUR, "unobserved"),
+            ]
+        } else {
+            &[(NO_RETURN_COLOUR, "no return")]
+        };
+        for &(colour, label) in keys {
+            let fill = RGBColor::from(colour).filled();
+            drawn(root.draw(&Rectangle::new(
+                [(bar_x, key_y), (bar_x + BAR_W, key_y + KEY_H)],
+                fill,
+            )))?;
+            frame(root, (bar_x, key_y), (BAR_W, KEY_H))?;
+            let text_y = key_y + (KEY_H - TEXT.cap()) / 2;
+            TEXT.put(root, label, INK, (bar_x + BAR_W + 8, text_y), HPos::Left)?;
+            key_y += KEY_H + 6;
+        }
+        Ok(())
     })?;
     Ok(DepthFigure {
         image,

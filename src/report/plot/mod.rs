@@ -60,7 +60,7 @@ pub use chart::{
     line_plot, scatter_plot, Chart, ChartFigure, LegendPosition, Marker, Series, SeriesStyle,
 };
 pub use colour::{series_colour, viridis, Rgb, PALETTE};
-pub use depth::{depth_panels, DepthFigure, DepthOptions, NO_RETURN_COLOUR};
+pub use depth::{depth_panels, DepthFigure, DepthOptions, NO_RETURN_COLOUR, UNOBSERVED_COLOUR};
 
 /// The largest side of a figure, in pixels.
 pub const MAX_SIDE: usize = 16_384;
