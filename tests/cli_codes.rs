@@ -234,3 +234,171 @@ fn packed_codes_that_do_not_fit_are_refused_naming_the_file() {
         assert!(!tmp.path("never").exists());
     }
 }
+
+/// The arguments of `forward` with the codes `codes`, the scene and pulse of `run`, into `out`.
+fn forward_args<'a>(
+    run: &'a Path,
+    codes: &'a Path,
+    out: &'a Path,
+    tiles: Option<&'a str>,
+) -> Vec<String> {
+    let mut v: Vec<String> = vec![
+        "forward".into(),
+        "--pulse".into(),
+        s(&run.join("pulse.npy")).into(),
+        "--codes".into(),
+        s(codes).into(),
+        "--scene".into(),
+        s(&run.join("scene.npy")).into(),
+        "--out".into(),
+        s(out).into(),
+    ];
+    if let Some(t) = tiles {
+        v.extend(["--tiles".into(), t.into()]);
+    }
+    v
+}
+
+fn run_ok(args: &[String]) -> std::process::Output {
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = rdlidar(&refs);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+#[test]
+fn seeded_codes_need_no_file_and_give_the_simulated_measurements_back() {
+    use rdlidar::io::meta::SimulationMeta;
+    use rdlidar::lidar::SeededCodes;
+    let tmp = TempDir::new("seeded");
+    for (name, extra, tiles) in [
+        ("single", vec![], None),
+        ("adcs", vec!["--adcs", "3"], None),
+        ("tiles", vec!["--tiles", "2x3"], Some("2x3")),
+    ] {
+        let run = tmp.path(name);
+        let mut flags = vec!["--codes-format", "seed"];
+        flags.extend(extra);
+        simulate(&run, &flags);
+        assert!(!run.join("codes.npy").exists(), "{name}: no codes file");
+        let meta_path = run.join("meta.json");
+        let meta: SimulationMeta =
+            serde_json::from_str(&std::fs::read_to_string(&meta_path).unwrap()).unwrap();
+        assert_eq!(meta.codes_format, "seed");
+        assert_eq!(meta.codes_generator.as_deref(), Some("chacha8-packbits-v1"));
+        assert_eq!(meta.files.codes, "meta.json");
+        // The readers regenerate the codes the simulation used: the same measurements.
+        let y = tmp.path(&format!("{name}-y.npy"));
+        run_ok(&forward_args(&run, &meta_path, &y, tiles));
+        assert_eq!(bytes(&y), bytes(&run.join("meas.npy")), "{name}");
+        // ... and they are the seeded stream itself, materialized to a packed file.
+        let sets = if name == "adcs" { 3 } else { 1 };
+        let seeded = SeededCodes::new(meta.seeds.codes, sets, 35, 55).unwrap();
+        let packed = tmp.path(&format!("{name}-codes.npy"));
+        let all: Vec<_> = (0..sets).map(|g| seeded.materialize(g).unwrap()).collect();
+        if sets == 1 {
+            rdlidar::io::write_packed_codes(&packed, (5, 7), &all[0]).unwrap();
+        } else {
+            rdlidar::io::write_packed_code_sets(&packed, (5, 7), &all).unwrap();
+        }
+        let y2 = tmp.path(&format!("{name}-y2.npy"));
+        run_ok(&forward_args(&run, &packed, &y2, tiles));
+        assert_eq!(bytes(&y2), bytes(&y), "{name}");
+        // Reconstruction from the description and from the packed file: the same bytes.
+        let rec = |codes: &Path, tag: &str| {
+            let (d, x) = (
+                tmp.path(&format!("{name}-{tag}-d.npy")),
+                tmp.path(&format!("{name}-{tag}-x.npy")),
+            );
+            let mut args: Vec<String> = [
+                "reconstruct",
+                "--pulse",
+                s(&run.join("pulse.npy")),
+                "--codes",
+                s(codes),
+                "--meas",
+                s(&run.join("meas.npy")),
+                "--depth-bins",
+                "6",
+                "--solver",
+                "fista",
+                "--out-depth",
+                s(&d),
+                "--out-scene",
+                s(&x),
+            ]
+            .map(String::from)
+            .to_vec();
+            if let Some(t) = tiles {
+                args.extend(["--tiles".into(), t.into()]);
+            }
+            run_ok(&args);
+            (bytes(&d), bytes(&x))
+        };
+        assert_eq!(rec(&meta_path, "seed"), rec(&packed, "packed"), "{name}");
+    }
+}
+
+#[test]
+fn seeded_codes_that_do_not_fit_are_refused_naming_the_file() {
+    let tmp = TempDir::new("seeded-bad");
+    let (seed, int8, other) = (tmp.path("seed"), tmp.path("int8"), tmp.path("other"));
+    simulate(&seed, &["--codes-format", "seed", "--tiles", "2x3"]);
+    simulate(&int8, &[]);
+    let meta = seed.join("meta.json");
+    let y = tmp.path("y.npy");
+    let fails = |args: Vec<String>, needles: &[&str]| {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        assert_one_line_error(&rdlidar(&refs), needles);
+        assert!(!y.exists());
+    };
+    // A meta.json whose codes are in a file.
+    let m8 = int8.join("meta.json");
+    fails(
+        forward_args(&int8, &m8, &y, None),
+        &[s(&m8), "stored as int8 in codes.npy"],
+    );
+    // Another pulse length: K does not fit.
+    let args = vec![
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "5x7x6",
+        "--pulse-len",
+        "40",
+        "--out",
+        s(&other),
+    ];
+    assert!(rdlidar(&args).status.success());
+    let mut f = forward_args(&seed, &meta, &y, Some("2x3"));
+    f[2] = s(&other.join("pulse.npy")).into();
+    fails(f, &[s(&meta), "K = 55", "K = 40 + 6 − 1 = 45"]);
+    // Another tile size than the acquisition's.
+    fails(
+        forward_args(&seed, &meta, &y, Some("3x3")),
+        &[s(&meta), "tiles of 2x3", "--tiles says 3x3"],
+    );
+    // An unknown generator, and a file that is not a description at all.
+    let edited = tmp.path("edited.json");
+    let text = std::fs::read_to_string(&meta).unwrap();
+    std::fs::write(
+        &edited,
+        text.replace("chacha8-packbits-v1", "chacha8-packbits-v9"),
+    )
+    .unwrap();
+    fails(
+        forward_args(&seed, &edited, &y, Some("2x3")),
+        &[s(&edited), "chacha8-packbits-v9"],
+    );
+    let junk = tmp.path("junk.json");
+    std::fs::write(&junk, "{\"not\": 1}").unwrap();
+    fails(
+        forward_args(&seed, &junk, &y, None),
+        &[s(&junk), "not a meta.json"],
+    );
+}

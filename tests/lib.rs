@@ -36,6 +36,7 @@ mod rdop;
 mod recon_architectures;
 mod reconstruct;
 mod scenes;
+mod seeded_codes;
 mod solvers;
 mod sparse_solvers;
 mod stress;

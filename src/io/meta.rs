@@ -4,7 +4,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::lidar::{Architecture, CodeAlphabet, Simulation};
+use std::path::Path;
+
+use crate::error::Result;
+use crate::lidar::{Architecture, CodeAlphabet, SeededCodes, Simulation, SEEDED_CODES_GENERATOR};
 use crate::real::Real;
 
 /// The files of a simulation, in the order they are written.
@@ -134,6 +137,11 @@ pub struct SimulationMeta {
     /// `np.packbits(S > 0, axis=-1)` writes ±1 codes (a leading G axis for several ADCs).
     #[serde(default = "int8_format")]
     pub codes_format: String,
+    /// For "seed": the stream the codes are regenerated from
+    /// ([`SEEDED_CODES_GENERATOR`](crate::lidar::SEEDED_CODES_GENERATOR)); the key is
+    /// `seeds.codes`, the code sets are `architecture.adcs` for several ADCs, one otherwise.
+    #[serde(default)]
+    pub codes_generator: Option<String>,
     /// The probability of a zero code of ternary codes.
     pub ternary_zero_prob: Option<f64>,
     /// The architecture.
@@ -217,6 +225,7 @@ impl SimulationMeta {
             },
             code_alphabet: alphabet.into(),
             codes_format: int8_format(),
+            codes_generator: None,
             ternary_zero_prob: spec.ternary_zero_prob,
             architecture: ArchitectureMeta {
                 kind: arch.kind().into(),
@@ -247,4 +256,91 @@ impl SimulationMeta {
 /// The codes format of files written before packed codes existed.
 fn int8_format() -> String {
     "int8".into()
+}
+
+/// Codes described by a seed in a `meta.json` (`simulate --codes-format seed`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SeededCodesFile {
+    /// (M, N) of the array.
+    pub grid: (usize, usize),
+    /// The codes: every code set of the acquisition.
+    pub codes: SeededCodes,
+    /// `architecture.kind`: "single", "multi_adc" or "tiles".
+    pub architecture: String,
+    /// The tile size [A, B] of a tiled acquisition.
+    pub tile: Option<[usize; 2]>,
+}
+
+/// Whether `path` names a JSON description of codes rather than a `.npy` array: its extension is
+/// `.json`.
+pub fn is_codes_description(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+}
+
+/// Reads the seeded codes that a `meta.json` written by `simulate --codes-format seed`
+/// describes, for the pulse length and depth bins of `expect`.
+///
+/// # Errors
+/// [`Error::File`](crate::Error::File) naming `path` if it cannot be read or parsed, if it
+/// describes codes stored in a file (another `codes_format`), names an unknown generator, has
+/// another number of samples K than `expect` gives, or another grid than `expect.grid`.
+pub fn read_seeded_codes(
+    path: &Path,
+    expect: &crate::io::ShapeExpectation,
+) -> Result<SeededCodesFile> {
+    let fail = |why: String| super::file_error(path, why);
+    let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot read: {e}")))?;
+    let meta: SimulationMeta = serde_json::from_str(&text)
+        .map_err(|e| fail(format!("not a meta.json written by rdlidar simulate: {e}")))?;
+    if meta.codes_format != "seed" {
+        return Err(fail(format!(
+            "describes codes stored as {} in {}, not codes described by a seed: pass that file \
+             to --codes",
+            meta.codes_format, meta.files.codes
+        )));
+    }
+    match meta.codes_generator.as_deref() {
+        Some(SEEDED_CODES_GENERATOR) => {}
+        other => {
+            return Err(fail(format!(
+                "codes generator {other:?} is not known to this version (it knows \
+                 {SEEDED_CODES_GENERATOR:?})"
+            )))
+        }
+    }
+    let k = expect.samples();
+    if meta.k != k {
+        return Err(fail(format!(
+            "describes codes of K = {} samples (K_p {}, {} depth bins), but the pulse and \
+             --depth-bins give K = {} + {} − 1 = {k}",
+            meta.k, meta.pulse_len, meta.geometry.ks, expect.pulse_len, expect.depth_bins
+        )));
+    }
+    let grid = (meta.geometry.m, meta.geometry.n);
+    if let Some(want) = expect.grid {
+        if want != grid {
+            return Err(fail(format!(
+                "describes codes of {}x{} pixels, the scene has {}x{}",
+                grid.0, grid.1, want.0, want.1
+            )));
+        }
+    }
+    let sets = match meta.architecture.kind.as_str() {
+        "multi_adc" => meta.architecture.adcs,
+        "single" | "tiles" => 1,
+        other => {
+            return Err(fail(format!(
+                "architecture {other:?} has no seeded codes (only single, multi_adc and tiles)"
+            )))
+        }
+    };
+    let codes = SeededCodes::new(meta.seeds.codes, sets, grid.0 * grid.1, k)
+        .map_err(|e| fail(e.to_string()))?;
+    Ok(SeededCodesFile {
+        grid,
+        codes,
+        architecture: meta.architecture.kind,
+        tile: meta.architecture.tile,
+    })
 }

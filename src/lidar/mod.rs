@@ -15,6 +15,7 @@ mod rdop;
 pub(crate) mod sampling;
 mod scene;
 mod scenes;
+mod seeded;
 mod simulate;
 mod support;
 
@@ -39,5 +40,6 @@ pub use scenes::{
 };
 #[cfg(feature = "images")]
 pub(crate) use scenes::{bin_of_fraction, checked};
+pub use seeded::{SeededCodes, SEEDED_CODES_GENERATOR};
 pub use simulate::{simulate, SceneSpec, Seeds, Simulation, SimulationSpec};
 pub use support::SupportOperator;

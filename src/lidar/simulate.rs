@@ -24,6 +24,7 @@ use crate::operator::{BoxedOperator, LinearOperator, OperatorExt};
 use crate::real::Real;
 
 use super::architectures::{aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles};
+use super::seeded::SeededCodes;
 use super::{
     codes::CodeAlphabet, paper_scene, random_opaque_scene, semi_transparent_scene, Architecture,
     Codes, Geometry, NoiseModel, NoiseReport, NoiseStage, Pulse, RdOperator, Scene,
@@ -137,6 +138,10 @@ pub struct SimulationSpec {
     pub architecture: Architecture,
     /// Gaussian noise at this SNR (dB) on the measurements; `None` for none.
     pub snr_db: Option<f64>,
+    /// ±1 codes from the seeded stream of [`SeededCodes`] (key: the first code set's seed,
+    /// [`Seeds::code_set`]`(0)`), which can be regenerated pixel by pixel without a file,
+    /// instead of [`Codes::random_binary`]'s stream. Not with ternary codes.
+    pub seeded_codes: bool,
 }
 
 impl SimulationSpec {
@@ -150,7 +155,23 @@ impl SimulationSpec {
             ternary_zero_prob: None,
             architecture: Architecture::Single,
             snr_db: None,
+            seeded_codes: false,
         }
+    }
+
+    /// The seeded description of its codes ([`SimulationSpec::seeded_codes`]), `None` when its
+    /// codes are drawn otherwise.
+    ///
+    /// # Errors
+    /// As [`SeededCodes::new`], and [`Error::InvalidParameter`] for a pulse length that
+    /// overflows.
+    pub fn seeded(&self) -> Result<Option<SeededCodes>> {
+        if !self.seeded_codes {
+            return Ok(None);
+        }
+        let g = self.geometry;
+        let sets = self.architecture.code_sets();
+        SeededCodes::new(self.seeds().code_set(0), sets, g.pixels(), self.samples()?).map(Some)
     }
 
     /// The seeds of its draws.
@@ -303,12 +324,20 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
     };
     let scene = spec.scene.generate::<T>(g, seeds)?;
     let pulse = Pulse::<T>::bernoulli(spec.pulse_len, seeds.pulse())?;
+    if spec.seeded_codes && spec.ternary_zero_prob.is_some() {
+        return Err(Error::param(
+            "codes",
+            "seeded codes are ±1 codes: they cannot have the zeros of ternary codes",
+        ));
+    }
+    let seeded = spec.seeded()?;
     let code_sets = (0..arch.code_sets())
         .map(|set| {
             let seed = seeds.code_set(set);
-            match spec.ternary_zero_prob {
-                None => Codes::random_binary(g.pixels(), k, seed),
-                Some(p) => Codes::random_ternary(g.pixels(), k, p, seed),
+            match (spec.ternary_zero_prob, &seeded) {
+                (_, Some(s)) => s.materialize(set),
+                (None, None) => Codes::random_binary(g.pixels(), k, seed),
+                (Some(p), None) => Codes::random_ternary(g.pixels(), k, p, seed),
             }
             .map(Arc::new)
         })

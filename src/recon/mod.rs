@@ -22,4 +22,6 @@ pub use pursuit::explained_tolerance;
 pub use reconstruct::{
     is_piecewise_smooth, reconstruct, Reconstruction, SMOOTH_BINS, SMOOTH_FRACTION,
 };
-pub use tiled::{tile_places, TilePlace, TileReconstruction, TiledArray, TiledReconstruction};
+pub use tiled::{
+    tile_places, ArrayCodes, TilePlace, TileReconstruction, TiledArray, TiledReconstruction,
+};

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::lidar::{Codes, DepthMap, Geometry, RdOperator, Regime, Scene, TileSize};
+use crate::lidar::{Codes, DepthMap, Geometry, RdOperator, Regime, Scene, SeededCodes, TileSize};
 use crate::real::Real;
 
 use super::method::{Method, ReconstructOptions};
@@ -133,23 +133,81 @@ impl<T> TiledReconstruction<T> {
     }
 }
 
+/// The codes of a tiled array: held in memory for the whole array, or described by a seed and
+/// generated tile by tile (memory proportional to the tiles being solved).
+#[derive(Debug, Clone, Copy)]
+pub enum ArrayCodes<'a> {
+    /// Packed codes of every pixel.
+    Packed(&'a Codes),
+    /// Codes regenerated from their seed (one code set) for each tile's pixels.
+    Seeded(SeededCodes),
+}
+
+impl<'a> From<&'a Codes> for ArrayCodes<'a> {
+    fn from(c: &'a Codes) -> Self {
+        ArrayCodes::Packed(c)
+    }
+}
+
+impl From<SeededCodes> for ArrayCodes<'_> {
+    fn from(c: SeededCodes) -> Self {
+        ArrayCodes::Seeded(c)
+    }
+}
+
+impl ArrayCodes<'_> {
+    fn pixels(&self) -> usize {
+        match self {
+            ArrayCodes::Packed(c) => c.pixels(),
+            ArrayCodes::Seeded(c) => c.pixels(),
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            ArrayCodes::Packed(c) => c.len(),
+            ArrayCodes::Seeded(c) => c.len(),
+        }
+    }
+
+    fn select(&self, pixels: &[usize]) -> Result<Codes> {
+        match self {
+            ArrayCodes::Packed(c) => c.select_pixels(pixels),
+            ArrayCodes::Seeded(c) => c.select(0, pixels),
+        }
+    }
+
+    fn observed_pixels(&self) -> Vec<bool> {
+        match self {
+            ArrayCodes::Packed(c) => c.observed_pixels(),
+            ArrayCodes::Seeded(c) => vec![true; c.pixels()],
+        }
+    }
+}
+
 /// A tiled array (the paper's §3): one code set for the M×N array, one ADC per tile of A×B
 /// pixels (row-major tiles, edge tiles clipped), as `simulate --tiles` writes it.
 #[derive(Debug, Clone, Copy)]
 pub struct TiledArray<'a, T> {
     array: Geometry,
     pulse: &'a [T],
-    codes: &'a Codes,
+    codes: ArrayCodes<'a>,
     tile: TileSize,
 }
 
 impl<'a, T: Real> TiledArray<'a, T> {
-    /// The array `array` with the pulse `pulse`, the codes `codes` of all its pixels and tiles of
-    /// `tile` pixels.
+    /// The array `array` with the pulse `pulse`, the codes `codes` of all its pixels (packed,
+    /// or described by a seed) and tiles of `tile` pixels.
     ///
     /// # Errors
     /// [`Error::ShapeMismatch`] if `codes` do not have the array's pixels.
-    pub fn new(array: Geometry, pulse: &'a [T], codes: &'a Codes, tile: TileSize) -> Result<Self> {
+    pub fn new(
+        array: Geometry,
+        pulse: &'a [T],
+        codes: impl Into<ArrayCodes<'a>>,
+        tile: TileSize,
+    ) -> Result<Self> {
+        let codes = codes.into();
         if codes.pixels() != array.pixels() {
             return Err(Error::shape(
                 "tiled array: code pixels vs M·N",
@@ -180,7 +238,7 @@ impl<'a, T: Real> TiledArray<'a, T> {
     /// # Errors
     /// The errors of [`RdOperator::new`].
     pub fn tile_operator(&self, place: &TilePlace) -> Result<RdOperator<T>> {
-        let codes = self.codes.select_pixels(&place.pixels(self.array))?;
+        let codes = self.codes.select(&place.pixels(self.array))?;
         RdOperator::new(place.geometry, self.pulse.to_vec(), codes.into())
     }
 
@@ -188,7 +246,7 @@ impl<'a, T: Real> TiledArray<'a, T> {
     /// and stitches them. Each tile is an independent problem with its own 2-D grid: the tiles
     /// run in parallel, each by [`reconstruct`] with `method` and `options` (no progress bar
     /// inside a tile), and `on_tile` is called as each finishes (from its worker thread). Only
-    /// the tiles being solved hold their codes beside the array's.
+    /// the tiles being solved hold their own codes (beside the array's, unless those are seeded).
     ///
     /// # Errors
     /// [`Error::ShapeMismatch`] if `y` does not hold one row of K samples per tile; the errors

@@ -54,8 +54,8 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
     let expect = expectation(p.len(), a.files.depth_bins)?;
     let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
     let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
-    check_memory::<T>("adjoint", &a.files.codes, &expect, 2)?;
-    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins)?;
+    check_memory::<T>("adjoint", &a.files.codes, &expect, 2, false)?;
+    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins, false)?;
     let g = layout.geometry;
     let pulse = if a.debiased {
         zero_mean(p.as_slice())

@@ -45,8 +45,8 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
     let expect = expectation(p.len(), a.depth_bins)?;
     let (arch, _) = architecture_of(&a.codes, a.tiles)?;
     // Operators in both precisions, each with its test vectors.
-    check_memory::<f64>("dottest", &a.codes, &expect, 6)?;
-    let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins)?;
+    check_memory::<f64>("dottest", &a.codes, &expect, 6, false)?;
+    let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins, false)?;
     let p64 = p.as_slice().to_vec();
     let p32: Vec<f32> = p.as_slice().iter().map(|&v| v as f32).collect();
     if let Some(i) = p32.iter().position(|v| !v.is_finite()) {

@@ -68,8 +68,8 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
         grid: Some((g.m, g.n)),
     };
     let (arch, _) = architecture_of(&a.codes, a.tiles)?;
-    check_memory::<T>("forward", &a.codes, &expect, 2)?;
-    let layout = Layout::read(&a.codes, arch, &expect, g.ks)?;
+    check_memory::<T>("forward", &a.codes, &expect, 2, false)?;
+    let layout = Layout::read(&a.codes, arch, &expect, g.ks, false)?;
     let op = layout.operator(p.into_inner())?;
     let mut y = vec![T::zero(); op.nrows()];
     op.apply(x.as_slice(), &mut y);

@@ -1,14 +1,16 @@
 //! The codes of a problem read as its architecture says: one code set (M, N, K) with one ADC
 //! (a coded aperture is such a file with zero codes), G code sets (G, M, N, K) with one ADC
-//! each, or one code set with one ADC per tile (`--tiles AxB`).
+//! each, or one code set with one ADC per tile (`--tiles AxB`); int8 or packed `.npy` files, or
+//! a `meta.json` that describes ±1 codes by their seed.
 
 use std::path::Path;
 use std::sync::Arc;
 
+use rdlidar::io::meta::{is_codes_description, read_seeded_codes, SimulationMeta};
 use rdlidar::io::{self, NpyDtype, ShapeExpectation};
 use rdlidar::lidar::{
     multi_adc, pixel_groups, tiles, Architecture, CodeAlphabet, Codes, Geometry, RdOperator,
-    TileSize,
+    SeededCodes, TileSize,
 };
 use rdlidar::operator::{BoxedOperator, OperatorExt};
 use rdlidar::Real;
@@ -21,6 +23,9 @@ pub fn architecture_of(
     codes: &Path,
     tile: Option<TileSize>,
 ) -> CliResult<(Architecture, Vec<usize>)> {
+    if is_codes_description(codes) {
+        return seeded_architecture(codes, tile);
+    }
     let h = io::read_header(codes)?;
     let arch = match (h.shape.len(), tile) {
         (4, Some(t)) => {
@@ -40,6 +45,55 @@ pub fn architecture_of(
     Ok((arch, h.shape))
 }
 
+/// Reads a `meta.json` whose codes are described by a seed: the whole description is checked by
+/// [`Layout::read`]; this parses enough of it for the architecture, from its own `architecture`
+/// (a tiled acquisition takes its tile size from there unless `--tiles` gives the same), and
+/// the shape its codes would have as int8 (G, M, N, K) or (M, N, K).
+fn seeded_architecture(
+    codes: &Path,
+    tile: Option<TileSize>,
+) -> CliResult<(Architecture, Vec<usize>)> {
+    let text = std::fs::read_to_string(codes)
+        .map_err(|e| format!("{}: cannot read: {e}", codes.display()))?;
+    let meta: SimulationMeta = serde_json::from_str(&text).map_err(|e| {
+        format!(
+            "{}: not a meta.json written by rdlidar simulate: {e}",
+            codes.display()
+        )
+    })?;
+    let (m, n, k) = (meta.geometry.m, meta.geometry.n, meta.k);
+    let arch = meta.architecture;
+    let described = match (arch.kind.as_str(), arch.tile) {
+        ("multi_adc", _) => Architecture::MultiAdc(arch.adcs),
+        ("tiles", Some([tm, tn])) => Architecture::Tiles(TileSize { m: tm, n: tn }),
+        _ => Architecture::Single,
+    };
+    let arch = match (described, tile) {
+        (Architecture::Tiles(d), Some(t)) if d != t => {
+            return Err(format!(
+                "{}: describes an acquisition in tiles of {d}, but --tiles says {t}",
+                codes.display()
+            )
+            .into())
+        }
+        (Architecture::MultiAdc(g), Some(t)) => {
+            return Err(format!(
+                "{}: describes {g} code sets, one ADC each; --tiles {t} and several code sets \
+                 are not supported together",
+                codes.display()
+            )
+            .into())
+        }
+        (Architecture::Single, Some(t)) => Architecture::Tiles(t),
+        (a, _) => a,
+    };
+    let shape = match arch {
+        Architecture::MultiAdc(g) => vec![g, m, n, k],
+        _ => vec![m, n, k],
+    };
+    Ok((arch, shape))
+}
+
 /// The codes of a problem with its architecture.
 pub struct Layout {
     /// How the pixels reach the ADCs.
@@ -50,20 +104,42 @@ pub struct Layout {
     pub code_sets: Vec<Arc<Codes>>,
     /// The tiles' pixel groups ([`Architecture::Tiles`] only).
     pub groups: Option<Vec<Vec<usize>>>,
+    /// Codes described by a seed (a `meta.json` given to --codes).
+    pub seeded: Option<SeededCodes>,
 }
 
 impl Layout {
     /// Reads the codes as `arch` says, for `ks` depth bins.
+    ///
+    /// Seeded codes are generated here, every code set of the whole array, unless `lazy_tiles`
+    /// and the array is tiled: then `code_sets` is empty and [`Layout::seeded`] gives each
+    /// tile's codes on demand.
     pub fn read(
         codes: &Path,
         arch: Architecture,
         expect: &ShapeExpectation,
         ks: usize,
+        lazy_tiles: bool,
     ) -> CliResult<Layout> {
         let geometry = |(m, n): (usize, usize)| {
             Geometry::new(m, n, ks).map_err(|e| format!("--depth-bins: {e}"))
         };
+        let mut seeded = None;
         let (grid, code_sets) = match arch {
+            _ if is_codes_description(codes) => {
+                let file = read_seeded_codes(codes, expect)?;
+                let s = file.codes;
+                seeded = Some(s);
+                let sets = if lazy_tiles && matches!(arch, Architecture::Tiles(_)) {
+                    Vec::new()
+                } else {
+                    (0..s.sets())
+                        .map(|g| s.materialize(g).map(Arc::new))
+                        .collect::<rdlidar::Result<Vec<_>>>()
+                        .map_err(|e| format!("{}: {e}", codes.display()))?
+                };
+                (file.grid, sets)
+            }
             Architecture::MultiAdc(_) => {
                 let (grid, sets) = io::read_code_sets(codes, expect)?;
                 (grid, sets.into_iter().map(Arc::new).collect())
@@ -85,6 +161,7 @@ impl Layout {
             geometry,
             code_sets,
             groups,
+            seeded,
         })
     }
 
@@ -108,10 +185,11 @@ impl Layout {
 
     /// "binary" if every code set is ±1, "ternary" otherwise.
     pub fn alphabet(&self) -> &'static str {
-        if self
-            .code_sets
-            .iter()
-            .all(|c| c.alphabet() == CodeAlphabet::Binary)
+        if self.seeded.is_some()
+            || self
+                .code_sets
+                .iter()
+                .all(|c| c.alphabet() == CodeAlphabet::Binary)
         {
             "binary"
         } else {
@@ -210,16 +288,30 @@ pub fn expectation(pulse_len: usize, depth_bins: usize) -> CliResult<ShapeExpect
 
 /// Checks, from the codes file's header and before any data are read, that `command` fits in
 /// memory in `T`: the codes with the operator's per-thread buffers (one per code set), `copies`
-/// scenes (inputs, outputs and a solver's working copies) and the measurements. A file the
-/// readers will refuse is left to them.
+/// scenes (inputs, outputs and a solver's working copies) and the measurements. With
+/// `per_tile`, a tiled array whose codes are seeded counts one tile's codes per thread. A file
+/// the readers will refuse is left to them.
 pub fn check_memory<T: Real>(
     command: &str,
     codes: &Path,
     expect: &ShapeExpectation,
     copies: u128,
+    per_tile: bool,
 ) -> CliResult {
-    let h = io::read_header(codes)?;
-    let (sets, m, n) = match h.shape.as_slice() {
+    let shape = if is_codes_description(codes) {
+        match seeded_architecture(codes, None) {
+            // A tiled array with seeded codes holds only the tiles being solved.
+            Ok((Architecture::Tiles(t), _)) if per_tile => {
+                let threads = rayon::current_num_threads();
+                vec![threads, t.m, t.n, expect.samples()]
+            }
+            Ok((_, shape)) => shape,
+            Err(_) => return Ok(()),
+        }
+    } else {
+        io::read_header(codes)?.shape
+    };
+    let (sets, m, n) = match shape.as_slice() {
         [g, m, n, _] => (*g, *m, *n),
         [m, n, _] => (1, *m, *n),
         _ => return Ok(()),

@@ -9,7 +9,7 @@ use rdlidar::lidar::{
     DEFAULT_TAU_S, UNOBSERVED,
 };
 use rdlidar::recon::{
-    compare, reconstruct, Method, PeakThreshold, ReconstructOptions, Reconstruction,
+    compare, reconstruct, ArrayCodes, Method, PeakThreshold, ReconstructOptions, Reconstruction,
     TileReconstruction, TiledArray, MAX_RETURNS_ESTIMATE,
 };
 use rdlidar::Real;
@@ -165,8 +165,8 @@ fn reconstruct_files<T: Real + WritableElement>(
     let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
     let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
-    check_memory::<T>("reconstruct", &a.files.codes, &expect, 10)?;
-    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins)?;
+    check_memory::<T>("reconstruct", &a.files.codes, &expect, 10, true)?;
+    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins, true)?;
     let g = layout.geometry;
     let truth = match &a.truth {
         Some(path) => {
@@ -203,7 +203,12 @@ fn reconstruct_files<T: Real + WritableElement>(
             )
         }
         Architecture::Tiles(t) => {
-            let tiled = TiledArray::new(g, &pulse, &layout.code_sets[0], t)?;
+            let codes: ArrayCodes = match (&layout.seeded, layout.code_sets.first()) {
+                (Some(seeded), _) => (*seeded).into(),
+                (None, Some(c)) => c.as_ref().into(),
+                (None, None) => return Err("no codes were read".to_string().into()),
+            };
+            let tiled = TiledArray::new(g, &pulse, codes, t)?;
             let count = tiled.places().len();
             let done = std::sync::atomic::AtomicUsize::new(0);
             let report = |tile: &TileReconstruction<T>| {

@@ -8,6 +8,7 @@ use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
     packed_len, simulate, Architecture, Geometry, SceneSpec, SimulationSpec, TileSize,
+    SEEDED_CODES_GENERATOR,
 };
 use rdlidar::Real;
 
@@ -24,6 +25,9 @@ pub enum CodesFormat {
     /// uint8 (M, N, ⌈K/8⌉) (or (G, M, N, ⌈K/8⌉)), eight samples to a byte exactly as
     /// `np.packbits(S > 0, axis=-1)` writes them: ±1 codes only.
     Packed,
+    /// No codes file: meta.json describes ±1 codes by their seed and stream
+    /// (chacha8-packbits-v1, regenerated pixel by pixel); pass meta.json to --codes.
+    Seed,
 }
 
 /// The scenes `simulate` generates.
@@ -36,6 +40,16 @@ pub enum SceneKind {
     Random,
     /// Semi-transparent scene: 1 to 3 returns per pixel (at most K_s), amplitudes in [0.1, 1].
     Transparent,
+}
+
+impl CodesFormat {
+    fn name(self) -> &'static str {
+        match self {
+            CodesFormat::Int8 => "int8",
+            CodesFormat::Packed => "packed",
+            CodesFormat::Seed => "seed",
+        }
+    }
 }
 
 impl SceneKind {
@@ -119,9 +133,12 @@ pub struct SimulateArgs {
     /// reaches the ADC; the others' codes are written as 0.
     #[arg(long, value_name = "F")]
     pub aperture: Option<f64>,
-    /// How to write codes.npy: int8 (M, N, K), or packed, uint8 (M, N, ⌈K/8⌉) as
-    /// `np.packbits(S > 0, axis=-1)` writes ±1 codes, 8× smaller (read back with
-    /// `np.unpackbits(b, axis=-1, count=K)`). Every subcommand that reads codes takes both.
+    /// How to write the codes: int8, codes.npy (M, N, K); packed, codes.npy uint8 (M, N, ⌈K/8⌉)
+    /// as `np.packbits(S > 0, axis=-1)` writes ±1 codes, 8× smaller (read back with
+    /// `np.unpackbits(b, axis=-1, count=K)`); or seed, no codes file at all: meta.json
+    /// describes ±1 codes by their seed and a documented stream (chacha8-packbits-v1) that
+    /// regenerates them pixel by pixel, and is passed to --codes. Every subcommand that reads
+    /// codes takes all three.
     #[arg(long, value_enum, value_name = "FORMAT", default_value_t = CodesFormat::Int8)]
     pub codes_format: CodesFormat,
 }
@@ -175,22 +192,21 @@ fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
             .into());
         }
     }
-    if a.codes_format == CodesFormat::Packed {
+    if a.codes_format != CodesFormat::Int8 {
+        let name = a.codes_format.name();
         if a.ternary_zero_prob.is_some() {
-            return Err(
-                "--codes-format packed holds ±1 codes only, not --ternary-zero-prob \
-                        codes with zeros: use --codes-format int8"
-                    .to_string()
-                    .into(),
-            );
+            return Err(format!(
+                "--codes-format {name} holds ±1 codes only, not --ternary-zero-prob codes \
+                 with zeros: use --codes-format int8"
+            )
+            .into());
         }
         if a.aperture.is_some() {
-            return Err(
-                "--codes-format packed holds ±1 codes only, not the zero codes of \
-                        --aperture's masked pixels: use --codes-format int8"
-                    .to_string()
-                    .into(),
-            );
+            return Err(format!(
+                "--codes-format {name} holds ±1 codes only, not the zero codes of \
+                 --aperture's masked pixels: use --codes-format int8"
+            )
+            .into());
         }
     }
     let architecture = match (a.adcs, a.tiles, a.aperture) {
@@ -211,6 +227,7 @@ fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
         ternary_zero_prob: a.ternary_zero_prob,
         architecture,
         snr_db: a.snr_db,
+        seeded_codes: a.codes_format == CodesFormat::Seed,
         ..SimulationSpec::new(a.size, a.pulse_len, seed)
     })
 }
@@ -239,8 +256,11 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
     })?;
     let mut meta = SimulationMeta::new(&sim);
     let packed = a.codes_format == CodesFormat::Packed;
-    if packed {
-        meta.codes_format = "packed".into();
+    let seeded = a.codes_format == CodesFormat::Seed;
+    meta.codes_format = a.codes_format.name().into();
+    if seeded {
+        meta.codes_generator = Some(SEEDED_CODES_GENERATOR.into());
+        meta.files.codes = "meta.json".into();
     }
     let mut json =
         serde_json::to_string_pretty(&meta).map_err(|e| format!("cannot format meta.json: {e}"))?;
@@ -270,10 +290,13 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         let codes = &sim.code_sets[0];
         // Each file is complete and synced before the first one is renamed into place; on an
         // error the staged files are dropped, which removes them.
-        let staged: Vec<StagedFile> = vec![
+        let mut staged: Vec<StagedFile> = vec![
             io::stage_array(f_scene, sim.scene.data())?,
             io::stage_array(f_pulse, &ndarray::ArrayView1::from(sim.pulse.as_slice()))?,
-            match (spec.architecture, &sim.active, packed) {
+        ];
+        // Seeded codes have no file: meta.json describes them.
+        if !seeded {
+            staged.push(match (spec.architecture, &sim.active, packed) {
                 (Architecture::MultiAdc(_), _, false) => {
                     io::stage_code_sets(f_codes, grid, &sim.code_sets)?
                 }
@@ -283,12 +306,20 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
                 (_, Some(active), _) => io::stage_masked_codes(f_codes, grid, codes, active)?,
                 (_, None, false) => io::stage_codes(f_codes, grid, codes)?,
                 (_, None, true) => io::stage_packed_codes(f_codes, grid, codes)?,
-            },
-            io::stage_array(f_meas, &meas)?,
-            io::stage_bytes(f_meta, json.as_bytes())?,
-        ];
+            });
+        }
+        staged.push(io::stage_array(f_meas, &meas)?);
+        staged.push(io::stage_bytes(f_meta, json.as_bytes())?);
         io::commit_all(staged)
     })();
+    if written.is_ok() && seeded {
+        // A codes.npy left by an earlier run (--force) would contradict meta.json.
+        let stale = dir.join(SIMULATION_FILES[2]);
+        if stale.exists() {
+            std::fs::remove_file(&stale)
+                .map_err(|e| format!("{}: cannot remove the old codes: {e}", stale.display()))?;
+        }
+    }
     if let Err(e) = written {
         if created {
             for f in SIMULATION_FILES {
@@ -299,19 +330,24 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         return Err(e.into());
     }
     let dt = npy_dtype::<T>();
+    let codes_text = match a.codes_format {
+        CodesFormat::Seed => format!(
+            "codes described by seed {} in meta.json ({SEEDED_CODES_GENERATOR})",
+            meta.seeds.codes
+        ),
+        CodesFormat::Packed => format!(
+            "codes.npy {} uint8 (packed bits)",
+            io::shape_text(&codes_shape)
+        ),
+        CodesFormat::Int8 => format!("codes.npy {} int8", io::shape_text(&codes_shape)),
+    };
     outln!(
-        "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, codes.npy {} {}, \
-         meas.npy {} {dt}, meta.json",
+        "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, {codes_text}, meas.npy \
+         {} {dt}, meta.json",
         dir.display(),
         g.m,
         g.n,
         g.ks,
-        io::shape_text(&codes_shape),
-        if packed {
-            "uint8 (packed bits)"
-        } else {
-            "int8"
-        },
         io::shape_text(&meas_shape),
     );
     outln!(
