@@ -83,7 +83,10 @@ fn several_adcs_are_reconstructed_through_their_stacked_operator() {
     let out = reconstruct(&run, &tmp.0, (&codes, &meas), &[]);
     assert!(out.status.success(), "{}", stderr(&out));
     let text = stdout(&out);
-    assert!(text.contains("614 measurements, 2 ADCs"), "{text}");
+    assert!(
+        text.contains("from 2 × 307 = 614 measurements, 2 ADCs"),
+        "{text}"
+    );
     assert!(
         text.contains("exact depth 100.0%") && text.contains("false 0"),
         "{text}"

@@ -303,10 +303,17 @@ fn reconstruct_files<T: Real + WritableElement>(
 
     let files: Vec<String> = written.iter().map(|f| f.display().to_string()).collect();
     outln!(
-        "reconstruct {g} from {} measurements{}: solver {}; {}; {:.3} s; {} of {} pixels with a \
-         return; wrote {} (depth int32, scene {}).",
-        y.len(),
-        layout.note(),
+        "reconstruct {g} from {}: solver {}; {}; {:.3} s; {} of {} pixels with a return; wrote \
+         {} (depth int32, scene {}).",
+        match layout.rows() {
+            None => format!("K = {}", y.len()),
+            Some(rows) => format!(
+                "{rows} × {} = {} measurements{}",
+                expect.samples(),
+                y.len(),
+                layout.note()
+            ),
+        },
         r.chosen,
         r.iterations,
         r.seconds,
