@@ -138,7 +138,7 @@ pub struct SimulationMeta {
     #[serde(default = "int8_format")]
     pub codes_format: String,
     /// For "seed": the stream the codes are regenerated from
-    /// ([`SEEDED_CODES_GENERATOR`](crate::lidar::SEEDED_CODES_GENERATOR)); the key is
+    /// ([`SEEDED_CODES_GENERATOR`]); the key is
     /// `seeds.codes`, the code sets are `architecture.adcs` for several ADCs, one otherwise.
     #[serde(default)]
     pub codes_generator: Option<String>,

@@ -26,7 +26,9 @@ use super::codes::{packed_len, Codes};
 pub const SEEDED_CODES_GENERATOR: &str = "chacha8-packbits-v1";
 
 /// ±1 codes of `sets` code sets for `pixels` pixels and `len` samples, described by a seed
-/// (the stream is in the [module documentation](self)).
+/// (the stream `chacha8-packbits-v1`, specified in docs/architectures.md: ChaCha8 keyed by the
+/// seed, nonce set·pixels + pixel, each pixel's first ⌈len/8⌉ keystream bytes with the pad bits
+/// cleared, in the layout of [`Codes::from_packbits`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SeededCodes {
     seed: u64,

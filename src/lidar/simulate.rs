@@ -352,9 +352,25 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
         meas: Vec::new(),
         noise: None,
     };
-    let op = sim.operator()?;
-    let mut y = vec![T::zero(); op.nrows()];
-    op.apply(sim.scene.as_slice(), &mut y);
+    let mut y = match &sim.groups {
+        // One tile at a time: only one tile's operator (and copy of its codes) is alive.
+        Some(groups) => {
+            let mut y = Vec::with_capacity(groups.len() * k);
+            for group in groups {
+                let op = coded_aperture(g, sim.pulse.as_slice(), &sim.code_sets[0], group)?;
+                let mut rows = vec![T::zero(); op.nrows()];
+                op.apply(sim.scene.as_slice(), &mut rows);
+                y.extend(rows);
+            }
+            y
+        }
+        None => {
+            let op = sim.operator()?;
+            let mut y = vec![T::zero(); op.nrows()];
+            op.apply(sim.scene.as_slice(), &mut y);
+            y
+        }
+    };
     if let Some(snr_db) = spec.snr_db {
         let report = NoiseModel::none()
             .then(NoiseStage::Gaussian { snr_db })

@@ -284,7 +284,7 @@ pub(super) fn auto<T: Real>(
     several_returns(op, y, options, (best, p.end), vec![one], stages)
 }
 
-/// [`auto`] takes a compressive scene for one with several returns per pixel, and skips the
+/// [`Method::Auto`] takes a compressive scene for one with several returns per pixel, and skips the
 /// one-reflector fits, when at least this share of the support pursuit's lit pixels hold more
 /// than one return. The pursuit's spurious returns on an opaque scene stay far below it (at most
 /// 9% of the paper scene's lit pixels down to 10 dB SNR at 32×32×40); on the semi-transparent

@@ -73,7 +73,7 @@ pub struct TileReconstruction<T> {
     pub reconstruction: Reconstruction<T>,
 }
 
-/// What [`reconstruct_tiles`] returns: the stitched estimate and every tile's reconstruction.
+/// What [`TiledArray::reconstruct`] returns: the stitched estimate and every tile's reconstruction.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TiledReconstruction<T> {
     /// Every return found, stitched into the M×N×K_s array.

@@ -141,21 +141,7 @@ pub fn stage_code_sets<C: Borrow<Codes>>(
     sets: &[C],
 ) -> Result<StagedFile> {
     let path = path.as_ref();
-    let first = sets
-        .first()
-        .ok_or_else(|| Error::param("sets", "need at least one code set"))?
-        .borrow();
-    for (i, set) in sets.iter().enumerate() {
-        let set = set.borrow();
-        check_grid("write_code_sets", grid, set)?;
-        if set.len() != first.len() {
-            return Err(Error::shape(
-                format!("write_code_sets: samples of set {i} vs set 0"),
-                first.len(),
-                set.len(),
-            ));
-        }
-    }
+    let first = check_sets("write_code_sets", grid, sets)?;
     let (m, n) = grid;
     let mut staged = start_codes_file(path, vec![sets.len(), m, n, first.len()])?;
     for set in sets {
@@ -224,6 +210,31 @@ fn check_grid(context: &str, grid: (usize, usize), codes: &Codes) -> Result<()> 
     Ok(())
 }
 
+/// Checks that there is at least one code set, that each has the pixels of `grid` and that they
+/// have the same number of samples; returns the first.
+fn check_sets<'a, C: Borrow<Codes>>(
+    context: &str,
+    grid: (usize, usize),
+    sets: &'a [C],
+) -> Result<&'a Codes> {
+    let first = sets
+        .first()
+        .ok_or_else(|| Error::param("sets", "need at least one code set"))?
+        .borrow();
+    for (i, set) in sets.iter().enumerate() {
+        let set = set.borrow();
+        check_grid(context, grid, set)?;
+        if set.len() != first.len() {
+            return Err(Error::shape(
+                format!("{context}: samples of set {i} vs set 0"),
+                first.len(),
+                set.len(),
+            ));
+        }
+    }
+    Ok(first)
+}
+
 /// Creates the temporary file of an int8 array of shape `shape` and writes its header.
 fn start_codes_file(path: &Path, shape: Vec<usize>) -> Result<StagedFile> {
     start_file::<i8>(path, shape)
@@ -282,21 +293,7 @@ pub fn stage_packed_code_sets<C: Borrow<Codes>>(
     stacked: bool,
 ) -> Result<StagedFile> {
     let path = path.as_ref();
-    let first = sets
-        .first()
-        .ok_or_else(|| Error::param("sets", "need at least one code set"))?
-        .borrow();
-    for (i, set) in sets.iter().enumerate() {
-        let set = set.borrow();
-        check_grid("write_packed_code_sets", grid, set)?;
-        if set.len() != first.len() {
-            return Err(Error::shape(
-                format!("write_packed_code_sets: samples of set {i} vs set 0"),
-                first.len(),
-                set.len(),
-            ));
-        }
-    }
+    let first = check_sets("write_packed_code_sets", grid, sets)?;
     let (m, n) = grid;
     let mut shape = vec![m, n, packed_len(first.len())];
     if stacked {
