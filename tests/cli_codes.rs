@@ -344,6 +344,98 @@ fn seeded_codes_need_no_file_and_give_the_simulated_measurements_back() {
 }
 
 #[test]
+fn streamed_seeded_codes_give_the_held_codes_results() {
+    let tmp = TempDir::new("streamed");
+    let run = tmp.path("run");
+    simulate(&run, &["--codes-format", "seed"]);
+    let meta = run.join("meta.json");
+    let with = |args: Vec<String>, stream: bool| {
+        let mut args = args;
+        if stream {
+            args.push("--stream-codes".into());
+        }
+        run_ok(&args);
+    };
+    // Forward: one block holds these 35 pixels, so the same bytes.
+    let (y1, y2) = (tmp.path("y1.npy"), tmp.path("y2.npy"));
+    with(forward_args(&run, &meta, &y1, None), false);
+    with(forward_args(&run, &meta, &y2, None), true);
+    assert_eq!(bytes(&y1), bytes(&y2));
+    assert_eq!(bytes(&y1), bytes(&run.join("meas.npy")));
+    let files = |extra: &[&str]| -> Vec<String> {
+        let mut v: Vec<String> = [
+            "--pulse",
+            s(&run.join("pulse.npy")),
+            "--codes",
+            s(&meta),
+            "--meas",
+            s(&run.join("meas.npy")),
+            "--depth-bins",
+            "6",
+        ]
+        .map(String::from)
+        .to_vec();
+        v.extend(extra.iter().map(|a| a.to_string()));
+        v
+    };
+    // Adjoint, debiased: a pixel's backprojection depends on its codes only.
+    let (a1, a2) = (tmp.path("a1.npy"), tmp.path("a2.npy"));
+    for (out, stream) in [(&a1, false), (&a2, true)] {
+        let mut args = vec!["adjoint".to_string()];
+        args.extend(files(&["--debiased", "--out", s(out)]));
+        with(args, stream);
+    }
+    assert_eq!(bytes(&a1), bytes(&a2));
+    // Reconstruction with auto: the same depth map.
+    let (d1, d2) = (tmp.path("d1.npy"), tmp.path("d2.npy"));
+    for (out, stream) in [(&d1, false), (&d2, true)] {
+        let scene = out.with_extension("scene.npy");
+        let mut args = vec!["reconstruct".to_string()];
+        args.extend(files(&[
+            "--solver",
+            "auto",
+            "--out-depth",
+            s(out),
+            "--out-scene",
+            s(&scene),
+        ]));
+        with(args, stream);
+    }
+    assert_eq!(bytes(&d1), bytes(&d2));
+    // The dot test runs on the streamed operator.
+    let out = rdlidar(&[
+        "dottest",
+        "--pulse",
+        s(&run.join("pulse.npy")),
+        "--codes",
+        s(&meta),
+        "--depth-bins",
+        "6",
+        "--stream-codes",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Streaming is for seeded codes of one ADC.
+    let int8 = tmp.path("int8");
+    simulate(&int8, &[]);
+    let codes = int8.join("codes.npy");
+    let mut f = forward_args(&int8, &codes, &y1, None);
+    f.push("--stream-codes".into());
+    let refs: Vec<&str> = f.iter().map(String::as_str).collect();
+    assert_one_line_error(&rdlidar(&refs), &["--stream-codes", s(&codes), "seed"]);
+    let tiled = tmp.path("tiled");
+    simulate(&tiled, &["--codes-format", "seed", "--tiles", "2x3"]);
+    let tmeta = tiled.join("meta.json");
+    let mut f = forward_args(&tiled, &tmeta, &y1, Some("2x3"));
+    f.push("--stream-codes".into());
+    let refs: Vec<&str> = f.iter().map(String::as_str).collect();
+    assert_one_line_error(&rdlidar(&refs), &["--stream-codes", s(&tmeta), "tiles"]);
+}
+
+#[test]
 fn seeded_codes_that_do_not_fit_are_refused_naming_the_file() {
     let tmp = TempDir::new("seeded-bad");
     let (seed, int8, other) = (tmp.path("seed"), tmp.path("int8"), tmp.path("other"));

@@ -39,6 +39,7 @@ mod scenes;
 mod seeded_codes;
 mod solvers;
 mod sparse_solvers;
+mod streamed;
 mod stress;
 mod tight_frame;
 mod tv;

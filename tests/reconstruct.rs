@@ -181,3 +181,63 @@ fn auto_turns_to_tv_where_the_model_based_fit_does_not_explain_the_data() {
     assert!(chosen.exact_fraction >= 0.99, "{chosen}");
     assert!(chosen.false_detections <= g.pixels() / 200, "{chosen}");
 }
+
+#[test]
+fn an_observer_sees_every_iteration_and_can_stop_the_solver() {
+    use rdlidar::recon::reconstruct_observed;
+    use rdlidar::solver::{Control, IterationInfo, Termination};
+    let g = Geometry::new(6, 5, 8).unwrap();
+    let op = problem::<f64>(g, 120, 4);
+    let y = measure(&op, &paper_scene(g).unwrap());
+    let options = ReconstructOptions::default();
+    // Every iteration, in order, with the iterate of the scene's size.
+    for method in [Method::Fista, Method::Cgls, Method::Tv] {
+        let mut seen = Vec::new();
+        let mut watch = |info: &IterationInfo<'_, f64>| {
+            assert_eq!(info.x.len(), g.voxels());
+            seen.push(info.iteration);
+            Control::Continue
+        };
+        let r = reconstruct_observed(&op, &y, method, &options, &mut watch).unwrap();
+        let report = r.report.unwrap();
+        assert!(!seen.is_empty(), "{method}");
+        assert_eq!(seen, (1..=seen.len()).collect::<Vec<_>>(), "{method}");
+        // TV's report also counts the iterations of its inner one-reflector fits.
+        if method == Method::Tv {
+            assert!(seen.len() <= report.iterations, "{method}");
+        } else {
+            assert_eq!(seen.len(), report.iterations, "{method}");
+        }
+    }
+    // Stopping after three iterations ends FISTA there.
+    let mut stop = |info: &IterationInfo<'_, f64>| {
+        if info.iteration >= 3 {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    };
+    let options = ReconstructOptions {
+        debias: false,
+        ..ReconstructOptions::default()
+    };
+    let r = reconstruct_observed(&op, &y, Method::Fista, &options, &mut stop).unwrap();
+    let report = r.report.unwrap();
+    assert_eq!(
+        (report.iterations, report.termination),
+        (3, Termination::Observer)
+    );
+    // auto's stages are observed through the same observer: never more calls than the
+    // iterations it reports (its support pursuit's rounds are counted but not observed).
+    let mut calls = 0;
+    let mut count = |_: &IterationInfo<'_, f64>| {
+        calls += 1;
+        Control::Continue
+    };
+    let r = reconstruct_observed(&op, &y, Method::Auto, &options, &mut count).unwrap();
+    let iterations = r.report.map_or(0, |r| r.iterations);
+    assert!(
+        calls <= iterations,
+        "{calls} calls, {iterations} iterations"
+    );
+}

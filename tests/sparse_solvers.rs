@@ -818,3 +818,67 @@ fn cosamp_through_the_lidar_restriction_repeats_the_generic_iterates() {
         }
     }
 }
+
+#[test]
+fn fista_with_a_fixed_step_is_the_textbook_iteration() {
+    // Plain FISTA (no restart) with step 1/L: the iterates of the textbook recursion, written
+    // here with dense products.
+    let (m, n) = (30, 60);
+    let a = gaussian(m, n, 17);
+    let op = DenseMatrix::new(a.clone()).unwrap();
+    let y = matvec(&a, &sparse_vec(n, 5, 18));
+    let (lambda, l) = (0.05, 8.0);
+    for iterations in [1, 2, 30] {
+        let params = FistaParams {
+            lambda: Lambda::Absolute(lambda),
+            nonnegative: false,
+            step: StepRule::Fixed { lipschitz: l },
+            restart: Restart::Off,
+            stopping: Stopping {
+                max_iter: iterations,
+                rel_residual: None,
+                rel_change: None,
+                ..Stopping::default()
+            },
+        };
+        let mut x = vec![0.0; n];
+        let report = fista(&op, &y, &mut x, &params, &mut ()).unwrap();
+        assert_eq!(report.iterations, iterations);
+        let (mut xr, mut z, mut t) = (vec![0.0; n], vec![0.0; n], 1.0f64);
+        for _ in 0..iterations {
+            let az = matvec(&a, &z);
+            let r: Vec<f64> = az.iter().zip(&y).map(|(u, v)| u - v).collect();
+            let g = matvec_t(&a, &r);
+            let p: Vec<f64> = z
+                .iter()
+                .zip(&g)
+                .map(|(zi, gi)| {
+                    let v = zi - gi / l;
+                    v.signum() * (v.abs() - lambda / l).max(0.0)
+                })
+                .collect();
+            let t_next = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
+            z = p
+                .iter()
+                .zip(&xr)
+                .map(|(pi, xi)| pi + (t - 1.0) / t_next * (pi - xi))
+                .collect();
+            xr = p;
+            t = t_next;
+        }
+        let diff: f64 = x.iter().zip(&xr).map(|(u, v)| (u - v).powi(2)).sum();
+        let size: f64 = xr.iter().map(|v| v * v).sum();
+        assert!(
+            diff.sqrt() <= 1e-12 * size.sqrt(),
+            "{iterations} iterations"
+        );
+    }
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let params = FistaParams {
+            step: StepRule::Fixed { lipschitz: bad },
+            ..FistaParams::default()
+        };
+        let mut x = vec![0.0; n];
+        assert!(fista(&op, &y, &mut x, &params, &mut ()).is_err(), "{bad}");
+    }
+}

@@ -17,6 +17,7 @@ mod scene;
 mod scenes;
 mod seeded;
 mod simulate;
+mod streamed;
 mod support;
 
 pub use architectures::{
@@ -42,4 +43,5 @@ pub use scenes::{
 pub(crate) use scenes::{bin_of_fraction, checked};
 pub use seeded::{SeededCodes, SEEDED_CODES_GENERATOR};
 pub use simulate::{simulate, SceneSpec, Seeds, Simulation, SimulationSpec};
+pub use streamed::{StreamedOperator, STREAM_BLOCK_BYTES};
 pub use support::SupportOperator;

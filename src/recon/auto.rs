@@ -4,7 +4,7 @@
 use crate::error::Result;
 use crate::lidar::LidarOperator;
 use crate::real::Real;
-use crate::solver::{Report, Termination};
+use crate::solver::{Observer, Report, Termination};
 
 use super::method::{estimate_returns, run, Method, ReconstructOptions};
 use super::peaks::returns;
@@ -119,8 +119,9 @@ fn attempt<T: Real>(
     y: &[T],
     method: Method,
     options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
 ) -> Result<Tried<T>> {
-    let (x, report) = run(op, y, method, options)?;
+    let (x, report) = run(op, y, method, options, observer)?;
     let x = returns(&x, op.geometry());
     let mut report = report.expect("iterative methods report");
     let rel = relative_residual(op, y, &x, &mut report);
@@ -142,6 +143,7 @@ pub(super) fn auto<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
     options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
 ) -> Result<Auto<T>> {
     let tol = explained_tolerance::<T>();
     let explained = |rel: f64| rel <= tol;
@@ -173,7 +175,7 @@ pub(super) fn auto<T: Real>(
         // 2a. A has full column rank (critical or redundant regime). The one-reflector fit is
         // cheap and well posed here; least squares on every voxel is exact without noise but
         // slow near the critical length, so it runs only when the two cheap fits disagree.
-        let mut mb = attempt(op, y, Method::ModelBased, options)?;
+        let mut mb = attempt(op, y, Method::ModelBased, options, observer)?;
         if explained(mb.stage.relative_residual) {
             mb.stage.verdict = "one reflector per pixel explains the data".to_string();
             stages.push(best.stage);
@@ -183,7 +185,7 @@ pub(super) fn auto<T: Real>(
         let agree = (r_p - r_mb).abs() <= 0.05 * r_p.max(r_mb);
         let mut tried = vec![best, mb];
         if !agree {
-            let mut ls = attempt(op, y, Method::Cgls, options)?;
+            let mut ls = attempt(op, y, Method::Cgls, options, observer)?;
             let refit = refit_support(op, y, &mut ls.x, REFIT_MAX_ITER, REFIT_ROUNDS)?;
             if let (Some(r), Some(rep)) = (refit, ls.stage.report.as_mut()) {
                 rep.absorb_applies(&r);
@@ -225,18 +227,18 @@ pub(super) fn auto<T: Real>(
             best.stage.verdict,
             100.0 * share
         );
-        return several_returns(op, y, options, (best, p.end), Vec::new(), stages);
+        return several_returns(op, y, options, observer, (best, p.end), Vec::new(), stages);
     }
     // TV on the depth map, whose first fit is the model-based one (so that it costs little more
     // where that fit explains the data already); the model-based fit alone only when TV does not
     // explain the data, as a scene need not be piecewise smooth.
-    let mut tv = attempt(op, y, Method::Tv, options)?;
+    let mut tv = attempt(op, y, Method::Tv, options, observer)?;
     if explained(tv.stage.relative_residual) || tv.converged() {
         tv.stage.verdict = "TV on the depth map explains the data".to_string();
         stages.push(best.stage);
         return Ok(finish(tv, stages));
     }
-    let mut mb = attempt(op, y, Method::ModelBased, options)?;
+    let mut mb = attempt(op, y, Method::ModelBased, options, observer)?;
     if explained(mb.stage.relative_residual) || mb.converged() {
         tv.stage.verdict = "TV on the depth map does not explain the data".to_string();
         mb.stage.verdict = "one reflector per pixel explains the data".to_string();
@@ -281,7 +283,7 @@ pub(super) fn auto<T: Real>(
         one.stage.verdict
     );
     stages.push(other.stage);
-    several_returns(op, y, options, (best, p.end), vec![one], stages)
+    several_returns(op, y, options, observer, (best, p.end), vec![one], stages)
 }
 
 /// [`Method::Auto`] takes a compressive scene for one with several returns per pixel, and skips the
@@ -316,6 +318,7 @@ fn several_returns<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
     options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
     (pursuit, end): (Tried<T>, PursuitEnd),
     others: Vec<Tried<T>>,
     mut stages: Vec<Stage>,
@@ -326,7 +329,7 @@ fn several_returns<T: Real>(
         max_returns: Some(k),
         ..*options
     };
-    let mut mbk = attempt(op, y, Method::ModelBased, &several)?;
+    let mut mbk = attempt(op, y, Method::ModelBased, &several, observer)?;
     if mbk.stage.relative_residual <= tol {
         mbk.stage.verdict = format!("up to {k} returns per pixel explain the data");
         stages.push(pursuit.stage);
@@ -368,7 +371,7 @@ fn several_returns<T: Real>(
             b.stage.verdict
         )
     };
-    let mut fista = attempt(op, y, Method::Fista, options)?;
+    let mut fista = attempt(op, y, Method::Fista, options, observer)?;
     if fista.stage.relative_residual <= tol {
         fista.stage.verdict = "the debiased lasso explains the data".to_string();
         stages.extend(tried.into_iter().map(|t| t.stage));

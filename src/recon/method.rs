@@ -8,9 +8,9 @@ use crate::lidar::{LidarOperator, NO_RETURN};
 use crate::operator::PowerIteration;
 use crate::real::Real;
 use crate::solver::{
-    cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, CglsParams, CosampParams,
-    FistaParams, IhtParams, Lambda, ModelBasedParams, ReflectorAmpParams, Report, Restart,
-    StepRule, Stopping, TvDepthParams,
+    cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, CglsParams, Control,
+    CosampParams, FistaParams, IhtParams, IterationInfo, Lambda, ModelBasedParams, Observer,
+    ReflectorAmpParams, Report, Restart, StepRule, Stopping, TvDepthParams,
 };
 
 use super::peaks::backproject;
@@ -277,6 +277,21 @@ impl<T> crate::solver::Observer<T> for NoProgress {
     }
 }
 
+/// Two observers in turn: the run stops when either asks to.
+struct Tee<'a, T>(&'a mut dyn Observer<T>, &'a mut dyn Observer<T>);
+
+impl<T> Observer<T> for Tee<'_, T> {
+    fn observe(&mut self, info: &IterationInfo<'_, T>) -> Control {
+        let a = self.0.observe(info);
+        let b = self.1.observe(info);
+        if a == Control::Stop || b == Control::Stop {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    }
+}
+
 fn stopping(default: Stopping, options: &ReconstructOptions) -> Stopping {
     Stopping {
         max_iter: options.max_iter.unwrap_or(default.max_iter),
@@ -300,6 +315,7 @@ pub(super) fn run<T: Real>(
     y: &[T],
     method: Method,
     options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
 ) -> Result<(Vec<T>, Option<Report>)> {
     let g = op.geometry();
     let n = g.voxels();
@@ -323,7 +339,13 @@ pub(super) fn run<T: Real>(
                 ),
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = cgls(op, y, &mut x, &params, &mut progress)?;
+            let r = cgls(
+                op,
+                y,
+                &mut x,
+                &params,
+                &mut Tee(&mut progress, &mut *observer),
+            )?;
             progress.finish();
             r
         }
@@ -357,7 +379,13 @@ pub(super) fn run<T: Real>(
                 ),
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let mut r = fista(op, y, &mut x, &params, &mut progress)?;
+            let mut r = fista(
+                op,
+                y,
+                &mut x,
+                &params,
+                &mut Tee(&mut progress, &mut *observer),
+            )?;
             progress.finish();
             if options.debias {
                 if let Some(refit) = refit_support(op, y, &mut x, REFIT_MAX_ITER, REFIT_ROUNDS)? {
@@ -380,7 +408,13 @@ pub(super) fn run<T: Real>(
                 ..d
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = iht(op, y, &mut x, &params, &mut progress)?;
+            let r = iht(
+                op,
+                y,
+                &mut x,
+                &params,
+                &mut Tee(&mut progress, &mut *observer),
+            )?;
             progress.finish();
             r
         }
@@ -405,7 +439,13 @@ pub(super) fn run<T: Real>(
                 ..d
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = cosamp(op, y, &mut x, &params, &mut progress)?;
+            let r = cosamp(
+                op,
+                y,
+                &mut x,
+                &params,
+                &mut Tee(&mut progress, &mut *observer),
+            )?;
             progress.finish();
             r
         }
@@ -422,7 +462,13 @@ pub(super) fn run<T: Real>(
                 ..d
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = reflector_amp(op, y, &mut x, &params, &mut progress)?;
+            let r = reflector_amp(
+                op,
+                y,
+                &mut x,
+                &params,
+                &mut Tee(&mut progress, &mut *observer),
+            )?;
             progress.finish();
             r
         }
@@ -439,7 +485,13 @@ pub(super) fn run<T: Real>(
                 }
             };
             let mut progress = progress_bar(params.stopping.max_iter, options);
-            let mut r = model_based(op, y, &mut x, &params, &mut progress)?;
+            let mut r = model_based(
+                op,
+                y,
+                &mut x,
+                &params,
+                &mut Tee(&mut progress, &mut *observer),
+            )?;
             progress.finish();
             if let Some(p) = pursuit {
                 r.absorb_applies(&p);
@@ -452,7 +504,14 @@ pub(super) fn run<T: Real>(
                 ..TvDepthParams::default()
             };
             let mut progress = progress_bar(params.model.stopping.max_iter, options);
-            let r = tv_depth(op, (g.m, g.n), y, &mut x, &params, &mut progress)?;
+            let r = tv_depth(
+                op,
+                (g.m, g.n),
+                y,
+                &mut x,
+                &params,
+                &mut Tee(&mut progress, &mut *observer),
+            )?;
             progress.finish();
             r
         }

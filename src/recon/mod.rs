@@ -20,7 +20,8 @@ pub use metrics::{compare, compare_depth, relative_error, Metrics};
 pub use peaks::{PAPER_FRACTION, PAPER_QUANTILE};
 pub use pursuit::explained_tolerance;
 pub use reconstruct::{
-    is_piecewise_smooth, reconstruct, Reconstruction, SMOOTH_BINS, SMOOTH_FRACTION,
+    is_piecewise_smooth, reconstruct, reconstruct_observed, Reconstruction, SMOOTH_BINS,
+    SMOOTH_FRACTION,
 };
 pub use tiled::{
     tile_places, ArrayCodes, TilePlace, TileReconstruction, TiledArray, TiledReconstruction,

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use crate::error::{Error, Result};
 use crate::lidar::{DepthMap, LidarOperator, Regime, Scene, NO_RETURN};
 use crate::real::Real;
-use crate::solver::Report;
+use crate::solver::{Observer, Report};
 
 use super::auto::{auto, Stage};
 use super::method::{run, Method, ReconstructOptions};
@@ -101,6 +101,23 @@ pub fn reconstruct<T: Real>(
     method: Method,
     options: &ReconstructOptions,
 ) -> Result<Reconstruction<T>> {
+    reconstruct_observed(op, y, method, options, &mut ())
+}
+
+/// [`reconstruct`] with an observer called after every iteration of every iterative solver
+/// it runs (for [`Method::Auto`], of each stage in turn; the support pursuit and the
+/// backprojections have none): it sees the iteration count, residual and iterate, and returns
+/// [`Control::Stop`](crate::solver::Control::Stop) to end that solver's run early.
+///
+/// # Errors
+/// As [`reconstruct`].
+pub fn reconstruct_observed<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    method: Method,
+    options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
+) -> Result<Reconstruction<T>> {
     let start = Instant::now();
     if options.max_iter == Some(0) {
         return Err(Error::param("max_iter", "must be at least 1"));
@@ -118,10 +135,10 @@ pub fn reconstruct<T: Real>(
     let g = op.geometry();
     let regime = op.regime();
     let (x, method_used, report, stages) = if method == Method::Auto {
-        let a = auto(op, y, options)?;
+        let a = auto(op, y, options, observer)?;
         (a.x, a.method_used, a.report, a.stages)
     } else {
-        let (x, report) = run(op, y, method, options)?;
+        let (x, report) = run(op, y, method, options, observer)?;
         // The backprojections already keep one thresholded peak per pixel.
         let x = if report.is_some() { returns(&x, g) } else { x };
         (x, method, report, Vec::new())

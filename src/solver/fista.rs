@@ -50,6 +50,12 @@ pub enum StepRule {
         /// Growth factor of L (finite, > 1).
         eta: f64,
     },
+    /// A given L (finite, > 0): the step is 1/L, as other packages take it (it converges for
+    /// L ≥ ‖A‖²).
+    Fixed {
+        /// The Lipschitz constant of the gradient of ½‖Ax − y‖².
+        lipschitz: f64,
+    },
 }
 
 impl Default for StepRule {
@@ -133,6 +139,13 @@ impl FistaParams {
                 format!("must be a finite number > 1, got {eta}"),
             )),
             StepRule::Backtracking { .. } => Ok(()),
+            StepRule::Fixed { lipschitz } if !(lipschitz.is_finite() && lipschitz > 0.0) => {
+                Err(Error::param(
+                    "lipschitz",
+                    format!("must be a finite number > 0, got {lipschitz}"),
+                ))
+            }
+            StepRule::Fixed { .. } => Ok(()),
         }
     }
 }
@@ -332,6 +345,7 @@ impl<T: Real> Iteration<T> for FistaIteration<T> {
                 (l, None)
             }
             StepRule::Backtracking { eta } => (0.0, Some(eta)),
+            StepRule::Fixed { lipschitz } => (lipschitz, None),
         };
         let mut lasso = Lasso {
             lambda,

@@ -11,7 +11,9 @@ use crate::common::{
     check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
     Globals, MeasurementFiles,
 };
-use crate::layout::{architecture_of, check_memory, expectation, read_measurements, Layout};
+use crate::layout::{
+    architecture_of, check_memory, expectation, read_measurements, streams, Layout,
+};
 
 /// Apply the adjoint (backprojection): x̃ = A* y.
 ///
@@ -37,6 +39,10 @@ pub struct AdjointArgs {
     /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
     #[arg(long, value_name = "AxB", value_parser = parse_tile)]
     pub tiles: Option<TileSize>,
+    /// Codes described by a seed (meta.json) of one ADC: regenerate them block by block on every
+    /// application instead of holding them (automatic when holding them would take over 1 GiB).
+    #[arg(long)]
+    pub stream_codes: bool,
 }
 
 /// Runs `adjoint`.
@@ -54,8 +60,16 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
     let expect = expectation(p.len(), a.files.depth_bins)?;
     let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
     let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
-    check_memory::<T>("adjoint", &a.files.codes, &expect, 2, false)?;
-    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins, false)?;
+    let stream = streams(&a.files.codes, arch, a.stream_codes, &expect)?;
+    check_memory::<T>("adjoint", &a.files.codes, &expect, 2, false, stream)?;
+    let layout = Layout::read(
+        &a.files.codes,
+        arch,
+        &expect,
+        a.files.depth_bins,
+        false,
+        stream,
+    )?;
     let g = layout.geometry;
     let pulse = if a.debiased {
         zero_mean(p.as_slice())

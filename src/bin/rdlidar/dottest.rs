@@ -8,7 +8,7 @@ use rdlidar::lidar::{zero_mean, TileSize};
 use rdlidar::operator::DotTest;
 
 use crate::common::{errln, outln, parse_depth_bins, parse_tile, CliResult, Globals};
-use crate::layout::{architecture_of, check_memory, expectation, Layout};
+use crate::layout::{architecture_of, check_memory, expectation, streams, Layout};
 
 /// Check the adjoint identity <Ax, y> = <x, A*y> of the operator built from files.
 ///
@@ -36,6 +36,10 @@ pub struct DottestArgs {
     /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
     #[arg(long, value_name = "AxB", value_parser = parse_tile)]
     pub tiles: Option<TileSize>,
+    /// Codes described by a seed (meta.json) of one ADC: regenerate them block by block on every
+    /// application instead of holding them (automatic when holding them would take over 1 GiB).
+    #[arg(long)]
+    pub stream_codes: bool,
 }
 
 /// Runs `dottest`: exit status 1 when a gap is above its tolerance.
@@ -45,8 +49,9 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
     let expect = expectation(p.len(), a.depth_bins)?;
     let (arch, _) = architecture_of(&a.codes, a.tiles)?;
     // Operators in both precisions, each with its test vectors.
-    check_memory::<f64>("dottest", &a.codes, &expect, 6, false)?;
-    let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins, false)?;
+    let stream = streams(&a.codes, arch, a.stream_codes, &expect)?;
+    check_memory::<f64>("dottest", &a.codes, &expect, 6, false, stream)?;
+    let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins, false, stream)?;
     let p64 = p.as_slice().to_vec();
     let p32: Vec<f32> = p.as_slice().iter().map(|&v| v as f32).collect();
     if let Some(i) = p32.iter().position(|v| !v.is_finite()) {

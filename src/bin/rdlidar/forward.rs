@@ -11,7 +11,7 @@ use crate::common::{
     check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
     Globals,
 };
-use crate::layout::{architecture_of, check_memory, Layout};
+use crate::layout::{architecture_of, check_memory, streams, Layout};
 
 /// Apply the measurement operator: y = A x.
 ///
@@ -41,6 +41,10 @@ pub struct ForwardArgs {
     /// One ADC per tile of AxB pixels (as written by `simulate --tiles AxB`).
     #[arg(long, value_name = "AxB", value_parser = parse_tile)]
     pub tiles: Option<TileSize>,
+    /// Codes described by a seed (meta.json) of one ADC: regenerate them block by block on every
+    /// application instead of holding them (automatic when holding them would take over 1 GiB).
+    #[arg(long)]
+    pub stream_codes: bool,
 }
 
 /// Runs `forward`.
@@ -68,8 +72,9 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
         grid: Some((g.m, g.n)),
     };
     let (arch, _) = architecture_of(&a.codes, a.tiles)?;
-    check_memory::<T>("forward", &a.codes, &expect, 2, false)?;
-    let layout = Layout::read(&a.codes, arch, &expect, g.ks, false)?;
+    let stream = streams(&a.codes, arch, a.stream_codes, &expect)?;
+    check_memory::<T>("forward", &a.codes, &expect, 2, false, stream)?;
+    let layout = Layout::read(&a.codes, arch, &expect, g.ks, false, stream)?;
     let op = layout.operator(p.into_inner())?;
     let mut y = vec![T::zero(); op.nrows()];
     op.apply(x.as_slice(), &mut y);

@@ -9,8 +9,8 @@ use std::sync::Arc;
 use rdlidar::io::meta::{is_codes_description, read_seeded_codes, SimulationMeta};
 use rdlidar::io::{self, NpyDtype, ShapeExpectation};
 use rdlidar::lidar::{
-    multi_adc, pixel_groups, tiles, Architecture, CodeAlphabet, Codes, Geometry, RdOperator,
-    SeededCodes, TileSize,
+    multi_adc, packed_len, pixel_groups, tiles, Architecture, CodeAlphabet, Codes, Geometry,
+    RdOperator, SeededCodes, StreamedOperator, TileSize, STREAM_BLOCK_BYTES,
 };
 use rdlidar::operator::{BoxedOperator, OperatorExt};
 use rdlidar::Real;
@@ -94,6 +94,52 @@ fn seeded_architecture(
     Ok((arch, shape))
 }
 
+/// Seeded codes of one ADC larger than this are regenerated block by block on every
+/// application ([`StreamedOperator`]) instead of being held.
+pub const STREAM_ABOVE_BYTES: u128 = 1 << 30;
+
+/// Whether the codes `codes` of architecture `arch` are streamed: seeded codes of one ADC when
+/// `--stream-codes` asks for it or when holding them would take more than
+/// [`STREAM_ABOVE_BYTES`]. `--stream-codes` with codes that are not seeded, or with several
+/// ADCs, is an error.
+pub fn streams(
+    codes: &Path,
+    arch: Architecture,
+    forced: bool,
+    expect: &ShapeExpectation,
+) -> CliResult<bool> {
+    let seeded = is_codes_description(codes);
+    if forced && !seeded {
+        return Err(format!(
+            "--stream-codes regenerates codes described by a seed, but {} is a codes file: pass              the meta.json of `simulate --codes-format seed`",
+            codes.display()
+        )
+        .into());
+    }
+    if !seeded || !matches!(arch, Architecture::Single) {
+        if forced {
+            return Err(format!(
+                "--stream-codes streams the codes of one ADC, but {} describes {}: its {} are \
+                 generated one code set or tile at a time already",
+                codes.display(),
+                arch.kind(),
+                match arch {
+                    Architecture::Tiles(_) => "tiles",
+                    _ => "code sets",
+                }
+            )
+            .into());
+        }
+        return Ok(false);
+    }
+    let pixels = match seeded_architecture(codes, None) {
+        Ok((_, shape)) => shape.iter().rev().skip(1).product::<usize>() as u128,
+        Err(_) => return Ok(forced),
+    };
+    let held = pixels.saturating_mul(packed_len(expect.samples()) as u128);
+    Ok(forced || held > STREAM_ABOVE_BYTES)
+}
+
 /// The codes of a problem with its architecture.
 pub struct Layout {
     /// How the pixels reach the ADCs.
@@ -106,20 +152,24 @@ pub struct Layout {
     pub groups: Option<Vec<Vec<usize>>>,
     /// Codes described by a seed (a `meta.json` given to --codes).
     pub seeded: Option<SeededCodes>,
+    /// Seeded codes of one ADC regenerated on every application ([`streams`]): `code_sets`
+    /// is empty.
+    pub streamed: bool,
 }
 
 impl Layout {
     /// Reads the codes as `arch` says, for `ks` depth bins.
     ///
     /// Seeded codes are generated here, every code set of the whole array, unless `lazy_tiles`
-    /// and the array is tiled: then `code_sets` is empty and [`Layout::seeded`] gives each
-    /// tile's codes on demand.
+    /// and the array is tiled, or `stream` (see [`streams`]): then `code_sets` is empty and
+    /// [`Layout::seeded`] gives the codes on demand.
     pub fn read(
         codes: &Path,
         arch: Architecture,
         expect: &ShapeExpectation,
         ks: usize,
         lazy_tiles: bool,
+        stream: bool,
     ) -> CliResult<Layout> {
         let geometry = |(m, n): (usize, usize)| {
             Geometry::new(m, n, ks).map_err(|e| format!("--depth-bins: {e}"))
@@ -130,7 +180,12 @@ impl Layout {
                 let file = read_seeded_codes(codes, expect)?;
                 let s = file.codes;
                 seeded = Some(s);
-                let sets = if lazy_tiles && matches!(arch, Architecture::Tiles(_)) {
+                let lazy = match arch {
+                    Architecture::Tiles(_) => lazy_tiles,
+                    Architecture::Single => stream,
+                    _ => false,
+                };
+                let sets = if lazy {
                     Vec::new()
                 } else {
                     (0..s.sets())
@@ -156,12 +211,14 @@ impl Layout {
             }
             _ => None,
         };
+        let streamed = stream && seeded.is_some() && matches!(arch, Architecture::Single);
         Ok(Layout {
             arch,
             geometry,
             code_sets,
             groups,
             seeded,
+            streamed,
         })
     }
 
@@ -173,6 +230,9 @@ impl Layout {
     /// The measurement operator with the pulse `pulse`.
     pub fn operator<T: Real>(&self, pulse: Vec<T>) -> rdlidar::Result<BoxedOperator<T>> {
         let g = self.geometry;
+        if let Some(op) = self.streamed_operator(pulse.clone())? {
+            return Ok(op.boxed());
+        }
         let codes = &self.code_sets[0];
         Ok(match (&self.arch, &self.groups) {
             (Architecture::MultiAdc(_), _) => multi_adc(g, &pulse, self.code_sets.clone())?.boxed(),
@@ -181,6 +241,17 @@ impl Layout {
             }
             _ => RdOperator::new(g, pulse, codes.clone())?.boxed(),
         })
+    }
+
+    /// The streamed operator of seeded codes of one ADC, if they are streamed.
+    pub fn streamed_operator<T: Real>(
+        &self,
+        pulse: Vec<T>,
+    ) -> rdlidar::Result<Option<StreamedOperator<T>>> {
+        match (self.streamed, self.seeded) {
+            (true, Some(s)) => Ok(Some(StreamedOperator::new(self.geometry, pulse, s, 0)?)),
+            _ => Ok(None),
+        }
     }
 
     /// "binary" if every code set is ±1, "ternary" otherwise.
@@ -289,38 +360,50 @@ pub fn expectation(pulse_len: usize, depth_bins: usize) -> CliResult<ShapeExpect
 /// Checks, from the codes file's header and before any data are read, that `command` fits in
 /// memory in `T`: the codes with the operator's per-thread buffers (one per code set), `copies`
 /// scenes (inputs, outputs and a solver's working copies) and the measurements. With
-/// `per_tile`, a tiled array whose codes are seeded counts one tile's codes per thread. A file
-/// the readers will refuse is left to them.
+/// `per_tile`, a tiled array whose codes are seeded counts one tile's codes per thread; with
+/// `streamed`, one block of codes. A file the readers will refuse is left to them.
 pub fn check_memory<T: Real>(
     command: &str,
     codes: &Path,
     expect: &ShapeExpectation,
     copies: u128,
     per_tile: bool,
+    streamed: bool,
 ) -> CliResult {
-    let shape = if is_codes_description(codes) {
+    let (shape, held) = if is_codes_description(codes) {
         match seeded_architecture(codes, None) {
-            // A tiled array with seeded codes holds only the tiles being solved.
-            Ok((Architecture::Tiles(t), _)) if per_tile => {
-                let threads = rayon::current_num_threads();
-                vec![threads, t.m, t.n, expect.samples()]
+            // Streamed codes of one ADC: a block of about STREAM_BLOCK_BYTES at a time.
+            Ok((_, shape)) if streamed => {
+                let per_pixel = packed_len(expect.samples()).max(1);
+                let block = (STREAM_BLOCK_BYTES / per_pixel).max(8);
+                let pixels = shape.iter().rev().skip(1).product::<usize>();
+                (shape, Some((1, 1, block.min(pixels))))
             }
-            Ok((_, shape)) => shape,
+            // A tiled array with seeded codes holds only the tiles being solved.
+            Ok((Architecture::Tiles(t), shape)) if per_tile => {
+                (shape, Some((rayon::current_num_threads(), t.m, t.n)))
+            }
+            Ok((_, shape)) => (shape, None),
             Err(_) => return Ok(()),
         }
     } else {
-        io::read_header(codes)?.shape
+        (io::read_header(codes)?.shape, None)
     };
     let (sets, m, n) = match shape.as_slice() {
         [g, m, n, _] => (*g, *m, *n),
         [m, n, _] => (1, *m, *n),
         _ => return Ok(()),
     };
-    let Ok(g) = Geometry::new(m, n, expect.depth_bins) else {
+    // The grid and count of the codes held at once: the whole array's, or a block's or tiles'.
+    let (held_sets, hm, hn) = held.unwrap_or((sets, m, n));
+    let (Ok(g), Ok(held_grid)) = (
+        Geometry::new(m, n, expect.depth_bins),
+        Geometry::new(hm, hn, expect.depth_bins),
+    ) else {
         return Ok(());
     };
     let operator = RdOperator::<T>::estimated_memory_bytes(
-        g,
+        held_grid,
         expect.pulse_len,
         CodeAlphabet::Ternary,
         rayon::current_num_threads(),
@@ -330,7 +413,7 @@ pub fn check_memory<T: Real>(
     rdlidar::limits::MemoryPlan::new()
         .add(
             "codes and operator",
-            operator.saturating_mul(sets as u128),
+            operator.saturating_mul(held_sets as u128),
             1,
         )
         .add("scenes", copies.saturating_mul(g.voxels() as u128), size)

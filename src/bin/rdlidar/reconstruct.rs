@@ -18,7 +18,9 @@ use crate::common::{
     check_out_file, npy_dtype, outln, parse_positive, parse_tile, with_precision, CliResult,
     Globals, MeasurementFiles,
 };
-use crate::layout::{architecture_of, check_memory, expectation, read_measurements, Layout};
+use crate::layout::{
+    architecture_of, check_memory, expectation, read_measurements, streams, Layout,
+};
 
 /// Reconstruct the scene from measurements: a depth map and the returns found.
 ///
@@ -98,6 +100,10 @@ pub struct ReconstructArgs {
     /// are (T, K), one row per tile, and the tiles are reconstructed independently.
     #[arg(long, value_name = "AxB", value_parser = parse_tile)]
     pub tiles: Option<TileSize>,
+    /// Codes described by a seed (meta.json) of one ADC: regenerate them block by block on every
+    /// application instead of holding them (automatic when holding them would take over 1 GiB).
+    #[arg(long)]
+    pub stream_codes: bool,
 }
 
 /// A `--returns` value: a count, or `None` for auto.
@@ -165,8 +171,16 @@ fn reconstruct_files<T: Real + WritableElement>(
     let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
     let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
-    check_memory::<T>("reconstruct", &a.files.codes, &expect, 10, true)?;
-    let layout = Layout::read(&a.files.codes, arch, &expect, a.files.depth_bins, true)?;
+    let stream = streams(&a.files.codes, arch, a.stream_codes, &expect)?;
+    check_memory::<T>("reconstruct", &a.files.codes, &expect, 10, true, stream)?;
+    let layout = Layout::read(
+        &a.files.codes,
+        arch,
+        &expect,
+        a.files.depth_bins,
+        true,
+        stream,
+    )?;
     let g = layout.geometry;
     let truth = match &a.truth {
         Some(path) => {
@@ -221,6 +235,15 @@ fn reconstruct_files<T: Real + WritableElement>(
                 .reconstruct(&y, a.solver, &options, &report)
                 .map_err(solver)?;
             Outcome::tiled(r, t, kp)
+        }
+        _ if layout.streamed => {
+            let op = layout
+                .streamed_operator(pulse)?
+                .ok_or_else(|| "the streamed codes were not read".to_string())?;
+            Outcome::single(
+                reconstruct(&op, &y, a.solver, &options).map_err(solver)?,
+                kp,
+            )
         }
         _ => {
             let op = RdOperator::new(g, pulse, layout.code_sets[0].clone())?;
