@@ -1,0 +1,113 @@
+"""simulate, reconstruct (every solver), metrics and the callback from Python."""
+
+import numpy as np
+import pytest
+
+import rdlidar
+
+
+def test_version_and_solvers():
+    assert isinstance(rdlidar.__version__, str) and rdlidar.__version__.count(".") == 2
+    assert "auto" in rdlidar.SOLVERS and "fista" in rdlidar.SOLVERS and "tv" in rdlidar.SOLVERS
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_simulate_gives_what_the_operator_measures(dtype):
+    sim = rdlidar.simulate("paper", size=(12, 10, 8), pulse_len=600, seed=3, dtype=dtype)
+    assert sim.scene.shape == (12, 10, 8) and sim.scene.dtype == np.dtype(dtype)
+    assert sim.pulse.shape == (600,) and sim.codes.shape == (12, 10, 607)
+    assert sim.codes.dtype == np.int8 and set(np.unique(sim.codes)) <= {-1, 1}
+    assert sim.meas.shape == (607,) and sim.meas.dtype == np.dtype(dtype)
+    assert sim.meta["pulse_len"] == 600 and sim.meta["scene"] == "paper"
+    y = sim.operator().forward(sim.scene)
+    tol = 1e-5 if dtype == np.float32 else 1e-12
+    assert np.linalg.norm(y - sim.meas) <= tol * np.linalg.norm(sim.meas)
+    # The same seed, the same draws; another seed, other codes.
+    again = rdlidar.simulate("paper", size=(12, 10, 8), pulse_len=600, seed=3, dtype=dtype)
+    assert np.array_equal(again.codes, sim.codes) and np.array_equal(again.meas, sim.meas)
+    other = rdlidar.simulate("paper", size=(12, 10, 8), pulse_len=600, seed=4, dtype=dtype)
+    assert not np.array_equal(other.codes, sim.codes)
+    noisy = rdlidar.simulate("transparent", size=(6, 5, 8), pulse_len=300, seed=1, snr_db=20)
+    assert noisy.meta["snr_db"] == 20 and "noise" in noisy.meta
+    ternary = rdlidar.simulate("random", size=(6, 5, 8), pulse_len=300, ternary_zero_prob=0.3,
+                               lit_fraction=0.2)
+    assert 0 in np.unique(ternary.codes)
+
+
+@pytest.mark.parametrize("solver", rdlidar.SOLVERS)
+def test_every_solver_reconstructs_and_the_exact_ones_are_exact(solver):
+    sim = rdlidar.simulate("paper", size=(12, 10, 8), pulse_len=600, seed=21)
+    depth, scene, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 8, solver=solver)
+    assert depth.shape == (12, 10) and depth.dtype == np.int32
+    assert scene.shape == (12, 10, 8) and np.isfinite(scene).all()
+    assert report["method"] == solver and report["method_used"] in rdlidar.SOLVERS
+    assert report["seconds"] > 0 and report["regime"] == "compressive"
+    m = rdlidar.metrics(sim.scene, scene)
+    if solver in ("auto", "support-ls", "tv", "model-based"):
+        assert m["exact_fraction"] == 1.0 and m["false_detections"] == 0, m
+        assert m["relative_error"] < 1e-6
+        truth_depth = np.where(sim.scene.max(axis=2) > 0, sim.scene.argmax(axis=2), -1)
+        assert np.array_equal(depth, truth_depth)
+    if solver == "auto":
+        assert report["stages"] and any(s["kept"] for s in report["stages"])
+    if solver not in ("backprojection", "backprojection-debiased"):
+        assert report["iterations"] >= 1 and report["termination"]
+
+
+def test_packed_codes_and_an_operator_give_the_same_reconstruction():
+    sim = rdlidar.simulate("paper", size=(8, 8, 6), pulse_len=300, seed=2)
+    a = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 6, solver="fista")
+    b = rdlidar.reconstruct(sim.pulse, np.packbits(sim.codes > 0, axis=-1), sim.meas, 6,
+                            solver="fista")
+    op = rdlidar.RdOperator(sim.pulse, sim.codes, 6, dtype=np.float64)
+    c = rdlidar.reconstruct(op, None, sim.meas, None, solver="fista")
+    for other in (b, c):
+        assert np.array_equal(a[0], other[0]) and np.array_equal(a[1], other[1])
+
+
+def test_the_callback_sees_iterations_and_can_stop():
+    sim = rdlidar.simulate("paper", size=(8, 8, 6), pulse_len=300, seed=2)
+    seen = []
+
+    def cb(info):
+        seen.append(info)
+
+    _, _, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 6, solver="cgls",
+                                       callback=cb)
+    assert [s["iteration"] for s in seen] == list(range(1, report["iterations"] + 1))
+    assert all(np.isfinite(s["residual"]) for s in seen)
+    assert np.allclose([s["residual"] for s in seen], report["residual_history"])
+    # A true return value stops the solver there.
+    _, _, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 6, solver="fista",
+                                       callback=lambda info: info["iteration"] >= 4)
+    assert report["iterations"] == 4 and report["termination"] == "Observer"
+    # max_iter bounds the iterations.
+    _, _, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 6, solver="cgls",
+                                       max_iter=3)
+    assert report["iterations"] <= 3
+
+
+def test_an_exception_in_the_callback_propagates():
+    sim = rdlidar.simulate("paper", size=(8, 8, 6), pulse_len=300, seed=2)
+
+    class Enough(Exception):
+        pass
+
+    def cb(info):
+        if info["iteration"] == 2:
+            raise Enough("stop here")
+
+    with pytest.raises(Enough, match="stop here"):
+        rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 6, solver="fista", callback=cb)
+
+
+def test_metrics_count_exact_missed_and_false():
+    truth = np.zeros((2, 2, 5))
+    truth[0, 0, 1] = 1.0
+    truth[1, 1, 3] = 0.5
+    est = np.zeros_like(truth)
+    est[0, 0, 1] = 0.9
+    est[0, 1, 2] = 0.2
+    m = rdlidar.metrics(truth, est)
+    assert (m["lit"], m["exact"], m["missed"], m["false_detections"]) == (2, 1, 1, 1)
+    assert m["exact_fraction"] == 0.5
