@@ -215,6 +215,14 @@ class Simulation:
         return RdOperator(self.pulse, self.codes, self.scene.shape[2], dtype=dt, debiased=debiased)
 
 
+def _seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed: expected an int, got {type(seed).__name__}")
+    if not 0 <= int(seed) < 2**64:
+        raise ValueError(f"seed: must be an integer in [0, 2**64), got {seed}")
+    return int(seed)
+
+
 def _size(size) -> Tuple[int, int, int]:
     try:
         m, n, ks = (int(v) for v in size)
@@ -255,7 +263,7 @@ def simulate(
         str(scene),
         _size(size),
         int(pulse_len),
-        int(seed),
+        _seed(seed),
         None if snr_db is None else float(snr_db),
         None if ternary_zero_prob is None else float(ternary_zero_prob),
         None if lit_fraction is None else float(lit_fraction),
@@ -320,7 +328,7 @@ def reconstruct(
     if y.shape != (op.samples,):
         raise ValueError(f"meas: expected shape ({op.samples},), got {y.shape}")
     depth, scene, report = _rdlidar.reconstruct(
-        op._core, y, solver, None if max_iter is None else int(max_iter), callback, int(seed)
+        op._core, y, solver, None if max_iter is None else int(max_iter), callback, _seed(seed)
     )
     return depth, scene.reshape(op.scene_shape), report
 
@@ -358,6 +366,8 @@ def fista(
         raise TypeError(f"niter: expected an int, got {type(niter).__name__}")
     if niter < 1:
         raise ValueError(f"niter: must be at least 1, got {niter}")
+    if not (np.isfinite(lam) and lam >= 0):
+        raise ValueError(f"lam: must be finite and >= 0, got {lam}")
     y = _real_array(meas, op.dtype, "meas")
     if y.shape != (op.samples,):
         raise ValueError(f"meas: expected shape ({op.samples},), got {y.shape}")

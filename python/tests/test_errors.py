@@ -125,6 +125,15 @@ def test_bad_reconstruction_requests(problem):
         rdlidar.reconstruct(pulse, codes, y, 5, callback=3)
     with pytest.raises(TypeError):
         rdlidar.reconstruct(pulse, codes, y, 5, solver=3)
+    with pytest.raises(ValueError) as e:
+        rdlidar.reconstruct(pulse, codes, y, 5, seed=-3)
+    one_line(e, "seed")
+    plain = rdlidar.RdOperator(pulse, codes, 5)
+    for kwargs, needle in ((dict(lam=-1.0), "lam"), (dict(lam=0.1, step=0.0), "step"),
+                           (dict(lam=0.1, niter=0), "niter")):
+        with pytest.raises(ValueError) as e:
+            rdlidar.fista(plain, y, **kwargs)
+        one_line(e, needle)
     op = rdlidar.RdOperator(pulse, codes, 5, debiased=True)
     with pytest.raises(ValueError) as e:
         rdlidar.reconstruct(op, None, y, None)
@@ -141,6 +150,10 @@ def test_bad_simulations_and_metrics():
         (dict(size=(100000, 100000, 100)), ValueError, "size"),
         (dict(size=(4096, 4096, 100), pulse_len=10**6), ValueError, "memory"),
         (dict(size="big"), TypeError, "size"),
+        (dict(seed=-1), ValueError, "seed"),
+        (dict(seed=2**64), ValueError, "seed"),
+        (dict(seed=1.5), TypeError, "seed"),
+        (dict(snr_db=float("nan")), ValueError, "snr_db"),
         (dict(dtype=np.float16), TypeError, "dtype"),
     ]
     for kwargs, exc, needle in cases:
