@@ -52,6 +52,7 @@
 
 #![warn(missing_docs)]
 
+pub mod acquisition;
 pub mod error;
 pub mod io;
 #[cfg(feature = "lapack")]

@@ -13,6 +13,7 @@ mod cli_codes;
 mod cli_errors;
 mod cli_experiments;
 mod cli_faults;
+mod cli_front_door;
 mod cli_lidar;
 mod cli_reconstruct;
 mod cli_support;

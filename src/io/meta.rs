@@ -7,7 +7,10 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 use crate::error::Result;
-use crate::lidar::{Architecture, CodeAlphabet, SeededCodes, Simulation, SEEDED_CODES_GENERATOR};
+use crate::lidar::{
+    Architecture, Geometry, SeededCodes, Simulation, TileSize, SEEDED_CODES_GENERATOR,
+};
+use crate::limits;
 use crate::real::Real;
 
 /// The files of a simulation, in the order they are written.
@@ -186,10 +189,7 @@ impl SimulationMeta {
                 seed: None,
             },
         };
-        let alphabet = match sim.code_sets[0].alphabet() {
-            CodeAlphabet::Binary => "binary",
-            CodeAlphabet::Ternary => "ternary",
-        };
+        let alphabet = sim.code_sets[0].alphabet().name();
         let [scene, pulse, codes, meas, _] = SIMULATION_FILES;
         SimulationMeta {
             crate_name: env!("CARGO_PKG_NAME").into(),
@@ -258,17 +258,18 @@ fn int8_format() -> String {
     "int8".into()
 }
 
-/// Codes described by a seed in a `meta.json` (`simulate --codes-format seed`).
+/// Codes described by a seed in a `meta.json` (`simulate --codes-format seed`), as the file
+/// describes them, every field checked against the others.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SeededCodesFile {
-    /// (M, N) of the array.
-    pub grid: (usize, usize),
+    /// The scene grid (`geometry`).
+    pub geometry: Geometry,
+    /// The pulse length K_p (`pulse_len`).
+    pub pulse_len: usize,
+    /// How the pixels reach the ADCs (`architecture`): one ADC, G ADCs or tiles.
+    pub architecture: Architecture,
     /// The codes: every code set of the acquisition.
     pub codes: SeededCodes,
-    /// `architecture.kind`: "single", "multi_adc" or "tiles".
-    pub architecture: String,
-    /// The tile size [A, B] of a tiled acquisition.
-    pub tile: Option<[usize; 2]>,
 }
 
 /// Whether `path` names a JSON description of codes rather than a `.npy` array: its extension is
@@ -278,69 +279,160 @@ pub fn is_codes_description(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("json"))
 }
 
+/// At most 40 characters of a value quoted in a message, with an ellipsis when it was longer.
+pub fn excerpt(text: &str) -> String {
+    const MAX: usize = 40;
+    let mut out: String = text.chars().take(MAX).collect();
+    if text.chars().nth(MAX).is_some() {
+        out.push('…');
+    }
+    format!("{out:?}")
+}
+
+/// A message of at most about 200 characters: a parser's message may quote a whole value.
+fn shortened(text: &str) -> String {
+    const MAX: usize = 200;
+    if text.chars().nth(MAX).is_none() {
+        return text.to_string();
+    }
+    let head: String = text.chars().take(MAX).collect();
+    format!("{head}…")
+}
+
 /// Reads the seeded codes that a `meta.json` written by `simulate --codes-format seed`
-/// describes, for the pulse length and depth bins of `expect`.
+/// describes: the one parser of that description. Every field the codes depend on is checked
+/// against its bound and against the others before anything is allocated.
 ///
 /// # Errors
-/// [`Error::File`](crate::Error::File) naming `path` if it cannot be read or parsed, if it
-/// describes codes stored in a file (another `codes_format`), names an unknown generator, has
-/// another number of samples K than `expect` gives, or another grid than `expect.grid`.
-pub fn read_seeded_codes(
-    path: &Path,
-    expect: &crate::io::ShapeExpectation,
-) -> Result<SeededCodesFile> {
+/// [`Error::File`](crate::Error::File) naming `path` and the field at fault: the file cannot be
+/// read or parsed; it describes codes stored in a file (another `codes_format`) or names an
+/// unknown generator; `geometry` is outside the bounds of [`crate::limits`] or disagrees with
+/// `size`; `pulse_len` is out of bounds or `k` is not `pulse_len + geometry.ks − 1`; the
+/// architecture has no seeded codes (a coded aperture), a zero or too large tile or ADC count,
+/// or an `adcs` that disagrees with its tiles. Quoted values are shortened to an excerpt.
+pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
     let fail = |why: String| super::file_error(path, why);
     let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot read: {e}")))?;
-    let meta: SimulationMeta = serde_json::from_str(&text)
-        .map_err(|e| fail(format!("not a meta.json written by rdlidar simulate: {e}")))?;
+    let meta: SimulationMeta = serde_json::from_str(&text).map_err(|e| {
+        fail(format!(
+            "not a meta.json written by rdlidar simulate: {}",
+            shortened(&e.to_string())
+        ))
+    })?;
     if meta.codes_format != "seed" {
         return Err(fail(format!(
-            "describes codes stored as {} in {}, not codes described by a seed: pass that file \
-             to --codes",
-            meta.codes_format, meta.files.codes
+            "describes codes stored as {} in {} (codes_format), not codes described by a \
+             seed: pass that file to --codes",
+            shortened(&meta.codes_format),
+            shortened(&meta.files.codes)
         )));
     }
     match meta.codes_generator.as_deref() {
         Some(SEEDED_CODES_GENERATOR) => {}
         other => {
             return Err(fail(format!(
-                "codes generator {other:?} is not known to this version (it knows \
-                 {SEEDED_CODES_GENERATOR:?})"
+                "codes_generator {} is not known to this version (it knows \
+                 {SEEDED_CODES_GENERATOR:?})",
+                other.map_or("(missing)".to_string(), excerpt)
             )))
         }
     }
-    let k = expect.samples();
-    if meta.k != k {
+    let GeometryMeta { m, n, ks } = meta.geometry;
+    let geometry = Geometry::new(m, n, ks)
+        .and_then(|g| limits::check_geometry(g).map(|()| g))
+        .map_err(|_| {
+            fail(format!(
+                "geometry {m} × {n} × {ks} is outside the bounds: 1 to {} pixel rows and \
+                 columns, 1 to {} depth bins",
+                limits::MAX_SIDE,
+                limits::MAX_DEPTH_BINS
+            ))
+        })?;
+    if meta.size != geometry.to_string() {
         return Err(fail(format!(
-            "describes codes of K = {} samples (K_p {}, {} depth bins), but the pulse and \
-             --depth-bins give K = {} + {} − 1 = {k}",
-            meta.k, meta.pulse_len, meta.geometry.ks, expect.pulse_len, expect.depth_bins
+            "size {} disagrees with geometry {geometry}",
+            excerpt(&meta.size)
         )));
     }
-    let grid = (meta.geometry.m, meta.geometry.n);
-    if let Some(want) = expect.grid {
-        if want != grid {
-            return Err(fail(format!(
-                "describes codes of {}x{} pixels, the scene has {}x{}",
-                grid.0, grid.1, want.0, want.1
-            )));
-        }
+    let kp = meta.pulse_len;
+    if kp == 0 || kp > limits::MAX_PULSE_LEN {
+        return Err(fail(format!(
+            "pulse_len {kp} is outside 1 to {}",
+            limits::MAX_PULSE_LEN
+        )));
     }
-    let sets = match meta.architecture.kind.as_str() {
-        "multi_adc" => meta.architecture.adcs,
-        "single" | "tiles" => 1,
+    let k = geometry.samples(kp);
+    if meta.k != k {
+        return Err(fail(format!(
+            "k = {} disagrees with pulse_len + geometry.ks − 1 = {kp} + {ks} − 1 = {k}",
+            meta.k
+        )));
+    }
+    let arch = &meta.architecture;
+    let architecture = match arch.kind.as_str() {
+        "single" => Architecture::Single,
+        "multi_adc" => {
+            limits::check_count("architecture.adcs", arch.adcs, limits::MAX_ADCS)
+                .map_err(|e| fail(e.to_string()))?;
+            Architecture::MultiAdc(arch.adcs)
+        }
+        "tiles" => {
+            let t = match arch.tile {
+                Some([tm, tn]) if tm > 0 && tn > 0 => TileSize { m: tm, n: tn },
+                Some([tm, tn]) => {
+                    return Err(fail(format!(
+                        "architecture.tile [{tm}, {tn}]: tile rows and columns must be at \
+                         least 1"
+                    )))
+                }
+                None => {
+                    return Err(fail(
+                        "architecture.tile is missing for the tiles architecture".to_string(),
+                    ))
+                }
+            };
+            Architecture::Tiles(t)
+        }
+        "aperture" => {
+            return Err(fail(
+                "architecture \"aperture\" has no seeded codes (its blocked pixels have zero \
+                 codes, which a seed does not describe)"
+                    .to_string(),
+            ))
+        }
         other => {
             return Err(fail(format!(
-                "architecture {other:?} has no seeded codes (only single, multi_adc and tiles)"
+                "architecture.kind {} is not one of \"single\", \"multi_adc\", \"tiles\"",
+                excerpt(other)
             )))
         }
     };
-    let codes = SeededCodes::new(meta.seeds.codes, sets, grid.0 * grid.1, k)
-        .map_err(|e| fail(e.to_string()))?;
+    let rows = architecture.rows(m, n).unwrap_or(1);
+    if rows > limits::MAX_ADCS {
+        return Err(fail(format!(
+            "architecture.tile: {rows} tiles of {m} × {n} pixels, more than the limit of {} \
+             ADCs",
+            limits::MAX_ADCS
+        )));
+    }
+    if arch.adcs != rows {
+        return Err(fail(format!(
+            "architecture.adcs = {} disagrees with the architecture, which has {rows} {}",
+            arch.adcs,
+            if rows == 1 { "ADC" } else { "ADCs" }
+        )));
+    }
+    let codes = SeededCodes::new(
+        meta.seeds.codes,
+        architecture.code_sets(),
+        geometry.pixels(),
+        k,
+    )
+    .map_err(|e| fail(e.to_string()))?;
     Ok(SeededCodesFile {
-        grid,
+        geometry,
+        pulse_len: kp,
+        architecture,
         codes,
-        architecture: meta.architecture.kind,
-        tile: meta.architecture.tile,
     })
 }

@@ -6,7 +6,8 @@
 //! Writes are atomic: the data goes to a temporary file in the destination's directory
 //! (`.NAME.tmp-<pid>-<n>`), which is flushed, synced to disk and then renamed over the destination.
 //! On any error the temporary file is removed, so a destination is either left as it was or
-//! replaced by a complete file, never by a partial one.
+//! replaced by a complete file, never by a partial one. A destination that exists and is not a
+//! regular file (a device such as `/dev/null`, a FIFO) is written in place, never renamed over.
 //!
 //! ```no_run
 //! use rdlidar::io::{read_pulse, write_measurements};
@@ -78,6 +79,27 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// Whether the output paths `a` and `b` name one destination: the same existing file (after
+/// symbolic and hard links), or, for paths that do not exist yet, the same name in the same
+/// folder however spelt (`x.npy`, `./x.npy`, an absolute path, a path through a symbolic
+/// link to the folder).
+pub fn same_destination(a: &Path, b: &Path) -> bool {
+    if same_file(a, b) {
+        return true;
+    }
+    fn resolved(p: &Path) -> Option<PathBuf> {
+        if let Ok(c) = p.canonicalize() {
+            return Some(c);
+        }
+        let dir = parent_dir(p).canonicalize().ok()?;
+        Some(dir.join(p.file_name()?))
+    }
+    match (resolved(a), resolved(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
+    }
+}
+
 /// Checks, before any work, that outputs can be written into the folder `dir`: an existing
 /// folder must be empty unless `force` (`replaced` names what `--force` would replace), a new one
 /// needs an existing parent. Nothing is created.
@@ -136,10 +158,15 @@ static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
 /// # Ok(())
 /// # }
 /// ```
+///
+/// A destination that exists and is not a regular file (a character device such as
+/// `/dev/null`, a FIFO, a socket) is never renamed over: it is opened and written in place,
+/// and committing only flushes it.
 #[derive(Debug)]
 pub struct StagedFile {
     dest: PathBuf,
-    tmp: PathBuf,
+    /// The temporary file; `None` when the destination is written in place.
+    tmp: Option<PathBuf>,
     /// `None` once the file has been synced and closed.
     writer: Option<BufWriter<File>>,
     committed: bool,
@@ -161,6 +188,20 @@ impl StagedFile {
         if dest.is_dir() {
             return Err(file_error(&dest, "is a directory, expected a file name"));
         }
+        if let Ok(meta) = std::fs::metadata(&dest) {
+            if !meta.is_file() {
+                let file = OpenOptions::new()
+                    .write(true)
+                    .open(&dest)
+                    .map_err(|e| file_error(&dest, format!("cannot open for writing: {e}")))?;
+                return Ok(StagedFile {
+                    dest,
+                    tmp: None,
+                    writer: Some(BufWriter::with_capacity(1 << 20, file)),
+                    committed: false,
+                });
+            }
+        }
         let dir = match dest.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
@@ -174,7 +215,7 @@ impl StagedFile {
                 Ok(file) => {
                     return Ok(StagedFile {
                         dest,
-                        tmp,
+                        tmp: Some(tmp),
                         writer: Some(BufWriter::with_capacity(1 << 20, file)),
                         committed: false,
                     })
@@ -223,10 +264,18 @@ impl StagedFile {
             let file = w
                 .into_inner()
                 .map_err(|e| file_error(&self.dest, format!("cannot write: {}", e.error())))?;
-            file.sync_all()
-                .map_err(|e| file_error(&self.dest, format!("cannot sync to disk: {e}")))?;
+            // A device or a FIFO written in place has nothing to sync to disk.
+            if self.tmp.is_some() {
+                file.sync_all()
+                    .map_err(|e| file_error(&self.dest, format!("cannot sync to disk: {e}")))?;
+            }
         }
         Ok(())
+    }
+
+    /// Whether the destination is written in place (it exists and is not a regular file).
+    pub fn in_place(&self) -> bool {
+        self.tmp.is_none()
     }
 
     /// Syncs the data (if not done yet) and renames the temporary file over the destination.
@@ -236,7 +285,11 @@ impl StagedFile {
     /// removed and the destination left as it was.
     pub fn commit(mut self) -> Result<()> {
         self.sync()?;
-        std::fs::rename(&self.tmp, &self.dest)
+        let Some(tmp) = self.tmp.clone() else {
+            self.committed = true;
+            return Ok(());
+        };
+        std::fs::rename(&tmp, &self.dest)
             .map_err(|e| file_error(&self.dest, format!("cannot rename into place: {e}")))?;
         self.committed = true;
         // Make the rename itself durable where directories can be synced (best effort).
@@ -258,7 +311,9 @@ impl Drop for StagedFile {
     fn drop(&mut self) {
         if !self.committed {
             self.writer.take();
-            let _ = std::fs::remove_file(&self.tmp);
+            if let Some(tmp) = &self.tmp {
+                let _ = std::fs::remove_file(tmp);
+            }
         }
     }
 }

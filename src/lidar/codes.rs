@@ -22,6 +22,16 @@ pub enum CodeAlphabet {
     Ternary,
 }
 
+impl CodeAlphabet {
+    /// "binary" or "ternary".
+    pub fn name(&self) -> &'static str {
+        match self {
+            CodeAlphabet::Binary => "binary",
+            CodeAlphabet::Ternary => "ternary",
+        }
+    }
+}
+
 /// Bit-packed codes for `pixels` pixels and `len` samples (K).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Codes {

@@ -32,6 +32,12 @@ pub use noise::{
     StageReport,
 };
 pub use pulse::{zero_mean, Pulse};
+
+/// The instruction set the fused operator's kernels run with on this machine (`"avx512"`,
+/// `"avx2+fma"` or `"generic"`), as [`RdOperator::isa`] reports it.
+pub fn kernel_isa() -> &'static str {
+    kernels::Isa::detect().name()
+}
 pub use rdop::{composed_operator, ForwardPath, RdOperator};
 pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};
 pub use scene::{DepthMap, Scene, NO_RETURN, UNOBSERVED};

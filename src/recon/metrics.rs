@@ -401,3 +401,70 @@ pub fn compare_depth<T: Real>(
     return_metrics(&mut m, pairs.into_iter())?;
     Ok(m)
 }
+/// How an estimate compares with the truth when some pixels reach no ADC (a coded aperture's
+/// blocked pixels, −2 in the depth map): the metrics on the observed pixels, and what became
+/// of the unobserved ones.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObservedComparison {
+    /// [`compare`] on the observed pixels (the others emptied in both scenes).
+    pub observed: Metrics,
+    /// Pixels that reach an ADC.
+    pub observed_pixels: usize,
+    /// Pixels that reach none.
+    pub unobserved: usize,
+    /// Unobserved pixels with a return in the truth.
+    pub unobserved_lit: usize,
+    /// Unobserved pixels lit in the truth whose filled depth is the true one.
+    pub filled_exact: usize,
+    /// Unobserved pixels lit in the truth whose filled depth is within one bin.
+    pub filled_near: usize,
+    /// Unobserved pixels empty in the truth that were filled with a return.
+    pub filled_false: usize,
+}
+
+/// Compares `estimate` with `truth` on the pixels `observed` says reach an ADC, and the depth
+/// map `depth` (after any filling of the unobserved pixels from their neighbours) with the true
+/// depths on the others.
+///
+/// # Errors
+/// The errors of [`compare`]; [`Error::ShapeMismatch`] if `observed` or `depth` do not have
+/// the truth's pixels.
+pub fn compare_observed<T: Real>(
+    truth: &Scene<T>,
+    estimate: &Scene<T>,
+    depth: &ndarray::Array2<i32>,
+    observed: &[bool],
+    tau_s: f64,
+) -> Result<ObservedComparison> {
+    let g = truth.geometry();
+    if depth.len() != g.pixels() {
+        return Err(Error::shape(
+            "compare_observed: depth map pixels vs M·N",
+            g.pixels(),
+            depth.len(),
+        ));
+    }
+    let seen = truth.masked_pixels(observed)?;
+    let metrics = compare(&seen, estimate, tau_s)?;
+    let true_depth = truth.depth_map().depth;
+    let hidden: Vec<(i32, i32)> = true_depth
+        .iter()
+        .zip(depth.iter())
+        .zip(observed)
+        .filter(|(_, &o)| !o)
+        .map(|((&d, &e), _)| (d, e))
+        .collect();
+    let lit = |d: i32| d >= 0;
+    Ok(ObservedComparison {
+        observed: metrics,
+        observed_pixels: observed.iter().filter(|&&o| o).count(),
+        unobserved: hidden.len(),
+        unobserved_lit: hidden.iter().filter(|(d, _)| lit(*d)).count(),
+        filled_exact: hidden.iter().filter(|(d, e)| lit(*d) && d == e).count(),
+        filled_near: hidden
+            .iter()
+            .filter(|(d, e)| lit(*d) && lit(*e) && (d - e).abs() <= 1)
+            .count(),
+        filled_false: hidden.iter().filter(|(d, e)| !lit(*d) && lit(*e)).count(),
+    })
+}

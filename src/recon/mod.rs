@@ -16,7 +16,9 @@ pub use auto::{Stage, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
 pub use method::{
     estimate_returns, Method, PeakThreshold, ReconstructOptions, MAX_RETURNS_ESTIMATE,
 };
-pub use metrics::{compare, compare_depth, relative_error, Metrics};
+pub use metrics::{
+    compare, compare_depth, compare_observed, relative_error, Metrics, ObservedComparison,
+};
 pub use peaks::{PAPER_FRACTION, PAPER_QUANTILE};
 pub use pursuit::explained_tolerance;
 pub use reconstruct::{

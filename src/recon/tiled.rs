@@ -13,7 +13,8 @@ use crate::lidar::{Codes, DepthMap, Geometry, RdOperator, Regime, Scene, SeededC
 use crate::real::Real;
 
 use super::method::{Method, ReconstructOptions};
-use super::reconstruct::{reconstruct, Reconstruction};
+use super::reconstruct::{reconstruct_observed, Reconstruction};
+use crate::solver::{Control, IterationInfo};
 
 /// Where a tile lies in the array: its first pixel row and column and its own grid (edge tiles
 /// are clipped).
@@ -244,7 +245,7 @@ impl<'a, T: Real> TiledArray<'a, T> {
 
     /// Reconstructs every tile from `y`, the T rows of K measurements (row-major tile order),
     /// and stitches them. Each tile is an independent problem with its own 2-D grid: the tiles
-    /// run in parallel, each by [`reconstruct`] with `method` and `options` (no progress bar
+    /// run in parallel, each by [`reconstruct`](super::reconstruct()) with `method` and `options` (no progress bar
     /// inside a tile), and `on_tile` is called as each finishes (from its worker thread). Only
     /// the tiles being solved hold their own codes (beside the array's, unless those are seeded).
     ///
@@ -256,6 +257,23 @@ impl<'a, T: Real> TiledArray<'a, T> {
         y: &[T],
         method: Method,
         options: &ReconstructOptions,
+        on_tile: &(dyn Fn(&TileReconstruction<T>) + Sync),
+    ) -> Result<TiledReconstruction<T>> {
+        self.reconstruct_observed(y, method, options, &|_, _| Control::Continue, on_tile)
+    }
+
+    /// [`TiledArray::reconstruct`] with `observe` called after every iteration of every
+    /// tile's solvers, with the tile's index, from the tile's worker thread: [`Control::Stop`]
+    /// ends that solver (to stop every tile, keep returning it).
+    ///
+    /// # Errors
+    /// As [`TiledArray::reconstruct`].
+    pub fn reconstruct_observed(
+        &self,
+        y: &[T],
+        method: Method,
+        options: &ReconstructOptions,
+        observe: &(dyn Fn(usize, &IterationInfo<'_, T>) -> Control + Sync),
         on_tile: &(dyn Fn(&TileReconstruction<T>) + Sync),
     ) -> Result<TiledReconstruction<T>> {
         let start = Instant::now();
@@ -295,7 +313,9 @@ impl<'a, T: Real> TiledArray<'a, T> {
                 };
                 let op = self.tile_operator(place).map_err(name)?;
                 let rows = &y[place.index * k..(place.index + 1) * k];
-                let reconstruction = reconstruct(&op, rows, method, &inner).map_err(name)?;
+                let mut observer = |info: &IterationInfo<'_, T>| observe(place.index, info);
+                let reconstruction =
+                    reconstruct_observed(&op, rows, method, &inner, &mut observer).map_err(name)?;
                 let done = TileReconstruction {
                     place: *place,
                     reconstruction,

@@ -7,12 +7,11 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, Scene, TileSize};
 use rdlidar::Real;
 
+use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames};
+
 use crate::common::{
-    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
-    Globals, MeasurementFiles,
-};
-use crate::layout::{
-    architecture_of, check_memory, expectation, read_measurements, streams, Layout,
+    architecture_note, at_pulse, check_finite_result, check_out_file, npy_dtype, outln, parse_tile,
+    streaming, with_precision, CliResult, Globals, MeasurementFiles,
 };
 
 /// Apply the adjoint (backprojection): x̃ = A* y.
@@ -56,27 +55,23 @@ pub fn run(a: &AdjointArgs, globals: &Globals) -> CliResult {
 
 fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
     let out = &a.out;
-    let p = io::read_pulse::<T>(&a.files.pulse)?;
-    let expect = expectation(p.len(), a.files.depth_bins)?;
-    let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
-    let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
-    let stream = streams(&a.files.codes, arch, a.stream_codes, &expect)?;
-    check_memory::<T>("adjoint", &a.files.codes, &expect, 2, false, stream)?;
-    let layout = Layout::read(
+    let p = io::read_pulse::<f64>(&a.files.pulse)?;
+    let files = AcquisitionFiles::describe(
         &a.files.codes,
-        arch,
-        &expect,
+        p.len(),
         a.files.depth_bins,
-        false,
-        stream,
+        None,
+        a.tiles,
+        streaming(a.stream_codes),
+        InputNames::COMMAND_LINE,
     )?;
-    let g = layout.geometry;
-    let pulse = if a.debiased {
-        zero_mean(p.as_slice())
-    } else {
-        p.into_inner()
-    };
-    let op = layout.operator(pulse)?;
+    let y = files.read_measurements::<T>(&a.files.meas)?;
+    files.check_memory::<T>("adjoint", 2)?;
+    let acq = files.load(p.into_inner())?;
+    let g = acq.geometry();
+    let pulse = pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;
+    let pulse = if a.debiased { zero_mean(&pulse) } else { pulse };
+    let op = acq.operator_with_pulse(pulse)?;
     let mut x = vec![T::zero(); g.voxels()];
     op.apply_adjoint(&y, &mut x);
     check_finite_result(&x, "backprojection", &a.files.meas, "--meas")?;
@@ -96,7 +91,7 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
         g.n,
         a.files.depth_bins,
         npy_dtype::<T>(),
-        layout.note()
+        architecture_note(&acq)
     );
     Ok(())
 }

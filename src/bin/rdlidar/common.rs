@@ -4,8 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use clap::ValueEnum;
+use rdlidar::acquisition::{count_of, Acquisition, Streaming};
 use rdlidar::io::{self, NpyDtype};
-use rdlidar::lidar::{Geometry, TileSize};
+use rdlidar::lidar::{Architecture, Geometry, TileSize};
 use rdlidar::{limits, Real};
 
 /// A command-line failure.
@@ -299,6 +300,61 @@ pub fn set_threads(threads: Option<usize>, source: &str) -> CliResult {
             .num_threads(n)
             .build_global()
             .map_err(|e| format!("{source} {n}: {e}"))?;
+    }
+    Ok(())
+}
+
+/// `--stream-codes`: always stream, or leave it to the size of the codes.
+pub fn streaming(forced: bool) -> Streaming {
+    if forced {
+        Streaming::Always
+    } else {
+        Streaming::Auto
+    }
+}
+
+/// Names the pulse file in an error about the pulse (e.g. one not representable in the
+/// precision of the computation).
+pub fn at_pulse(path: &Path) -> impl Fn(rdlidar::Error) -> Failure + '_ {
+    move |e| {
+        let e = e.to_string();
+        let hint = if e.ends_with("compute in f64") {
+            " (--precision f64)"
+        } else {
+            ""
+        };
+        Failure::Message(format!("{} (--pulse): {e}{hint}", path.display()))
+    }
+}
+
+/// A note on the architecture for the messages of several ADCs (empty for one ADC).
+pub fn architecture_note(acq: &Acquisition) -> String {
+    let g = acq.geometry();
+    match acq.architecture() {
+        Architecture::MultiAdc(n) => {
+            format!(", {} (one code set each)", count_of(n, "ADC", "ADCs"))
+        }
+        Architecture::Tiles(t) => format!(
+            ", tiles of {t} pixels ({})",
+            count_of(t.count(g.m, g.n), "ADC", "ADCs")
+        ),
+        _ => String::new(),
+    }
+}
+
+/// Refuses outputs that name one destination, however spelt (see [`io::same_destination`]).
+pub fn check_distinct_outputs(outputs: &[(&str, &Path)]) -> CliResult {
+    for (i, (fa, pa)) in outputs.iter().enumerate() {
+        for (fb, pb) in &outputs[i + 1..] {
+            if io::same_destination(pa, pb) {
+                return Err(format!(
+                    "{}: {fa} and {fb} ({}) name the same file",
+                    pa.display(),
+                    pb.display()
+                )
+                .into());
+            }
+        }
     }
     Ok(())
 }

@@ -7,8 +7,11 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, TileSize};
 use rdlidar::operator::DotTest;
 
-use crate::common::{errln, outln, parse_depth_bins, parse_tile, CliResult, Globals};
-use crate::layout::{architecture_of, check_memory, expectation, streams, Layout};
+use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames};
+
+use crate::common::{
+    architecture_note, errln, outln, parse_depth_bins, parse_tile, streaming, CliResult, Globals,
+};
 
 /// Check the adjoint identity <Ax, y> = <x, A*y> of the operator built from files.
 ///
@@ -46,43 +49,46 @@ pub struct DottestArgs {
 pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
     let seed = globals.seed();
     let p = io::read_pulse::<f64>(&a.pulse)?;
-    let expect = expectation(p.len(), a.depth_bins)?;
-    let (arch, _) = architecture_of(&a.codes, a.tiles)?;
     // Operators in both precisions, each with its test vectors.
-    let stream = streams(&a.codes, arch, a.stream_codes, &expect)?;
-    check_memory::<f64>("dottest", &a.codes, &expect, 6, false, stream)?;
-    let layout = Layout::read(&a.codes, arch, &expect, a.depth_bins, false, stream)?;
-    let p64 = p.as_slice().to_vec();
-    let p32: Vec<f32> = p.as_slice().iter().map(|&v| v as f32).collect();
-    if let Some(i) = p32.iter().position(|v| !v.is_finite()) {
-        return Err(format!(
-            "{}: pulse value {:e} at index {i} overflows f32, in which the dot test also runs",
-            a.pulse.display(),
-            p64[i]
+    let files = AcquisitionFiles::describe(
+        &a.codes,
+        p.len(),
+        a.depth_bins,
+        None,
+        a.tiles,
+        streaming(a.stream_codes),
+        InputNames::COMMAND_LINE,
+    )?;
+    files.check_memory::<f64>("dottest", 6)?;
+    let acq = files.load(p.into_inner())?;
+    let p64 = acq.pulse().to_vec();
+    let p32 = pulse_in::<f32>(&p64).map_err(|e| {
+        format!(
+            "{} (--pulse): {e}; the dot test runs in f32 too",
+            a.pulse.display()
         )
-        .into());
-    }
+    })?;
     let test = DotTest::new().seed(seed);
     let rows = [
         (
             "pulse as given",
-            test.measure(&layout.operator(p32.clone())?),
-            test.measure(&layout.operator(p64.clone())?),
+            test.measure(&acq.operator_with_pulse(p32.clone())?),
+            test.measure(&acq.operator_with_pulse(p64.clone())?),
         ),
         (
             "zero-mean pulse",
-            test.measure(&layout.operator(zero_mean(&p32))?),
-            test.measure(&layout.operator(zero_mean(&p64))?),
+            test.measure(&acq.operator_with_pulse(zero_mean(&p32))?),
+            test.measure(&acq.operator_with_pulse(zero_mean(&p64))?),
         ),
     ];
     outln!(
         "dot test |<Ax,y> - <x,A*y>| / max(|Ax||y|, |x||A*y|): {}, K_p {}, K {}, {} \
          codes{}, seed {seed}",
-        layout.geometry,
-        p.len(),
-        expect.samples(),
-        layout.alphabet(),
-        layout.note()
+        acq.geometry(),
+        acq.pulse_len(),
+        acq.samples(),
+        acq.alphabet().name(),
+        architecture_note(&acq)
     );
     outln!(
         "{:<16} {:<9} {:>10} {:>10}",

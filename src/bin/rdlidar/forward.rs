@@ -3,15 +3,16 @@
 use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
-use rdlidar::io::{self, ShapeExpectation};
+use rdlidar::io;
 use rdlidar::lidar::TileSize;
 use rdlidar::Real;
 
+use rdlidar::acquisition::{AcquisitionFiles, InputNames};
+
 use crate::common::{
-    check_finite_result, check_out_file, npy_dtype, outln, parse_tile, with_precision, CliResult,
-    Globals,
+    architecture_note, at_pulse, check_finite_result, check_out_file, npy_dtype, outln, parse_tile,
+    streaming, with_precision, CliResult, Globals,
 };
-use crate::layout::{architecture_of, check_memory, streams, Layout};
 
 /// Apply the measurement operator: y = A x.
 ///
@@ -63,23 +64,26 @@ pub fn run(a: &ForwardArgs, globals: &Globals) -> CliResult {
 
 fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
     let out = &a.out;
-    let p = io::read_pulse::<T>(&a.pulse)?;
+    let p = io::read_pulse::<f64>(&a.pulse)?;
     let x = io::read_scene::<T>(&a.scene)?;
     let g = x.geometry();
-    let expect = ShapeExpectation {
-        pulse_len: p.len(),
-        depth_bins: g.ks,
-        grid: Some((g.m, g.n)),
-    };
-    let (arch, _) = architecture_of(&a.codes, a.tiles)?;
-    let stream = streams(&a.codes, arch, a.stream_codes, &expect)?;
-    check_memory::<T>("forward", &a.codes, &expect, 2, false, stream)?;
-    let layout = Layout::read(&a.codes, arch, &expect, g.ks, false, stream)?;
-    let op = layout.operator(p.into_inner())?;
+    let files = AcquisitionFiles::describe(
+        &a.codes,
+        p.len(),
+        g.ks,
+        Some((g.m, g.n)),
+        a.tiles,
+        streaming(a.stream_codes),
+        InputNames::COMMAND_LINE,
+    )?;
+    files.check_memory::<T>("forward", 2)?;
+    let acq = files.load(p.into_inner())?;
+    let op = acq.operator::<T>().map_err(at_pulse(&a.pulse))?;
     let mut y = vec![T::zero(); op.nrows()];
     op.apply(x.as_slice(), &mut y);
     check_finite_result(&y, "measurements", &a.scene, "--scene")?;
-    match layout.rows() {
+    let k = acq.samples();
+    match acq.rows() {
         None => {
             io::write_measurements(out, &y)?;
             outln!(
@@ -90,7 +94,6 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
             );
         }
         Some(rows) => {
-            let k = expect.samples();
             let y2 = ndarray::ArrayView2::from_shape((rows, k), &y[..])
                 .map_err(|e| format!("cannot shape the measurements: {e}"))?;
             io::write_array(out, &y2)?;
@@ -98,7 +101,7 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
                 "wrote {}: measurements ({rows}, {k}) {}, one row per ADC{}",
                 out.display(),
                 npy_dtype::<T>(),
-                layout.note()
+                architecture_note(&acq)
             );
         }
     }

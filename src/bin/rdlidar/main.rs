@@ -11,7 +11,6 @@ mod dottest;
 mod experiment;
 mod forward;
 mod info;
-mod layout;
 mod reconstruct;
 mod selfcheck;
 mod simulate;

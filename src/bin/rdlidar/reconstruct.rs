@@ -1,25 +1,24 @@
 //! `rdlidar reconstruct`: a depth map and a scene from files, by any solver.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
+use rdlidar::acquisition::{
+    observe_nothing, pulse_in, AcquisitionFiles, InputNames, Reconstructed,
+};
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
-    depth_bin_m, Architecture, DepthMap, MultiAdcOperator, RdOperator, Scene, TileSize,
-    DEFAULT_TAU_S, UNOBSERVED,
+    depth_bin_m, Architecture, DepthMap, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED,
 };
 use rdlidar::recon::{
-    compare, reconstruct, ArrayCodes, Method, PeakThreshold, ReconstructOptions, Reconstruction,
-    TileReconstruction, TiledArray, MAX_RETURNS_ESTIMATE,
+    compare, compare_observed, Method, PeakThreshold, ReconstructOptions, Reconstruction,
+    TileReconstruction, MAX_RETURNS_ESTIMATE,
 };
 use rdlidar::Real;
 
 use crate::common::{
-    check_out_file, npy_dtype, outln, parse_positive, parse_tile, with_precision, CliResult,
-    Globals, MeasurementFiles,
-};
-use crate::layout::{
-    architecture_of, check_memory, expectation, read_measurements, streams, Layout,
+    architecture_note, at_pulse, check_distinct_outputs, check_out_file, errln, npy_dtype, outln,
+    parse_positive, parse_tile, streaming, with_precision, CliResult, Globals, MeasurementFiles,
 };
 
 /// Reconstruct the scene from measurements: a depth map and the returns found.
@@ -149,12 +148,17 @@ pub fn run(a: &ReconstructArgs, globals: &Globals) -> CliResult {
     if let Some(t) = &a.truth {
         inputs.push((t, "--truth"));
     }
-    check_out_file(&a.out_depth, "--out-depth", &inputs)?;
-    check_out_file(&a.out_scene, "--out-scene", &inputs)?;
+    let mut outputs = vec![
+        ("--out-depth", a.out_depth.as_path()),
+        ("--out-scene", a.out_scene.as_path()),
+    ];
     if let Some(png) = &a.png {
-        check_out_file(png, "--png", &inputs)?;
+        outputs.push(("--png", png.as_path()));
     }
-    check_distinct_outputs(a)?;
+    for (flag, out) in &outputs {
+        check_out_file(out, flag, &inputs)?;
+    }
+    check_distinct_outputs(&outputs)?;
     with_precision!(
         globals.precision_of(&[&a.files.meas, &a.files.pulse])?,
         reconstruct_files(a, globals)
@@ -165,23 +169,22 @@ fn reconstruct_files<T: Real + WritableElement>(
     a: &ReconstructArgs,
     globals: &Globals,
 ) -> CliResult {
-    let p = io::read_pulse::<T>(&a.files.pulse)?;
-    let kp = p.len();
-    let expect = expectation(kp, a.files.depth_bins)?;
-    let (arch, codes_shape) = architecture_of(&a.files.codes, a.tiles)?;
-    let y = read_measurements::<T>(&a.files.meas, &a.files.codes, arch, &codes_shape, &expect)?;
-    // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
-    let stream = streams(&a.files.codes, arch, a.stream_codes, &expect)?;
-    check_memory::<T>("reconstruct", &a.files.codes, &expect, 10, true, stream)?;
-    let layout = Layout::read(
+    let p = io::read_pulse::<f64>(&a.files.pulse)?;
+    let files = AcquisitionFiles::describe(
         &a.files.codes,
-        arch,
-        &expect,
+        p.len(),
         a.files.depth_bins,
-        true,
-        stream,
+        None,
+        a.tiles,
+        streaming(a.stream_codes),
+        InputNames::COMMAND_LINE,
     )?;
-    let g = layout.geometry;
+    let y = files.read_measurements::<T>(&a.files.meas)?;
+    // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
+    files.check_memory::<T>("reconstruct", 10)?;
+    let acq = files.load(p.into_inner())?;
+    pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;
+    let g = acq.geometry();
     let truth = match &a.truth {
         Some(path) => {
             let t = io::read_scene::<T>(path)?;
@@ -206,56 +209,21 @@ fn reconstruct_files<T: Real + WritableElement>(
         debias: !a.no_debias,
         max_returns: a.returns.0,
     };
-    let pulse = p.into_inner();
-    let solver = |e: rdlidar::Error| format!("--solver {}: {e}", a.solver);
-    let r = match arch {
-        Architecture::MultiAdc(_) => {
-            let op = MultiAdcOperator::new(g, &pulse, layout.code_sets.clone())?;
-            Outcome::single(
-                reconstruct(&op, &y, a.solver, &options).map_err(solver)?,
-                kp,
-            )
-        }
-        Architecture::Tiles(t) => {
-            let codes: ArrayCodes = match (&layout.seeded, layout.code_sets.first()) {
-                (Some(seeded), _) => (*seeded).into(),
-                (None, Some(c)) => c.as_ref().into(),
-                (None, None) => return Err("no codes were read".to_string().into()),
-            };
-            let tiled = TiledArray::new(g, &pulse, codes, t)?;
-            let count = tiled.places().len();
-            let done = std::sync::atomic::AtomicUsize::new(0);
-            let report = |tile: &TileReconstruction<T>| {
-                let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                if !globals.quiet {
-                    eprintln!("{}", tile_line(tile, n, count));
-                }
-            };
-            let r = tiled
-                .reconstruct(&y, a.solver, &options, &report)
-                .map_err(solver)?;
-            Outcome::tiled(r, t, kp)
-        }
-        _ if layout.streamed => {
-            let op = layout
-                .streamed_operator(pulse)?
-                .ok_or_else(|| "the streamed codes were not read".to_string())?;
-            Outcome::single(
-                reconstruct(&op, &y, a.solver, &options).map_err(solver)?,
-                kp,
-            )
-        }
-        _ => {
-            let op = RdOperator::new(g, pulse, layout.code_sets[0].clone())?;
-            Outcome::single(
-                reconstruct(&op, &y, a.solver, &options).map_err(solver)?,
-                kp,
-            )
+    let kp = acq.pulse_len();
+    let count = acq.rows().unwrap_or(1);
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let on_tile = |tile: &TileReconstruction<T>| {
+        let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        if !globals.quiet {
+            errln!("{}", tile_line(tile, n, count));
         }
     };
+    let r = acq
+        .reconstruct(&y, a.solver, &options, &observe_nothing, &on_tile)
+        .map_err(|e| format!("--solver {}: {e}", a.solver))?;
+    let mut r = Outcome::new(r, acq.architecture(), kp);
     // A coded aperture's blocked pixels reach no ADC: they are unobserved (−2 in the depth
     // map), judged apart from the observed ones, and filled from their neighbours on request.
-    let mut r = r;
     let observed: Vec<bool> = r.depth.depth.iter().map(|&d| d != UNOBSERVED).collect();
     let unobserved = observed.iter().filter(|&&o| !o).count();
     let filled = if a.fill_unobserved && unobserved > 0 {
@@ -270,34 +238,21 @@ fn reconstruct_files<T: Real + WritableElement>(
             let m = compare(t, &r.scene, DEFAULT_TAU_S).map_err(at_truth)?;
             metrics.push(format!("versus the truth: {m}"));
         } else {
-            let seen = t.masked_pixels(&observed).map_err(at_truth)?;
-            let m = compare(&seen, &r.scene, DEFAULT_TAU_S).map_err(at_truth)?;
-            let td = t.depth_map().depth;
-            let hidden: Vec<(i32, i32)> = td
-                .iter()
-                .zip(&r.depth.depth)
-                .zip(&observed)
-                .filter(|(_, &o)| !o)
-                .map(|((&d, &e), _)| (d, e))
-                .collect();
-            let lit = hidden.iter().filter(|(d, _)| *d >= 0).count();
+            let c = compare_observed(t, &r.scene, &r.depth.depth, &observed, DEFAULT_TAU_S)
+                .map_err(at_truth)?;
             metrics.push(format!(
-                "versus the truth on the {} observed pixels: {m}",
-                observed.len() - unobserved
+                "versus the truth on the {} observed pixels: {}",
+                c.observed_pixels, c.observed
             ));
             let mut line = format!(
-                "{unobserved} pixels unobserved (all-zero codes), {lit} of them lit in the truth"
+                "{unobserved} pixels unobserved (all-zero codes), {} of them lit in the truth",
+                c.unobserved_lit
             );
             if filled.is_some() {
-                let exact = hidden.iter().filter(|(d, e)| *d >= 0 && d == e).count();
-                let near = hidden
-                    .iter()
-                    .filter(|(d, e)| *d >= 0 && *e >= 0 && (d - e).abs() <= 1)
-                    .count();
-                let false_fills = hidden.iter().filter(|(d, e)| *d < 0 && *e >= 0).count();
                 line.push_str(&format!(
-                    "; filled from their neighbours: {exact} of the {lit} lit at the exact \
-                     depth, {near} within a bin, {false_fills} filled where the truth is empty"
+                    "; filled from their neighbours: {} of the {} lit at the exact depth, {} \
+                     within a bin, {} filled where the truth is empty",
+                    c.filled_exact, c.unobserved_lit, c.filled_near, c.filled_false
                 ));
             }
             metrics.push(line);
@@ -328,13 +283,13 @@ fn reconstruct_files<T: Real + WritableElement>(
     outln!(
         "reconstruct {g} from {}: solver {}; {}; {:.3} s; {} of {} pixels with a return; wrote \
          {} (depth int32, scene {}).",
-        match layout.rows() {
+        match acq.rows() {
             None => format!("K = {}", y.len()),
             Some(rows) => format!(
                 "{rows} × {} = {} measurements{}",
-                expect.samples(),
+                acq.samples(),
                 y.len(),
-                layout.note()
+                architecture_note(&acq)
             ),
         },
         r.chosen,
@@ -357,25 +312,6 @@ fn reconstruct_files<T: Real + WritableElement>(
     Ok(())
 }
 
-/// Refuses outputs of `reconstruct` that name the same file.
-fn check_distinct_outputs(a: &ReconstructArgs) -> CliResult {
-    let mut outs: Vec<(&str, &Path)> = vec![
-        ("--out-depth", a.out_depth.as_path()),
-        ("--out-scene", a.out_scene.as_path()),
-    ];
-    if let Some(png) = &a.png {
-        outs.push(("--png", png.as_path()));
-    }
-    for (i, (fa, pa)) in outs.iter().enumerate() {
-        for (fb, pb) in &outs[i + 1..] {
-            if pa == pb {
-                return Err(format!("{}: given to both {fa} and {fb}", pa.display()).into());
-            }
-        }
-    }
-    Ok(())
-}
-
 /// What `reconstruct` reports of a reconstruction, whatever the architecture.
 struct Outcome<T> {
     scene: Scene<T>,
@@ -392,6 +328,14 @@ struct Outcome<T> {
 }
 
 impl<T: Real> Outcome<T> {
+    fn new(r: Reconstructed<T>, architecture: Architecture, kp: usize) -> Self {
+        match (r, architecture) {
+            (Reconstructed::Tiled(r), Architecture::Tiles(t)) => Outcome::tiled(r, t, kp),
+            (Reconstructed::Tiled(r), _) => Outcome::tiled(r, TileSize { m: 1, n: 1 }, kp),
+            (Reconstructed::Single(r), _) => Outcome::single(r, kp),
+        }
+    }
+
     fn single(r: Reconstruction<T>, kp: usize) -> Self {
         let g = r.scene.geometry();
         let chosen = if r.stages.is_empty() {

@@ -140,9 +140,10 @@ pub fn read_measurement_rows<T: Real>(
             return Err(file_error(
                 path,
                 format!(
-                    "measurements shape {} has {} rows, expected {r} (one per ADC)",
+                    "measurements shape {} has {} {}, expected {r} (one per ADC)",
                     shape_text(&h.shape),
-                    h.shape[0]
+                    h.shape[0],
+                    if h.shape[0] == 1 { "row" } else { "rows" }
                 ),
             ));
         }

@@ -1,0 +1,937 @@
+//! The acquisition: a pulse, the codes of every pixel and how the pixels reach the ADCs (the
+//! paper's §3), as one value that knows its geometry, regime, memory plan and architecture
+//! and gives the operator the reconstructions run on.
+//!
+//! An [`Acquisition`] is built from arrays ([`Acquisition::new`]) or from the files that
+//! `rdlidar simulate` writes ([`AcquisitionFiles::describe`], then
+//! [`AcquisitionFiles::load`]). Every rule about inputs lives here, the same for the command
+//! line and the Python package: the pulse is ≥ 0, finite, not all zero and representable in the
+//! precision of the computation; the geometry is within [`crate::limits`]; codes fit the
+//! geometry and the K = K_p + K_s − 1 samples; measurements are finite and shaped as the
+//! architecture says; the memory a request needs is checked before anything is allocated.
+//!
+//! | architecture | codes | measurements | operator |
+//! |---|---|---|---|
+//! | one ADC | one code set | (K,) | [`RdOperator`], or [`StreamedOperator`] for large seeded codes |
+//! | G ADCs | G code sets | (G, K) | [`MultiAdcOperator`] |
+//! | tiles of A×B pixels | one code set | (T, K) | block-diagonal: one [`RdOperator`] per tile |
+//! | coded aperture | one code set, zero codes for blocked pixels | (K,) | [`RdOperator`] |
+//!
+//! ```
+//! use std::sync::Arc;
+//! use rdlidar::acquisition::{Acquisition, CodeStore, Streaming};
+//! use rdlidar::lidar::{Codes, Geometry, Pulse};
+//!
+//! # fn main() -> rdlidar::Result<()> {
+//! let g = Geometry::new(4, 4, 6)?;
+//! let pulse = Pulse::<f64>::bernoulli(50, 1)?.into_inner();
+//! let k = g.samples(pulse.len());
+//! let codes = (0..2)
+//!     .map(|s| Codes::random_binary(g.pixels(), k, 10 + s).map(Arc::new))
+//!     .collect::<rdlidar::Result<Vec<_>>>()?;
+//! // Two ADCs, each with its own code set: 2·K measurements.
+//! let acq = Acquisition::new(g, pulse, CodeStore::Held(codes), None, Streaming::Never)?;
+//! assert_eq!(acq.rows(), Some(2));
+//! let op = acq.operator::<f64>()?;
+//! assert_eq!(op.nrows(), 2 * k);
+//! # Ok(())
+//! # }
+//! ```
+
+mod files;
+
+use std::sync::Arc;
+
+use crate::error::{Error, Result};
+use crate::lidar::{
+    multi_adc, packed_len, pixel_groups, tiles, Architecture, CodeAlphabet, Codes, DepthMap,
+    Geometry, LidarOperator, RdOperator, Regime, Scene, SeededCodes, StreamedOperator, TileSize,
+    STREAM_BLOCK_BYTES,
+};
+use crate::limits::{self, MemoryPlan};
+use crate::operator::{BoxedOperator, OperatorExt};
+use crate::real::Real;
+use crate::recon::{
+    reconstruct_observed, ArrayCodes, Method, ReconstructOptions, Reconstruction,
+    TileReconstruction, TiledArray, TiledReconstruction,
+};
+use crate::solver::{Control, IterationInfo};
+
+pub use files::{AcquisitionFiles, InputNames};
+
+/// Seeded codes of one ADC larger than this (as packed bits) are regenerated block by block
+/// on every application ([`StreamedOperator`]) under [`Streaming::Auto`].
+pub const STREAM_ABOVE_BYTES: u128 = 1 << 30;
+
+/// Where the codes of an acquisition come from.
+#[derive(Debug, Clone)]
+pub enum CodeStore {
+    /// Codes held in memory: one code set per ADC for several ADCs, one otherwise.
+    Held(Vec<Arc<Codes>>),
+    /// Codes described by a seed: every code set of the acquisition.
+    Seeded(SeededCodes),
+}
+
+/// Whether seeded codes of one ADC are held or regenerated block by block on every
+/// application.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Streaming {
+    /// Streamed when holding them would take more than [`STREAM_ABOVE_BYTES`].
+    #[default]
+    Auto,
+    /// Always streamed (seeded codes of one ADC only).
+    Always,
+    /// Never streamed.
+    Never,
+}
+
+/// An acquisition: the pulse, the codes and the architecture, checked against each other.
+#[derive(Debug, Clone)]
+pub struct Acquisition {
+    geometry: Geometry,
+    pulse: Vec<f64>,
+    architecture: Architecture,
+    codes: CodeStore,
+    streamed: bool,
+}
+
+/// The singular or plural of a count: `1 row`, `3 rows`.
+pub fn count_of(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
+/// Checks a pulse: at least one sample, finite, ≥ 0, not all zero.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`pulse`) naming the first bad sample.
+pub fn check_pulse(pulse: &[f64]) -> Result<()> {
+    if pulse.is_empty() {
+        return Err(Error::param("pulse", "must have at least one sample"));
+    }
+    if pulse.len() > limits::MAX_PULSE_LEN {
+        return Err(Error::param(
+            "pulse",
+            format!(
+                "{} samples, more than the limit of {}",
+                pulse.len(),
+                limits::MAX_PULSE_LEN
+            ),
+        ));
+    }
+    if let Some(i) = pulse.iter().position(|v| !v.is_finite()) {
+        return Err(Error::param(
+            "pulse",
+            format!("sample {i} is {}, not a finite value", pulse[i]),
+        ));
+    }
+    if let Some(i) = pulse.iter().position(|&v| v < 0.0) {
+        return Err(Error::param(
+            "pulse",
+            format!(
+                "sample {i} is negative ({}): a pulse is light intensity, which must be ≥ 0",
+                pulse[i]
+            ),
+        ));
+    }
+    if pulse.iter().all(|&v| v == 0.0) {
+        return Err(Error::param(
+            "pulse",
+            format!(
+                "all {} samples are zero: nothing is transmitted",
+                pulse.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The pulse in `T`, refused if converting it overflows or loses every nonzero sample.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`pulse`).
+pub fn pulse_in<T: Real>(pulse: &[f64]) -> Result<Vec<T>> {
+    let p: Vec<T> = pulse.iter().map(|&v| T::of_f64(v)).collect();
+    if let Some(i) = p.iter().position(|v| !v.is_finite()) {
+        return Err(Error::param(
+            "pulse",
+            format!(
+                "sample {i} ({:e}) overflows {}: scale the pulse down or compute in f64",
+                pulse[i],
+                T::NAME
+            ),
+        ));
+    }
+    if p.iter().all(|&v| v == T::zero()) {
+        return Err(Error::param(
+            "pulse",
+            format!(
+                "every sample underflows {} to zero (the largest is {:e}): scale the pulse up \
+                 or compute in f64",
+                T::NAME,
+                pulse.iter().cloned().fold(0.0, f64::max)
+            ),
+        ));
+    }
+    Ok(p)
+}
+
+/// Checks that every value of `values` is finite; `what` names them (a flag, a file or an
+/// argument).
+///
+/// # Errors
+/// [`Error::InvalidParameter`] naming `what` and the first non-finite entry.
+pub fn check_finite<T: Real>(values: &[T], what: &'static str) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(Error::param(
+            what,
+            format!("entry {i} is {}, not a finite value", values[i]),
+        )),
+    }
+}
+
+/// Checks a result computed from finite inputs (`input` names them): a NaN or an infinite
+/// value means that the inputs overflow `T` through the operator.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] naming `input`.
+pub fn check_finite_result<T: Real>(values: &[T], what: &str, input: &'static str) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(Error::param(
+            input,
+            format!(
+                "the {what} of these values overflow {} (entry {i} is {}); scale the input \
+                 down{}",
+                T::NAME,
+                values[i],
+                if T::NAME == "f32" {
+                    " or compute in f64"
+                } else {
+                    ""
+                }
+            ),
+        )),
+    }
+}
+
+/// The memory of the codes held at once and of the operators over them, in `T`.
+fn operator_memory<T: Real>(held: Geometry, sets: usize, pulse_len: usize) -> u128 {
+    RdOperator::<T>::estimated_memory_bytes(
+        held,
+        pulse_len,
+        CodeAlphabet::Ternary,
+        rayon::current_num_threads(),
+    )
+    .map_or(u128::MAX, |b| b as u128)
+    .saturating_mul(sets as u128)
+}
+
+impl Acquisition {
+    /// The acquisition of `geometry` with the pulse `pulse`, the codes `codes` and one ADC per
+    /// tile of `tiles` pixels (None: one ADC per code set). Seeded codes are generated here
+    /// unless they are streamed (see [`Streaming`]) or the array is tiled (each tile's codes
+    /// are generated when needed).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`]: the pulse ([`check_pulse`]); a geometry beyond
+    /// [`limits::check_geometry`] (`size`); no code sets, more than [`limits::MAX_ADCS`], or
+    /// code sets without M·N pixels and K samples (`codes`); tiles with several code sets, or
+    /// more tiles than [`limits::MAX_ADCS`] (`tiles`); streaming asked of codes that are not
+    /// seeded codes of one ADC (`stream`).
+    pub fn new(
+        geometry: Geometry,
+        pulse: Vec<f64>,
+        codes: CodeStore,
+        tiles: Option<TileSize>,
+        streaming: Streaming,
+    ) -> Result<Self> {
+        check_pulse(&pulse)?;
+        limits::check_geometry(geometry)?;
+        let k = geometry.samples(pulse.len());
+        let sets = match &codes {
+            CodeStore::Held(sets) => {
+                for (i, c) in sets.iter().enumerate() {
+                    if c.pixels() != geometry.pixels() || c.len() != k {
+                        return Err(Error::param(
+                            "codes",
+                            format!(
+                                "code set {i} has {} of {} samples, but the {geometry} scene \
+                                 and the pulse of {} samples need {} of K = K_p + K_s − 1 = {k}",
+                                count_of(c.pixels(), "pixel", "pixels"),
+                                c.len(),
+                                pulse.len(),
+                                count_of(geometry.pixels(), "pixel", "pixels"),
+                            ),
+                        ));
+                    }
+                }
+                sets.len()
+            }
+            CodeStore::Seeded(s) => {
+                if s.pixels() != geometry.pixels() || s.len() != k {
+                    return Err(Error::param(
+                        "codes",
+                        format!(
+                            "seeded codes of {} pixels and {} samples do not fit the {geometry} \
+                             scene and K = {k}",
+                            s.pixels(),
+                            s.len()
+                        ),
+                    ));
+                }
+                s.sets()
+            }
+        };
+        if sets == 0 {
+            return Err(Error::param("codes", "need at least one code set"));
+        }
+        limits::check_count("codes", sets, limits::MAX_ADCS)?;
+        let architecture = match (sets, tiles) {
+            (1, Some(t)) => {
+                let count = t.count(geometry.m, geometry.n);
+                if count > limits::MAX_ADCS {
+                    return Err(Error::param(
+                        "tiles",
+                        format!(
+                            "{t} splits {geometry} into {count} tiles, more than the limit of \
+                             {} ADCs",
+                            limits::MAX_ADCS
+                        ),
+                    ));
+                }
+                Architecture::Tiles(t)
+            }
+            (g, Some(t)) => {
+                return Err(Error::param(
+                    "tiles",
+                    format!(
+                        "{g} code sets are {g} ADCs already; tiles of {t} and several code \
+                         sets are not supported together"
+                    ),
+                ))
+            }
+            (1, None) => Architecture::Single,
+            (g, None) => Architecture::MultiAdc(g),
+        };
+        let seeded = matches!(codes, CodeStore::Seeded(_));
+        let streamed = streams(streaming, seeded, architecture, geometry, k)
+            .map_err(|why| Error::param("stream", why.describe("streaming")))?;
+        // Seeded codes are generated now unless streamed or tiled (then on demand).
+        let codes = match codes {
+            CodeStore::Seeded(s)
+                if !streamed && !matches!(architecture, Architecture::Tiles(_)) =>
+            {
+                CodeStore::Held(
+                    (0..s.sets())
+                        .map(|g| s.materialize(g).map(Arc::new))
+                        .collect::<Result<Vec<_>>>()?,
+                )
+            }
+            other => other,
+        };
+        Ok(Acquisition {
+            geometry,
+            pulse,
+            architecture,
+            codes,
+            streamed,
+        })
+    }
+
+    /// Checks the shape of an acquisition given as arrays, before any is copied: `sets` code
+    /// sets of `m`×`n` pixels, `depth_bins` depth bins, a pulse of `pulse_len` samples and
+    /// tiles of `tiles` pixels; then that a request on it with `scenes` scenes fits in memory
+    /// in `T`. Returns the geometry.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming `codes`, `depth_bins`, `pulse` or `tiles` for a count
+    /// beyond [`crate::limits`]; [`Error::TooLarge`] for a request beyond memory.
+    pub fn check_arrays<T: Real>(
+        (sets, m, n): (usize, usize, usize),
+        depth_bins: usize,
+        pulse_len: usize,
+        tiles: Option<TileSize>,
+        scenes: u128,
+    ) -> Result<Geometry> {
+        limits::check_count("depth_bins", depth_bins, limits::MAX_DEPTH_BINS)?;
+        limits::check_count("pulse", pulse_len, limits::MAX_PULSE_LEN)?;
+        limits::check_count("codes", sets, limits::MAX_ADCS)?;
+        if m == 0 || n == 0 || m > limits::MAX_SIDE || n > limits::MAX_SIDE {
+            return Err(Error::param(
+                "codes",
+                format!(
+                    "{m}x{n} pixels: 1 to {} pixel rows and columns",
+                    limits::MAX_SIDE
+                ),
+            ));
+        }
+        let g = Geometry::new(m, n, depth_bins)?;
+        let rows = match tiles {
+            Some(t) => {
+                let count = t.count(m, n);
+                limits::check_count("tiles", count, limits::MAX_ADCS)?;
+                count
+            }
+            None => sets,
+        };
+        plan::<T>(g, pulse_len, (g, sets), rows, scenes).check(
+            &format!("an acquisition of {g} with K_p = {pulse_len}"),
+            "use smaller arrays or free memory",
+        )?;
+        Ok(g)
+    }
+
+    /// One code set read from an array with a code-set axis (G = 1): one ADC whose
+    /// measurements are one row (1, K).
+    fn with_code_set_axis(mut self) -> Self {
+        if self.architecture == Architecture::Single {
+            self.architecture = Architecture::MultiAdc(1);
+        }
+        self
+    }
+
+    /// The scene grid.
+    pub fn geometry(&self) -> Geometry {
+        self.geometry
+    }
+
+    /// The pulse, as given.
+    pub fn pulse(&self) -> &[f64] {
+        &self.pulse
+    }
+
+    /// The pulse length K_p.
+    pub fn pulse_len(&self) -> usize {
+        self.pulse.len()
+    }
+
+    /// Samples per ADC: K = K_p + K_s − 1.
+    pub fn samples(&self) -> usize {
+        self.geometry.samples(self.pulse.len())
+    }
+
+    /// How the pixels reach the ADCs: one ADC, G ADCs or tiles. A coded aperture is one ADC
+    /// whose blocked pixels have zero codes ([`Acquisition::observed_pixels`]).
+    pub fn architecture(&self) -> Architecture {
+        self.architecture
+    }
+
+    /// Rows of the measurements: `None` for the (K,) vector of one ADC, `Some(R)` for (R, K).
+    pub fn rows(&self) -> Option<usize> {
+        self.architecture.rows(self.geometry.m, self.geometry.n)
+    }
+
+    /// The number of measurements: K, or R·K for R ADCs.
+    pub fn measurements(&self) -> usize {
+        self.rows().unwrap_or(1) * self.samples()
+    }
+
+    /// The regime of every measurement against the unknowns; for tiles, of one tile's
+    /// measurements against the largest tile's unknowns.
+    pub fn regime(&self) -> Regime {
+        match self.architecture {
+            Architecture::Tiles(t) => Regime::of(
+                self.samples(),
+                t.m.min(self.geometry.m) * t.n.min(self.geometry.n) * self.geometry.ks,
+            ),
+            _ => Regime::of(self.measurements(), self.geometry.voxels()),
+        }
+    }
+
+    /// The codes.
+    pub fn codes(&self) -> &CodeStore {
+        &self.codes
+    }
+
+    /// Whether the codes are regenerated from their seed block by block on every application.
+    pub fn is_streamed(&self) -> bool {
+        self.streamed
+    }
+
+    /// "binary" if every code is ±1, "ternary" otherwise.
+    pub fn alphabet(&self) -> CodeAlphabet {
+        match &self.codes {
+            CodeStore::Held(sets) if sets.iter().any(|c| c.alphabet() == CodeAlphabet::Ternary) => {
+                CodeAlphabet::Ternary
+            }
+            _ => CodeAlphabet::Binary,
+        }
+    }
+
+    /// Per pixel, whether it reaches an ADC (some code of it is nonzero); `None` when every
+    /// pixel does.
+    pub fn observed_pixels(&self) -> Option<Vec<bool>> {
+        match &self.codes {
+            CodeStore::Held(sets) => {
+                let mut seen = vec![false; self.geometry.pixels()];
+                for c in sets {
+                    for (s, o) in seen.iter_mut().zip(c.observed_pixels()) {
+                        *s |= o;
+                    }
+                }
+                seen.iter().any(|&s| !s).then_some(seen)
+            }
+            CodeStore::Seeded(_) => None,
+        }
+    }
+
+    /// The memory one request on this acquisition needs in `T`: the codes held at once with
+    /// the operators' buffers, `scenes` scenes (inputs, outputs, a solver's working copies)
+    /// and two copies of the measurements.
+    pub fn memory_plan<T: Real>(&self, scenes: u128) -> MemoryPlan {
+        let held = self.held_codes();
+        plan::<T>(
+            self.geometry,
+            self.pulse.len(),
+            held,
+            self.rows().unwrap_or(1),
+            scenes,
+        )
+    }
+
+    /// The grid and count of the code sets held at once (see [`plan`]).
+    fn held_codes(&self) -> (Geometry, usize) {
+        let g = self.geometry;
+        match (&self.codes, self.architecture) {
+            (CodeStore::Seeded(_), _) if self.streamed => (stream_block(g, self.samples()), 1),
+            (CodeStore::Seeded(_), Architecture::Tiles(t)) => (
+                Geometry::new(t.m.min(g.m), t.n.min(g.n), g.ks).unwrap_or(g),
+                rayon::current_num_threads(),
+            ),
+            _ => (g, self.architecture.code_sets()),
+        }
+    }
+
+    /// The measurement operator of any architecture, in `T`, with the acquisition's pulse.
+    ///
+    /// # Errors
+    /// The pulse is not representable in `T` ([`pulse_in`]); the errors of the operators'
+    /// constructors.
+    pub fn operator<T: Real>(&self) -> Result<BoxedOperator<T>> {
+        self.operator_with_pulse(pulse_in::<T>(&self.pulse)?)
+    }
+
+    /// The measurement operator of any architecture with another pulse of the same length
+    /// (e.g. the zero-mean pulse of the debiased backprojection).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`pulse`) for another length; the operators' errors.
+    pub fn operator_with_pulse<T: Real>(&self, pulse: Vec<T>) -> Result<BoxedOperator<T>> {
+        self.check_pulse_len(pulse.len())?;
+        if let Architecture::Tiles(t) = self.architecture {
+            let g = self.geometry;
+            let groups = tiles(g, t.m, t.n)?;
+            return match &self.codes {
+                CodeStore::Held(sets) => Ok(pixel_groups(g, &pulse, &sets[0], &groups)?.boxed()),
+                CodeStore::Seeded(s) => {
+                    Ok(pixel_groups(g, &pulse, &s.materialize(0)?, &groups)?.boxed())
+                }
+            };
+        }
+        Ok(self.lidar_operator_with_pulse(pulse)?.boxed())
+    }
+
+    fn check_pulse_len(&self, len: usize) -> Result<()> {
+        if len != self.pulse.len() {
+            return Err(Error::param(
+                "pulse",
+                format!(
+                    "{len} samples, but the acquisition's pulse has {}",
+                    self.pulse.len()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The lidar operator that the reconstructions run on, in `T`: one ADC, G ADCs or
+    /// streamed codes. A tiled acquisition is reconstructed tile by tile
+    /// ([`Acquisition::tiled`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`tiles`) for a tiled acquisition; the pulse is not
+    /// representable in `T`; the operators' errors.
+    pub fn lidar_operator<T: Real>(&self) -> Result<Box<dyn LidarOperator<T>>> {
+        self.lidar_operator_with_pulse(pulse_in::<T>(&self.pulse)?)
+    }
+
+    fn lidar_operator_with_pulse<T: Real>(
+        &self,
+        pulse: Vec<T>,
+    ) -> Result<Box<dyn LidarOperator<T>>> {
+        self.check_pulse_len(pulse.len())?;
+        let g = self.geometry;
+        Ok(match (&self.codes, self.architecture) {
+            (_, Architecture::Tiles(t)) => {
+                return Err(Error::param(
+                    "tiles",
+                    format!(
+                        "a tiled acquisition (tiles of {t}) is block-diagonal: reconstruct it \
+                         tile by tile"
+                    ),
+                ))
+            }
+            (CodeStore::Seeded(s), _) => Box::new(StreamedOperator::new(g, pulse, *s, 0)?),
+            (CodeStore::Held(sets), Architecture::MultiAdc(_)) => {
+                Box::new(multi_adc(g, &pulse, sets.clone())?)
+            }
+            (CodeStore::Held(sets), _) => Box::new(RdOperator::new(g, pulse, sets[0].clone())?),
+        })
+    }
+
+    /// The tiled array of a tiled acquisition, with the pulse `pulse` (in `T`).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`tiles`) when the acquisition is not tiled.
+    pub fn tiled<'a, T: Real>(&'a self, pulse: &'a [T]) -> Result<TiledArray<'a, T>> {
+        let Architecture::Tiles(t) = self.architecture else {
+            return Err(Error::param("tiles", "the acquisition is not tiled"));
+        };
+        let codes: ArrayCodes<'a> = match &self.codes {
+            CodeStore::Held(sets) => sets[0].as_ref().into(),
+            CodeStore::Seeded(s) => (*s).into(),
+        };
+        TiledArray::new(self.geometry, pulse, codes, t)
+    }
+
+    /// Checks measurements for this acquisition: [`Acquisition::measurements`] values (rows
+    /// of K samples, one per ADC), every one finite. `what` names them (`meas`, a flag).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming `what`.
+    pub fn check_measurements<T: Real>(&self, y: &[T], what: &'static str) -> Result<()> {
+        if y.len() != self.measurements() {
+            let shape = match self.rows() {
+                None => format!("({},)", self.samples()),
+                Some(r) => format!("({r}, {}): {}", self.samples(), self.rows_why()),
+            };
+            return Err(Error::param(
+                what,
+                format!(
+                    "expected {} values, shape {shape}; got {}",
+                    self.measurements(),
+                    y.len()
+                ),
+            ));
+        }
+        check_finite(y, what)
+    }
+
+    /// Why the measurements have the rows they have.
+    pub(crate) fn rows_why(&self) -> String {
+        let g = self.geometry;
+        match self.architecture {
+            Architecture::MultiAdc(s) => format!("{s} code sets, one ADC each"),
+            Architecture::Tiles(t) => format!(
+                "tiles of {t} split the {}x{} array into {}, one ADC each",
+                g.m,
+                g.n,
+                count_of(t.count(g.m, g.n), "tile", "tiles")
+            ),
+            _ => "one ADC".to_string(),
+        }
+    }
+
+    /// Reconstructs the scene from `y` (every ADC's rows, one after the other) by `method`,
+    /// whatever the architecture: through the lidar operator, or tile by tile in parallel for
+    /// a tiled acquisition (`on_tile` is called as each tile finishes, from its worker thread).
+    /// `observe` sees every iteration of every solver (with the tile's index for tiles, 0
+    /// otherwise); [`Control::Stop`] ends the solver that reported it.
+    ///
+    /// # Errors
+    /// [`Acquisition::check_measurements`]; the pulse is not representable in `T`; the
+    /// errors of the reconstruction.
+    pub fn reconstruct<T: Real>(
+        &self,
+        y: &[T],
+        method: Method,
+        options: &ReconstructOptions,
+        observe: &(dyn Fn(usize, &IterationInfo<'_, T>) -> Control + Sync),
+        on_tile: &(dyn Fn(&TileReconstruction<T>) + Sync),
+    ) -> Result<Reconstructed<T>> {
+        self.check_measurements(y, "meas")?;
+        if matches!(self.architecture, Architecture::Tiles(_)) {
+            let pulse = pulse_in::<T>(&self.pulse)?;
+            let r = self
+                .tiled(&pulse)?
+                .reconstruct_observed(y, method, options, observe, on_tile)?;
+            return Ok(Reconstructed::Tiled(r));
+        }
+        let op = self.lidar_operator::<T>()?;
+        let mut observer = |info: &IterationInfo<'_, T>| observe(0, info);
+        let r = reconstruct_observed(op.as_ref(), y, method, options, &mut observer)?;
+        Ok(Reconstructed::Single(r))
+    }
+}
+
+/// Why codes cannot be streamed.
+pub(crate) enum NoStream {
+    /// They are held arrays, not described by a seed.
+    NotSeeded,
+    /// They are the codes of several ADCs or tiles.
+    Architecture(Architecture),
+}
+
+impl NoStream {
+    /// The message, with `asked` naming the request (a flag, an argument).
+    pub(crate) fn describe(&self, asked: &str) -> String {
+        match self {
+            NoStream::NotSeeded => format!(
+                "{asked} regenerates codes described by a seed, but these are a codes array: \
+                 pass the meta.json of `simulate --codes-format seed`"
+            ),
+            NoStream::Architecture(a) => format!(
+                "{asked} streams the codes of one ADC, but this acquisition is {}: its {} are \
+                 generated one at a time already",
+                a.kind(),
+                if matches!(a, Architecture::Tiles(_)) {
+                    "tiles"
+                } else {
+                    "code sets"
+                }
+            ),
+        }
+    }
+}
+
+/// Whether codes (`seeded` or held) of `architecture` are regenerated block by block on every
+/// application, as `streaming` asks.
+pub(crate) fn streams(
+    streaming: Streaming,
+    seeded: bool,
+    architecture: Architecture,
+    geometry: Geometry,
+    k: usize,
+) -> std::result::Result<bool, NoStream> {
+    let seeded_single = seeded && architecture == Architecture::Single;
+    let held_bytes = (geometry.pixels() as u128).saturating_mul(packed_len(k) as u128);
+    match streaming {
+        Streaming::Never => Ok(false),
+        Streaming::Auto => Ok(seeded_single && held_bytes > STREAM_ABOVE_BYTES),
+        Streaming::Always if seeded_single => Ok(true),
+        Streaming::Always if !seeded => Err(NoStream::NotSeeded),
+        Streaming::Always => Err(NoStream::Architecture(architecture)),
+    }
+}
+
+/// The grid of one block of streamed codes.
+fn stream_block(g: Geometry, k: usize) -> Geometry {
+    let per_pixel = packed_len(k).max(1);
+    let block = (STREAM_BLOCK_BYTES / per_pixel).max(8).min(g.pixels());
+    Geometry::new(1, block, g.ks).unwrap_or(g)
+}
+
+/// The memory plan of a request in `T`: `sets` code sets of the grid `held` held at once with
+/// their operators' buffers, `scenes` scenes of `g` and two copies of `rows`·K measurements.
+pub(crate) fn plan<T: Real>(
+    g: Geometry,
+    pulse_len: usize,
+    (held, sets): (Geometry, usize),
+    rows: usize,
+    scenes: u128,
+) -> MemoryPlan {
+    let size = std::mem::size_of::<T>();
+    MemoryPlan::new()
+        .add(
+            "codes and operator",
+            operator_memory::<T>(held, sets, pulse_len),
+            1,
+        )
+        .add("scenes", scenes.saturating_mul(g.voxels() as u128), size)
+        .add(
+            "measurements",
+            (rows as u128).saturating_mul(g.samples(pulse_len) as u128) * 2,
+            size,
+        )
+}
+
+/// A reconstruction of any architecture: one operator's, or a tiled array's.
+#[derive(Debug, Clone)]
+pub enum Reconstructed<T> {
+    /// One ADC or G ADCs: one reconstruction.
+    Single(Reconstruction<T>),
+    /// Tiles: every tile's reconstruction, stitched.
+    Tiled(TiledReconstruction<T>),
+}
+
+impl<T: Real> Reconstructed<T> {
+    /// Every return found.
+    pub fn scene(&self) -> &Scene<T> {
+        match self {
+            Reconstructed::Single(r) => &r.scene,
+            Reconstructed::Tiled(r) => &r.scene,
+        }
+    }
+
+    /// The depth map (each pixel's strongest return; unobserved pixels marked).
+    pub fn depth(&self) -> &DepthMap<T> {
+        match self {
+            Reconstructed::Single(r) => &r.depth,
+            Reconstructed::Tiled(r) => &r.depth,
+        }
+    }
+
+    /// The depth map, mutable (e.g. to fill unobserved pixels).
+    pub fn depth_mut(&mut self) -> &mut DepthMap<T> {
+        match self {
+            Reconstructed::Single(r) => &mut r.depth,
+            Reconstructed::Tiled(r) => &mut r.depth,
+        }
+    }
+
+    /// Wall-clock time.
+    pub fn elapsed(&self) -> std::time::Duration {
+        match self {
+            Reconstructed::Single(r) => r.elapsed,
+            Reconstructed::Tiled(r) => r.elapsed,
+        }
+    }
+
+    /// Forward, adjoint and support applications (summed over the tiles).
+    pub fn applies(&self) -> (usize, usize, usize) {
+        match self {
+            Reconstructed::Single(r) => r.report.as_ref().map_or((0, 1, 0), |rep| {
+                (
+                    rep.forward_applies,
+                    rep.adjoint_applies,
+                    rep.support_applies,
+                )
+            }),
+            Reconstructed::Tiled(r) => r.applies(),
+        }
+    }
+}
+
+/// An observer of every iteration that never stops a solver.
+pub fn observe_nothing<T>(_: usize, _: &IterationInfo<'_, T>) -> Control {
+    Control::Continue
+}
+
+/// A tile callback that does nothing.
+pub fn on_no_tile<T>(_: &TileReconstruction<T>) {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::operator::LinearOperator;
+
+    fn codes(g: Geometry, k: usize, sets: u64) -> Vec<Arc<Codes>> {
+        (0..sets)
+            .map(|s| Arc::new(Codes::random_binary(g.pixels(), k, 7 + s).unwrap()))
+            .collect()
+    }
+
+    #[test]
+    fn pulses_are_refused_for_what_they_are() {
+        assert!(check_pulse(&[]).is_err());
+        assert!(check_pulse(&[0.0, 0.0])
+            .unwrap_err()
+            .to_string()
+            .contains("zero"));
+        assert!(check_pulse(&[1.0, -1.0])
+            .unwrap_err()
+            .to_string()
+            .contains("negative"));
+        assert!(check_pulse(&[1.0, f64::NAN])
+            .unwrap_err()
+            .to_string()
+            .contains("finite"));
+        assert!(check_pulse(&[1.0, 0.5]).is_ok());
+        let tiny = [1e-300, 2e-300];
+        assert!(pulse_in::<f64>(&tiny).is_ok());
+        let e = pulse_in::<f32>(&tiny).unwrap_err().to_string();
+        assert!(e.contains("underflows f32"), "{e}");
+        let e = pulse_in::<f32>(&[1e300]).unwrap_err().to_string();
+        assert!(e.contains("overflows f32"), "{e}");
+    }
+
+    #[test]
+    fn the_architecture_follows_the_code_sets_and_tiles() {
+        let g = Geometry::new(4, 6, 3).unwrap();
+        let p = vec![1.0, 0.0, 1.0, 1.0];
+        let k = g.samples(4);
+        let one = Acquisition::new(
+            g,
+            p.clone(),
+            CodeStore::Held(codes(g, k, 1)),
+            None,
+            Streaming::Auto,
+        )
+        .unwrap();
+        assert_eq!(one.architecture(), Architecture::Single);
+        assert_eq!(one.rows(), None);
+        assert_eq!(one.measurements(), k);
+        let two = Acquisition::new(
+            g,
+            p.clone(),
+            CodeStore::Held(codes(g, k, 2)),
+            None,
+            Streaming::Auto,
+        )
+        .unwrap();
+        assert_eq!(two.architecture(), Architecture::MultiAdc(2));
+        assert_eq!(two.operator::<f64>().unwrap().nrows(), 2 * k);
+        let t = TileSize { m: 2, n: 4 };
+        let tiled = Acquisition::new(
+            g,
+            p.clone(),
+            CodeStore::Held(codes(g, k, 1)),
+            Some(t),
+            Streaming::Auto,
+        )
+        .unwrap();
+        assert_eq!(tiled.rows(), Some(4));
+        assert_eq!(tiled.operator::<f32>().unwrap().nrows(), 4 * k);
+        assert!(tiled.lidar_operator::<f32>().is_err());
+        let e = Acquisition::new(
+            g,
+            p.clone(),
+            CodeStore::Held(codes(g, k, 2)),
+            Some(t),
+            Streaming::Auto,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("tiles"), "{e}");
+        let e = Acquisition::new(
+            g,
+            p.clone(),
+            CodeStore::Held(codes(g, k + 1, 1)),
+            None,
+            Streaming::Auto,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("code set 0"), "{e}");
+        let e = Acquisition::new(
+            g,
+            p,
+            CodeStore::Held(codes(g, k, 1)),
+            None,
+            Streaming::Always,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("seed"), "{e}");
+    }
+
+    #[test]
+    fn measurements_are_checked_for_count_and_finiteness() {
+        let g = Geometry::new(2, 2, 3).unwrap();
+        let p = vec![1.0, 1.0];
+        let k = g.samples(2);
+        let a = Acquisition::new(
+            g,
+            p,
+            CodeStore::Held(codes(g, k, 3)),
+            None,
+            Streaming::Never,
+        )
+        .unwrap();
+        assert!(a.check_measurements(&vec![0.0f32; 3 * k], "meas").is_ok());
+        let e = a.check_measurements(&vec![0.0f32; k], "meas").unwrap_err();
+        assert!(e.to_string().contains("3 code sets"), "{e}");
+        let mut y = vec![0.0f64; 3 * k];
+        y[5] = f64::INFINITY;
+        let e = a.check_measurements(&y, "meas").unwrap_err();
+        assert!(e.to_string().contains("entry 5"), "{e}");
+    }
+}
