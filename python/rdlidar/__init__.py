@@ -9,12 +9,18 @@ Inputs are converted with ``numpy.ascontiguousarray`` to the dtype each function
 (the operator's dtype for scenes and measurements, float64 for pulses, int8 or packed uint8 for
 codes): Fortran-ordered, strided and other-dtype real arrays are accepted and copied; complex
 arrays, and arrays whose values do not fit (codes outside -1, 0, 1), are refused with
-``TypeError`` or ``ValueError``. Errors of the library are ``ValueError`` with its one-line
-message.
+``TypeError`` or ``ValueError``; values that overflow the dtype, or underflow it to all zeros,
+are refused. Errors of the library are ``ValueError`` with its one-line message naming the
+argument; a problem beyond the memory available is a ``MemoryError`` raised before anything is
+allocated. Every architecture of the command line is reachable: G code sets, tiles, coded
+apertures, and codes described by a seed (a path to their ``meta.json``).
 """
 
 from __future__ import annotations
 
+import json
+import os
+import tempfile
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional, Tuple
 
@@ -33,93 +39,197 @@ __all__ = [
     "dot_test",
     "metrics",
     "SOLVERS",
+    "CODES_FORMATS",
     "__version__",
 ]
 
 #: The reconstruction methods ``reconstruct`` takes, as the command line names them.
 SOLVERS: Tuple[str, ...] = tuple(_rdlidar.solvers())
 
+#: How ``simulate`` may give the codes: int8 arrays, packed uint8 arrays, or a seed.
+CODES_FORMATS: Tuple[str, ...] = ("int8", "packed", "seed")
+
+_MAX_U64 = 2**64 - 1
+
+
+def _int(value, name: str, minimum: int = 0, maximum: int = _MAX_U64) -> int:
+    """An integer argument: Python or NumPy integers only (not bool, float or str), in
+    [minimum, maximum]."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name}: expected an int, got {type(value).__name__} {value!r:.40}")
+    v = int(value)
+    if v < minimum:
+        raise ValueError(f"{name}: must be at least {minimum}, got {v}")
+    if v > maximum:
+        raise ValueError(f"{name}: must be at most {maximum}, got {v}")
+    return v
+
+
+def _optional_int(value, name: str, minimum: int = 0, maximum: int = _MAX_U64) -> Optional[int]:
+    return None if value is None else _int(value, name, minimum, maximum)
+
+
+def _float(value, name: str) -> float:
+    """A real argument: Python or NumPy reals (not bool, str or complex), finite or not as the
+    callee decides."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a real number, got {type(value).__name__} {value!r:.40}")
+    return float(value)
+
+
+def _optional_float(value, name: str) -> Optional[float]:
+    return None if value is None else _float(value, name)
+
+
+def _tiles(tiles) -> Optional[Tuple[int, int]]:
+    """``tiles=(A, B)``: a tile of A rows and B columns of pixels, or None."""
+    if tiles is None:
+        return None
+    if isinstance(tiles, (str, bytes)) or not hasattr(tiles, "__len__") or len(tiles) != 2:
+        raise TypeError(f"tiles: expected (A, B), got {tiles!r:.40}")
+    return (_int(tiles[0], "tiles", 1), _int(tiles[1], "tiles", 1))
+
 
 def _real_dtype(dtype: Any) -> np.dtype:
-    dt = np.dtype(dtype)
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        raise TypeError(f"dtype: rdlidar computes in float32 or float64, not {dtype!r:.40}") from None
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise TypeError(f"dtype: rdlidar computes in float32 or float64, not {dt}")
     return dt
 
 
 def _real_array(a: Any, dtype: np.dtype, what: str) -> np.ndarray:
+    """``a`` as a contiguous array of ``dtype``; values that overflow ``dtype`` or that
+    underflow it to all zeros are refused."""
     arr = np.asarray(a)
     if arr.dtype.kind == "c":
         raise TypeError(f"{what}: complex values are not supported (the operator is real)")
     if arr.dtype.kind not in "fiub":
         raise TypeError(f"{what}: expected a real numeric array, got dtype {arr.dtype}")
-    return np.ascontiguousarray(arr, dtype=dtype)
+    out = np.ascontiguousarray(arr, dtype=dtype)
+    if arr.dtype != out.dtype and arr.size:
+        with np.errstate(all="ignore"):
+            lost = np.isfinite(arr) & ~np.isfinite(out)
+        if lost.any():
+            i = tuple(int(j) for j in np.argwhere(lost)[0])
+            raise ValueError(f"{what}: entry {i} ({arr[i]!r}) overflows {out.dtype}")
+        if not out.any() and arr.any():
+            raise ValueError(
+                f"{what}: every value underflows {out.dtype} to zero (the largest is "
+                f"{float(np.max(np.abs(arr))):.3g}); scale it up or use float64"
+            )
+    return out
 
 
-def _codes_array(codes: Any) -> np.ndarray:
+def _codes_argument(codes: Any):
+    """Codes as the core takes them: a path (a codes .npy file or a seeded meta.json), or an
+    int8 / packed uint8 array of 3 or 4 dimensions (other integer and float arrays holding -1,
+    0, 1 are converted to int8)."""
+    if isinstance(codes, (str, os.PathLike)):
+        return os.fspath(codes)
+    if isinstance(codes, dict):
+        raise TypeError("codes: pass the path of the meta.json, not its contents")
     c = np.asarray(codes)
-    if c.ndim != 3:
+    if c.ndim not in (3, 4):
         raise ValueError(
-            f"codes: expected a 3-D array (M, N, K) or packed (M, N, ceil(K/8)), got shape {c.shape}"
+            "codes: expected a 3-D array (M, N, K), a 4-D array (G, M, N, K) of G code sets "
+            f"(packed: last axis ceil(K/8)), or the path of a seeded meta.json; got shape {c.shape}"
         )
-    if c.dtype == np.uint8:
-        return np.ascontiguousarray(c)
+    if c.dtype in (np.uint8, np.int8):
+        return c
     if c.dtype.kind == "c" or c.dtype.kind not in "fiub":
         raise TypeError(f"codes: expected int8 codes or packed uint8 bytes, got dtype {c.dtype}")
-    if c.dtype != np.int8:
-        bad = ~np.isin(c, (-1, 0, 1))
-        if bad.any():
-            idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            raise ValueError(f"codes: entry {idx} is {c[idx]!r}, not one of -1, 0, 1")
+    bad = ~np.isin(c, (-1, 0, 1))
+    if bad.any():
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"codes: entry {idx} is {c[idx]!r}, not one of -1, 0, 1")
     return np.ascontiguousarray(c, dtype=np.int8)
 
 
 class RdOperator(LinearOperator):
-    """The random-demodulation lidar operator A (one ADC) as a SciPy ``LinearOperator``.
+    """The random-demodulation lidar operator A of any architecture as a SciPy
+    ``LinearOperator``.
 
-    ``y = A x`` with ``y[k] = sum_{m,n} s[m,n,k] (x[m,n,:] * p)[k]``: a scene ``x`` of
-    M x N pixels and K_s depth bins (flattened in C order, depth fastest) to K = K_p + K_s - 1
-    samples of one ADC.
+    One ADC: ``y = A x`` with ``y[k] = sum_{m,n} s[m,n,k] (x[m,n,:] * p)[k]``, a scene ``x``
+    of M x N pixels and K_s depth bins (flattened in C order, depth fastest) to K = K_p + K_s - 1
+    samples. G code sets (codes (G, M, N, K)) give G ADCs, the stack of G such operators
+    (shape (G K, M N K_s)); ``tiles=(A, B)`` gives one ADC per tile of A x B pixels (rows of
+    tiles in row-major order, edge tiles clipped); a coded aperture is one ADC whose blocked
+    pixels have zero codes.
 
     Parameters
     ----------
     pulse : array_like, shape (K_p,)
-        The transmitted pulse (float; converted to ``dtype``).
-    codes : array_like, shape (M, N, K) int8 or (M, N, ceil(K/8)) uint8
-        Each pixel's codes in {-1, 0, +1}, or +-1 codes packed as ``np.packbits(S > 0, axis=-1)``
-        writes them (uint8 arrays are always read as packed). Other integer or float arrays
-        with values in {-1, 0, 1} are converted to int8.
+        The transmitted pulse: finite, >= 0, not all zero, representable in ``dtype``.
+    codes : array_like or path
+        Each pixel's codes: int8 (M, N, K) in {-1, 0, +1}, or (G, M, N, K) for G code sets;
+        +-1 codes packed as ``np.packbits(S > 0, axis=-1)`` writes them (uint8, last axis
+        ceil(K/8); uint8 arrays are always read as packed); other integer or float arrays with
+        values in {-1, 0, 1} are converted to int8. Or the path of a codes ``.npy`` file, or of
+        the ``meta.json`` that ``simulate(codes_format="seed")`` (or
+        ``rdlidar simulate --codes-format seed``) writes: codes described by a seed, generated
+        here (or regenerated block by block on every application when large, or with
+        ``stream_codes=True``), for an architecture of that description.
     depth_bins : int
         K_s.
     dtype : numpy.float32 or numpy.float64
         The precision of the kernels (sums are accumulated in float64 either way).
     debiased : bool
         Use the zero-mean pulse p - mean(p): the adjoint is then the debiased backprojection.
+    tiles : (A, B) or None
+        One ADC per tile of A x B pixels (one code set).
+    stream_codes : bool
+        Seeded codes of one ADC: regenerate them on every application instead of holding them.
 
     ``matvec``/``rmatvec``/``matmat``/``.H`` work as for any SciPy operator, so
     ``pylops.aslinearoperator(op)`` gives a PyLops operator. ``forward`` and ``adjoint`` also
-    take and return (M, N, K_s) scenes. The kernels run without the GIL.
+    take and return (M, N, K_s) scenes and ``meas_shape`` measurements ((K,) for one ADC,
+    (R, K) for R ADCs). Inputs must be finite, and results that overflow are refused. The
+    kernels run without the GIL. A problem beyond the memory available raises
+    ``MemoryError`` before anything is allocated.
     """
 
-    def __init__(self, pulse, codes, depth_bins, dtype=np.float32, debiased=False):
+    def __init__(
+        self,
+        pulse,
+        codes,
+        depth_bins,
+        dtype=np.float32,
+        debiased=False,
+        tiles=None,
+        stream_codes=False,
+    ):
         dt = _real_dtype(dtype)
         p = _real_array(pulse, np.float64, "pulse")
         if p.ndim != 1:
             raise ValueError(f"pulse: expected a 1-D array (K_p,), got shape {p.shape}")
-        if isinstance(depth_bins, bool) or not isinstance(depth_bins, (int, np.integer)):
-            raise TypeError(f"depth_bins: expected an int, got {type(depth_bins).__name__}")
-        if depth_bins < 1:
-            raise ValueError(f"depth_bins: must be at least 1, got {depth_bins}")
+        ks = _int(depth_bins, "depth_bins", 1)
         self._core = _rdlidar._Operator(
-            p, _codes_array(codes), int(depth_bins), dt == np.float64, bool(debiased)
+            p,
+            _codes_argument(codes),
+            ks,
+            dt == np.float64,
+            bool(debiased),
+            _tiles(tiles),
+            bool(stream_codes),
         )
         m, n, ks = self._core.geometry
         #: (M, N, K_s)
         self.scene_shape = (m, n, ks)
-        #: K = K_p + K_s - 1
+        #: K = K_p + K_s - 1, the samples of one ADC
         self.samples = self._core.samples
+        #: rows of the measurements: None for one ADC, R for R ADCs
+        self.rows = self._core.rows
+        #: the shape of the measurements: (K,) or (R, K)
+        self.meas_shape = (self.samples,) if self.rows is None else (self.rows, self.samples)
+        #: "single", "multi_adc" or "tiles"
+        self.architecture = self._core.architecture
+        #: (A, B) of a tiled acquisition, None otherwise
+        self.tiles = self._core.tiles
         self.debiased = bool(debiased)
-        super().__init__(dtype=dt, shape=(self.samples, m * n * ks))
+        super().__init__(dtype=dt, shape=(int(np.prod(self.meas_shape)), m * n * ks))
 
     # SciPy's hooks ----------------------------------------------------------------------
     def _matvec(self, x):
@@ -147,25 +257,35 @@ class RdOperator(LinearOperator):
 
     # Scene-shaped applications ----------------------------------------------------------
     def forward(self, x):
-        """y = A x for a scene of shape (M, N, K_s) (or flat); returns (K,)."""
+        """y = A x for a scene of shape (M, N, K_s) (or flat); returns ``meas_shape``."""
         x = _real_array(x, self.dtype, "x")
         if x.shape not in (self.scene_shape, (self.shape[1],)):
             raise ValueError(
                 f"x: expected shape {self.scene_shape} or ({self.shape[1]},), got {x.shape}"
             )
-        return self._core.forward(x.reshape(-1))
+        return self._core.forward(x.reshape(-1)).reshape(self.meas_shape)
 
     def adjoint(self, y):
-        """x = A^T y for measurements of shape (K,); returns (M, N, K_s)."""
+        """x = A^T y for measurements of ``meas_shape`` (or flat); returns (M, N, K_s)."""
         y = _real_array(y, self.dtype, "y")
-        if y.shape != (self.samples,):
-            raise ValueError(f"y: expected shape ({self.samples},), got {y.shape}")
-        return self._core.adjoint(y).reshape(self.scene_shape)
+        if y.shape not in (self.meas_shape, (self.shape[0],)):
+            raise ValueError(f"y: expected shape {self.meas_shape}, got {y.shape}")
+        return self._core.adjoint(y.reshape(-1)).reshape(self.scene_shape)
 
     @property
     def pulse(self) -> np.ndarray:
         """The pulse the operator applies (zero-mean when debiased), float64."""
         return self._core.pulse
+
+    @property
+    def regime(self) -> str:
+        """"compressive", "critical" or "redundant" (per tile for a tiled acquisition)."""
+        return self._core.regime
+
+    @property
+    def streamed(self) -> bool:
+        """Whether seeded codes are regenerated block by block on every application."""
+        return self._core.streamed
 
     @property
     def isa(self) -> str:
@@ -201,34 +321,50 @@ class _RdAdjoint(LinearOperator):
 
 @dataclass
 class Simulation:
-    """A simulated acquisition (one ADC): what ``simulate`` returns."""
+    """A simulated acquisition: what ``simulate`` returns.
+
+    ``codes`` is int8 ((M, N, K), or (G, M, N, K) for G ADCs; a coded aperture's blocked
+    pixels have zero codes), packed uint8, or None for codes described by a seed; ``meas`` is
+    (K,) for one ADC and (R, K) for R ADCs; ``meta`` is the description ``meta.json`` holds
+    (a dict); ``files`` the folder the files were written to, if any.
+    """
 
     scene: np.ndarray
     pulse: np.ndarray
-    codes: np.ndarray
+    codes: Optional[np.ndarray]
     meas: np.ndarray
     meta: dict = field(default_factory=dict)
+    files: Optional[str] = None
 
-    def operator(self, dtype=None, debiased=False) -> RdOperator:
+    @property
+    def tiles(self) -> Optional[Tuple[int, int]]:
+        """(A, B) of a tiled acquisition, None otherwise."""
+        tile = self.meta.get("architecture", {}).get("tile")
+        return None if tile is None else (int(tile[0]), int(tile[1]))
+
+    def operator(self, dtype=None, debiased=False, stream_codes=False) -> RdOperator:
         """The operator that took these measurements (in the measurements' dtype by default)."""
         dt = self.meas.dtype if dtype is None else dtype
-        return RdOperator(self.pulse, self.codes, self.scene.shape[2], dtype=dt, debiased=debiased)
-
-
-def _seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(f"seed: expected an int, got {type(seed).__name__}")
-    if not 0 <= int(seed) < 2**64:
-        raise ValueError(f"seed: must be an integer in [0, 2**64), got {seed}")
-    return int(seed)
+        ks = self.scene.shape[2]
+        if self.codes is not None:
+            return RdOperator(self.pulse, self.codes, ks, dtype=dt, debiased=debiased,
+                              tiles=self.tiles, stream_codes=stream_codes)
+        if self.files is not None:
+            return RdOperator(self.pulse, os.path.join(self.files, "meta.json"), ks, dtype=dt,
+                              debiased=debiased, stream_codes=stream_codes)
+        # Seeded codes: their description, as meta.json holds it, in a file of its own.
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "meta.json")
+            with open(path, "w") as f:
+                json.dump(self.meta, f)
+            return RdOperator(self.pulse, path, ks, dtype=dt, debiased=debiased,
+                              stream_codes=stream_codes)
 
 
 def _size(size) -> Tuple[int, int, int]:
-    try:
-        m, n, ks = (int(v) for v in size)
-    except (TypeError, ValueError):
-        raise TypeError(f"size: expected (M, N, K_s), got {size!r}") from None
-    return m, n, ks
+    if isinstance(size, (str, bytes)) or not hasattr(size, "__len__") or len(size) != 3:
+        raise TypeError(f"size: expected (M, N, K_s), got {size!r:.40}")
+    return tuple(_int(v, "size", 1) for v in size)
 
 
 def simulate(
@@ -240,8 +376,14 @@ def simulate(
     ternary_zero_prob: Optional[float] = None,
     lit_fraction: Optional[float] = None,
     dtype=np.float64,
+    adcs: int = 1,
+    tiles=None,
+    aperture: Optional[float] = None,
+    codes_format: str = "int8",
+    out=None,
+    force: bool = False,
 ) -> Simulation:
-    """Simulates an acquisition with one ADC, as ``rdlidar simulate`` does.
+    """Simulates an acquisition of any architecture, as ``rdlidar simulate`` does.
 
     Parameters
     ----------
@@ -250,26 +392,54 @@ def simulate(
         returns per lit pixel), or random opaque returns in ``lit_fraction`` of the pixels.
     size : (M, N, K_s)
     pulse_len : K_p
-    seed : the base seed of every random draw.
+    seed : the base seed of every random draw (the command line's ``--seed``).
     snr_db : Gaussian noise at this SNR on the measurements (None: noise-free).
     ternary_zero_prob : codes in {-1, 0, 1} with zeros of this probability (None: +-1 codes).
+    lit_fraction : a random scene's fraction of lit pixels (default 0.5).
     dtype : numpy.float32 or numpy.float64, of the scene, pulse and measurements.
+    adcs : G ADCs, each with its own code set (codes (G, M, N, K), measurements (G, K)).
+    tiles : (A, B): one ADC per tile of A x B pixels (measurements (T, K)).
+    aperture : a coded aperture: the fraction in (0, 1] of the pixels that reach the ADC.
+    codes_format : "int8", "packed" (``np.packbits`` bytes) or "seed" (no codes array: the
+        description ``meta`` regenerates them).
+    out : a folder to write the command line's files into (scene.npy, pulse.npy, codes.npy,
+        meas.npy, meta.json), byte for byte the same as ``rdlidar simulate`` with the same
+        settings; an existing non-empty folder is refused unless ``force``.
 
-    Returns a ``Simulation`` with ``scene`` (M, N, K_s), ``pulse`` (K_p,), ``codes`` int8
-    (M, N, K), ``meas`` (K,) and ``meta``.
+    Returns a ``Simulation``.
     """
     dt = _real_dtype(dtype)
+    if not isinstance(scene, str):
+        raise TypeError(f"scene: expected a name, got {type(scene).__name__}")
+    if not isinstance(codes_format, str):
+        raise TypeError(f"codes_format: expected one of {', '.join(CODES_FORMATS)}")
+    if out is not None and not isinstance(out, (str, os.PathLike)):
+        raise TypeError(f"out: expected a path, got {type(out).__name__}")
     d = _rdlidar.simulate(
-        str(scene),
+        scene,
         _size(size),
-        int(pulse_len),
-        _seed(seed),
-        None if snr_db is None else float(snr_db),
-        None if ternary_zero_prob is None else float(ternary_zero_prob),
-        None if lit_fraction is None else float(lit_fraction),
+        _int(pulse_len, "pulse_len", 1),
+        _int(seed, "seed"),
+        _optional_float(snr_db, "snr_db"),
+        _optional_float(ternary_zero_prob, "ternary_zero_prob"),
+        _optional_float(lit_fraction, "lit_fraction"),
         dt == np.float64,
+        _int(adcs, "adcs", 1),
+        _tiles(tiles),
+        _optional_float(aperture, "aperture"),
+        codes_format,
+        None if out is None else os.fspath(out),
+        bool(force),
     )
-    return Simulation(d["scene"], d["pulse"], d["codes"], d["meas"], d["meta"])
+    meta = json.loads(d["meta"])
+    files = None if out is None else os.fspath(out)
+    return Simulation(d["scene"], d["pulse"], d["codes"], d["meas"], meta, files)
+
+
+def _callback(callback):
+    if callback is not None and not callable(callback):
+        raise TypeError("callback: expected a callable or None")
+    return callback
 
 
 def reconstruct(
@@ -282,53 +452,60 @@ def reconstruct(
     callback: Optional[Callable[[dict], Any]] = None,
     dtype=None,
     seed: int = 0,
+    tiles=None,
+    fill_unobserved: bool = False,
+    stream_codes: bool = False,
 ):
-    """Reconstructs a scene from one ADC's measurements, as ``rdlidar reconstruct`` does.
+    """Reconstructs a scene from the measurements of any architecture, as
+    ``rdlidar reconstruct`` does.
 
     Parameters
     ----------
-    pulse, codes, depth_bins : as for ``RdOperator``; ``pulse`` may also be an ``RdOperator``
-        (then ``codes`` and ``depth_bins`` are ignored and may be None).
-    meas : array_like, shape (K,)
+    pulse, codes, depth_bins, tiles, stream_codes : as for ``RdOperator``; ``pulse`` may also
+        be an ``RdOperator`` (then ``codes``, ``depth_bins``, ``tiles`` and ``stream_codes``
+        are ignored and may be None).
+    meas : array_like, shape (K,) for one ADC, (G, K) for G code sets, (T, K) for T tiles.
     solver : one of ``SOLVERS`` ("auto" chooses from the data).
     max_iter : the iteration limit of the iterative solvers (None: their defaults).
     callback : called after every iteration of an iterative solver with a dict
-        (iteration, residual, objective, change, seconds); a true return value stops that
-        solver. An exception raised in it stops the reconstruction and is re-raised.
-        Ctrl-C interrupts the reconstruction between iterations.
+        (iteration, residual, objective, change, seconds; and tile for a tiled acquisition,
+        whose tiles are solved in parallel); a true return value stops that solver. An
+        exception raised in it stops the reconstruction and is re-raised. Ctrl-C interrupts
+        the reconstruction between iterations.
     dtype : the precision (default: the measurements' dtype if float32 or float64, else
         float64).
     seed : the seed of the randomized parts (FISTA's power iteration).
+    fill_unobserved : fill the depth of pixels that reach no ADC (a coded aperture's blocked
+        pixels, -2) from their neighbours, as ``--fill-unobserved`` does.
 
     Returns ``(depth, scene, report)``: ``depth`` (M, N) int32 depth bins (-1 where no return,
     -2 for pixels no code reaches), ``scene`` (M, N, K_s) with every return found, and
-    ``report`` a dict (method, method_used, regime, iterations, termination,
-    residual_history, forward/adjoint/support applies, seconds, and auto's stages).
+    ``report`` a dict (method, method_used, architecture, regime, iterations, termination,
+    residual_history, forward/adjoint/support applies, seconds, auto's stages, and a report
+    per tile for a tiled acquisition).
     """
-    if callback is not None and not callable(callback):
-        raise TypeError("callback: expected a callable or None")
-    if max_iter is not None and (isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer))):
-        raise TypeError(f"max_iter: expected an int or None, got {type(max_iter).__name__}")
-    if max_iter is not None and max_iter < 1:
-        raise ValueError(f"max_iter: must be at least 1, got {max_iter}")
+    callback = _callback(callback)
+    max_iter = _optional_int(max_iter, "max_iter", 1)
     if not isinstance(solver, str):
         raise TypeError(f"solver: expected a name (one of {', '.join(SOLVERS)})")
     if isinstance(pulse, RdOperator):
         op = pulse
-        if dtype is not None and np.dtype(dtype) != op.dtype:
+        if dtype is not None and _real_dtype(dtype) != op.dtype:
             raise ValueError(f"dtype: the operator is {op.dtype}, not {np.dtype(dtype)}")
     else:
         if dtype is None:
             m = np.asarray(meas)
             dtype = m.dtype if m.dtype in (np.float32, np.float64) else np.float64
-        op = RdOperator(pulse, codes, depth_bins, dtype=dtype)
+        op = RdOperator(pulse, codes, depth_bins, dtype=dtype, tiles=tiles,
+                        stream_codes=stream_codes)
     if op.debiased:
         raise ValueError("pulse: reconstruct needs the operator of the physical pulse, not debiased")
     y = _real_array(meas, op.dtype, "meas")
-    if y.shape != (op.samples,):
-        raise ValueError(f"meas: expected shape ({op.samples},), got {y.shape}")
+    if y.shape not in (op.meas_shape, (op.shape[0],)):
+        raise ValueError(f"meas: expected shape {op.meas_shape}, got {y.shape}")
     depth, scene, report = _rdlidar.reconstruct(
-        op._core, y, solver, None if max_iter is None else int(max_iter), callback, _seed(seed)
+        op._core, y.reshape(-1), solver, max_iter, callback, _int(seed, "seed"),
+        bool(fill_unobserved),
     )
     return depth, scene.reshape(op.scene_shape), report
 
@@ -360,26 +537,25 @@ def fista(
     """
     if not isinstance(op, RdOperator):
         raise TypeError(f"op: expected an rdlidar.RdOperator, got {type(op).__name__}")
-    if callback is not None and not callable(callback):
-        raise TypeError("callback: expected a callable or None")
-    if isinstance(niter, bool) or not isinstance(niter, (int, np.integer)):
-        raise TypeError(f"niter: expected an int, got {type(niter).__name__}")
-    if niter < 1:
-        raise ValueError(f"niter: must be at least 1, got {niter}")
+    callback = _callback(callback)
+    niter = _int(niter, "niter", 1)
+    lam = _float(lam, "lam")
     if not (np.isfinite(lam) and lam >= 0):
         raise ValueError(f"lam: must be finite and >= 0, got {lam}")
+    step = _optional_float(step, "step")
+    tol = _optional_float(tol, "tol")
     y = _real_array(meas, op.dtype, "meas")
-    if y.shape != (op.samples,):
-        raise ValueError(f"meas: expected shape ({op.samples},), got {y.shape}")
+    if y.shape not in (op.meas_shape, (op.shape[0],)):
+        raise ValueError(f"meas: expected shape {op.meas_shape}, got {y.shape}")
     return _rdlidar.fista(
         op._core,
-        y,
-        float(lam),
-        None if step is None else float(step),
-        int(niter),
+        y.reshape(-1),
+        lam,
+        step,
+        niter,
         bool(nonnegative),
         bool(restart),
-        None if tol is None else float(tol),
+        tol,
         callback,
     )
 
@@ -392,15 +568,16 @@ def dot_test(op: RdOperator, seed: int = 0, tolerance: Optional[float] = None) -
     """
     if not isinstance(op, RdOperator):
         raise TypeError(f"op: expected an rdlidar.RdOperator, got {type(op).__name__}")
-    return op._core.dot_test(int(seed), tolerance)
+    return op._core.dot_test(_int(seed, "seed"), _optional_float(tolerance, "tolerance"))
 
 
 def metrics(truth, estimate, tau_s: Optional[float] = None) -> dict:
     """Detection and error metrics of an estimated scene against the true one.
 
     Both (M, N, K_s). A pixel's depth is its strongest return; ``tau_s`` is the depth bin's
-    duration (default 200 ps). Returns a dict: exact_fraction, missed, false_detections,
-    depth_rmse_bins, relative_error, and the per-return counts for multi-return scenes.
+    duration in seconds (default 200e-12). Returns a dict: exact_fraction, missed,
+    false_detections, depth_rmse_bins, relative_error, and the per-return counts for
+    multi-return scenes.
     """
     t = _real_array(truth, np.float64, "truth")
     e = _real_array(estimate, np.float64, "estimate")
@@ -408,4 +585,4 @@ def metrics(truth, estimate, tau_s: Optional[float] = None) -> dict:
         raise ValueError(
             f"estimate: expected two scenes of the same shape (M, N, K_s), got {t.shape} and {e.shape}"
         )
-    return _rdlidar.metrics(t, e, tau_s)
+    return _rdlidar.metrics(t, e, _optional_float(tau_s, "tau_s"))

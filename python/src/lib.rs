@@ -6,103 +6,223 @@
 //! to call the user's callback and to let Ctrl-C interrupt them. Errors of the library become
 //! `ValueError` with its one-line message; arguments of the wrong type become `TypeError`.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use numpy::ndarray::Array3;
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use numpy::{
+    IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray3, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyMemoryError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use rdlidar::lidar::{
-    simulate as simulate_scene, zero_mean, Architecture, Codes, Geometry, LidarOperator,
-    RdOperator, Scene, SceneSpec, SimulationSpec, DEFAULT_TAU_S,
+use rdlidar::acquisition::{
+    check_finite, check_finite_result, check_pulse, pulse_in, simulation_meta, write_simulation,
+    Acquisition, AcquisitionFiles, CodeStore, CodesFormat, InputNames, Reconstructed,
+    SimulationRequest, Streaming,
 };
-use rdlidar::operator::{DotTest, LinearOperator};
-use rdlidar::recon::{compare, reconstruct_observed, Method, ReconstructOptions};
+use rdlidar::lidar::{
+    simulate as simulate_scene, zero_mean, Architecture, Codes, Geometry, Scene, SimulationSpec,
+    TileSize, DEFAULT_TAU_S,
+};
+use rdlidar::operator::{BoxedOperator, DotTest, LinearOperator};
+use rdlidar::recon::{compare, Method, ReconstructOptions, TileReconstruction};
 use rdlidar::solver::{
     fista as fista_solver, Control, FistaParams, IterationInfo, Lambda, Report, Restart, StepRule,
     Stopping,
 };
 use rdlidar::Real;
 
-/// A library error as the `ValueError` Python expects for bad values and shapes.
+/// A library error as Python expects it: `MemoryError` for a request beyond memory,
+/// `ValueError` naming the argument for bad values and shapes.
 fn value_error(e: rdlidar::Error) -> PyErr {
-    PyValueError::new_err(e.to_string())
+    match e {
+        rdlidar::Error::InvalidParameter { name, reason } => {
+            PyValueError::new_err(format!("{name}: {reason}"))
+        }
+        e @ rdlidar::Error::TooLarge { .. } => PyMemoryError::new_err(e.to_string()),
+        e => PyValueError::new_err(e.to_string()),
+    }
 }
 
 /// The operator in the precision it was built for.
 enum Op {
-    F32(RdOperator<f32>),
-    F64(RdOperator<f64>),
+    F32(BoxedOperator<f32>),
+    F64(BoxedOperator<f64>),
 }
 
-/// Codes as the Python layer passes them: int8 (M, N, K), or packed uint8 (M, N, ⌈K/8⌉).
-fn read_codes(codes: &Bound<'_, PyAny>, k: usize) -> PyResult<(usize, usize, Codes)> {
-    if let Ok(a) = codes.extract::<PyReadonlyArray3<'_, i8>>() {
-        let (m, n, kk) = a.as_array().dim();
-        if kk != k {
+/// Code sets as the Python layer passes them: int8 (M, N, K) or (G, M, N, K), or packed
+/// uint8 (M, N, ⌈K/8⌉) or (G, M, N, ⌈K/8⌉). Shapes and memory are checked before anything is
+/// copied.
+fn read_code_arrays<T: Real>(
+    codes: &Bound<'_, PyAny>,
+    pulse_len: usize,
+    depth_bins: usize,
+    tiles: Option<TileSize>,
+) -> PyResult<(Geometry, Vec<Arc<Codes>>)> {
+    let k = pulse_len
+        .checked_add(depth_bins - 1)
+        .ok_or_else(|| PyValueError::new_err("depth_bins: too large"))?;
+    let (packed, view) = if let Ok(a) = codes.extract::<PyReadonlyArrayDyn<'_, i8>>() {
+        (false, ArrayLike::I8(a))
+    } else if let Ok(a) = codes.extract::<PyReadonlyArrayDyn<'_, u8>>() {
+        (true, ArrayLike::U8(a))
+    } else {
+        return Err(PyTypeError::new_err(
+            "codes must be an int8 array (M, N, K) or (G, M, N, K) of -1, 0, 1, a uint8 array \
+             (M, N, ceil(K/8)) or (G, M, N, ceil(K/8)) as np.packbits(S > 0, axis=-1) writes \
+             it, or the path of a meta.json of seeded codes",
+        ));
+    };
+    let shape = view.shape();
+    let (sets, m, n, last) = match shape[..] {
+        [m, n, l] => (1, m, n, l),
+        [g, m, n, l] => (g, m, n, l),
+        _ => {
             return Err(PyValueError::new_err(format!(
-                "codes: int8 codes of shape ({m}, {n}, {kk}) have {kk} samples per pixel, but \
-                 the pulse and depth_bins give K = K_p + K_s - 1 = {k}"
-            )));
+                "codes: expected a 3-D array (M, N, K) or a 4-D array (G, M, N, K), got shape \
+                 {shape:?}"
+            )))
         }
-        let flat: Vec<i8> = a.as_array().iter().copied().collect();
-        let view = numpy::ndarray::ArrayView2::from_shape((m * n, k), &flat)
-            .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
-        let c =
-            Codes::from_dense(view).map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
-        return Ok((m, n, c));
+    };
+    let want = if packed { k.div_ceil(8) } else { k };
+    if last != want {
+        let (kind, unit) = if packed {
+            ("packed", "bytes per pixel")
+        } else {
+            ("int8", "samples per pixel")
+        };
+        return Err(PyValueError::new_err(format!(
+            "codes: {kind} codes of shape {shape:?} have {last} {unit}, but the pulse and \
+             depth_bins give K = K_p + K_s - 1 = {k}{}",
+            if packed {
+                format!(" samples, which pack into {want}")
+            } else {
+                String::new()
+            }
+        )));
     }
-    if let Ok(a) = codes.extract::<PyReadonlyArray3<'_, u8>>() {
-        let (m, n, nb) = a.as_array().dim();
-        if nb != k.div_ceil(8) {
-            return Err(PyValueError::new_err(format!(
-                "codes: packed codes of shape ({m}, {n}, {nb}) have {nb} bytes per pixel, but \
-                 K = K_p + K_s - 1 = {k} samples pack into {}",
-                k.div_ceil(8)
-            )));
+    let geom = Acquisition::check_arrays::<T>((sets, m, n), depth_bins, pulse_len, tiles, 2)
+        .map_err(value_error)?;
+    let per_set = m * n * last;
+    let mut out = Vec::with_capacity(sets);
+    for g in 0..sets {
+        let c = match &view {
+            ArrayLike::I8(a) => {
+                let flat: Vec<i8> = a
+                    .as_array()
+                    .iter()
+                    .skip(g * per_set)
+                    .take(per_set)
+                    .copied()
+                    .collect();
+                let v = numpy::ndarray::ArrayView2::from_shape((m * n, k), &flat)
+                    .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
+                Codes::from_dense(v)
+            }
+            ArrayLike::U8(a) => {
+                let bytes: Vec<u8> = a
+                    .as_array()
+                    .iter()
+                    .skip(g * per_set)
+                    .take(per_set)
+                    .copied()
+                    .collect();
+                Codes::from_packbits(&bytes, m * n, k)
+            }
         }
-        let bytes: Vec<u8> = a.as_array().iter().copied().collect();
-        let c = Codes::from_packbits(&bytes, m * n, k)
-            .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
-        return Ok((m, n, c));
+        .map_err(|e| {
+            let at = if sets > 1 {
+                format!(" (code set {g})")
+            } else {
+                String::new()
+            };
+            PyValueError::new_err(format!("codes{at}: {e}"))
+        })?;
+        out.push(Arc::new(c));
     }
-    Err(PyTypeError::new_err(
-        "codes must be a 3-D int8 array (M, N, K) of -1, 0, 1, or a 3-D uint8 array \
-         (M, N, ceil(K/8)) as np.packbits(S > 0, axis=-1) writes it",
-    ))
+    Ok((geom, out))
 }
 
-/// The fused lidar operator A = Σ·S·P (one ADC), in float32 or float64.
+/// An int8 or uint8 array of any dimension.
+enum ArrayLike<'py> {
+    I8(PyReadonlyArrayDyn<'py, i8>),
+    U8(PyReadonlyArrayDyn<'py, u8>),
+}
+
+impl ArrayLike<'_> {
+    fn shape(&self) -> Vec<usize> {
+        match self {
+            ArrayLike::I8(a) => a.shape().to_vec(),
+            ArrayLike::U8(a) => a.shape().to_vec(),
+        }
+    }
+}
+
+/// The measurement operator of an acquisition (one ADC, G ADCs, tiles, a coded aperture;
+/// codes held or described by a seed), in float32 or float64.
 #[pyclass(name = "_Operator", module = "rdlidar._rdlidar", frozen)]
 struct PyOperator {
     op: Op,
-    geom: Geometry,
-    samples: usize,
-}
-
-fn build<T: Real>(
-    geom: Geometry,
-    pulse: &[f64],
-    codes: Codes,
+    acq: Acquisition,
     debiased: bool,
-) -> PyResult<RdOperator<T>> {
-    let p: Vec<T> = pulse.iter().map(|&v| T::of_f64(v)).collect();
-    if let Some(i) = p.iter().position(|v| !v.is_finite()) {
-        return Err(PyValueError::new_err(format!(
-            "pulse: sample {i} ({}) is not finite in the operator's dtype",
-            pulse[i]
-        )));
-    }
-    let p = if debiased { zero_mean(&p) } else { p };
-    RdOperator::new(geom, p, Arc::new(codes)).map_err(value_error)
 }
 
-/// Applies `op` (or its adjoint) to a copy of `x` with the GIL released.
+/// The acquisition of `pulse` with `codes` (arrays, or the path of a codes file or seeded
+/// meta.json).
+fn acquisition<T: Real>(
+    pulse: Vec<f64>,
+    codes: &Bound<'_, PyAny>,
+    depth_bins: usize,
+    tiles: Option<TileSize>,
+    stream_codes: bool,
+) -> PyResult<Acquisition> {
+    check_pulse(&pulse).map_err(value_error)?;
+    let streaming = if stream_codes {
+        Streaming::Always
+    } else {
+        Streaming::Auto
+    };
+    if let Ok(path) = codes.extract::<std::path::PathBuf>() {
+        let files = AcquisitionFiles::describe(
+            &path,
+            pulse.len(),
+            depth_bins,
+            None,
+            tiles,
+            streaming,
+            InputNames::PYTHON,
+        )
+        .map_err(value_error)?;
+        files
+            .check_memory::<T>("RdOperator", 2)
+            .map_err(value_error)?;
+        return files.load(pulse).map_err(value_error);
+    }
+    if stream_codes {
+        return Err(PyValueError::new_err(
+            "stream_codes: streaming regenerates codes described by a seed: pass the path of \
+             the meta.json of `simulate --codes-format seed` as codes",
+        ));
+    }
+    let (geom, sets) = read_code_arrays::<T>(codes, pulse.len(), depth_bins, tiles)?;
+    Acquisition::new(geom, pulse, CodeStore::Held(sets), tiles, Streaming::Never)
+        .map_err(value_error)
+}
+
+/// The operator of `acq` in `T`, with the zero-mean pulse if `debiased`.
+fn operator_of<T: Real>(acq: &Acquisition, debiased: bool) -> PyResult<BoxedOperator<T>> {
+    let p = pulse_in::<T>(acq.pulse()).map_err(value_error)?;
+    let p = if debiased { zero_mean(&p) } else { p };
+    acq.operator_with_pulse(p).map_err(value_error)
+}
+
+/// Applies `op` (or its adjoint) to a copy of `x` with the GIL released; refuses non-finite
+/// inputs and results that overflow.
 fn apply<'py, T: Real + numpy::Element>(
     py: Python<'py>,
-    op: &RdOperator<T>,
+    op: &BoxedOperator<T>,
     x: &Bound<'py, PyAny>,
     adjoint: bool,
 ) -> PyResult<Bound<'py, PyArray1<T>>> {
@@ -125,6 +245,7 @@ fn apply<'py, T: Real + numpy::Element>(
     }
     let v: Vec<T> = a.as_array().iter().copied().collect();
     drop(a);
+    check_finite(&v, if adjoint { "y" } else { "x" }).map_err(value_error)?;
     let out = py.detach(|| {
         let mut o = vec![T::zero(); n_out];
         if adjoint {
@@ -134,45 +255,51 @@ fn apply<'py, T: Real + numpy::Element>(
         }
         o
     });
+    check_finite_result(
+        &out,
+        if adjoint { "adjoint" } else { "forward" },
+        if adjoint { "y" } else { "x" },
+    )
+    .map_err(value_error)?;
     Ok(out.into_pyarray(py))
 }
 
 #[pymethods]
 impl PyOperator {
     #[new]
-    #[pyo3(signature = (pulse, codes, depth_bins, double, debiased))]
+    #[pyo3(signature = (pulse, codes, depth_bins, double, debiased, tiles=None, stream_codes=false))]
     fn new(
         pulse: PyReadonlyArray1<'_, f64>,
         codes: &Bound<'_, PyAny>,
         depth_bins: usize,
         double: bool,
         debiased: bool,
+        tiles: Option<(usize, usize)>,
+        stream_codes: bool,
     ) -> PyResult<Self> {
         let p: Vec<f64> = pulse.as_array().iter().copied().collect();
-        if p.is_empty() {
-            return Err(PyValueError::new_err(
-                "pulse: must have at least one sample",
-            ));
-        }
         if depth_bins == 0 {
             return Err(PyValueError::new_err("depth_bins: must be at least 1"));
         }
-        let k = p
-            .len()
-            .checked_add(depth_bins - 1)
-            .ok_or_else(|| PyValueError::new_err("depth_bins: too large"))?;
-        let (m, n, c) = read_codes(codes, k)?;
-        let geom = Geometry::new(m, n, depth_bins).map_err(value_error)?;
-        let op = if double {
-            Op::F64(build(geom, &p, c, debiased)?)
-        } else {
-            Op::F32(build(geom, &p, c, debiased)?)
+        let tiles = match tiles {
+            None => None,
+            Some((m, n)) if m > 0 && n > 0 => Some(TileSize { m, n }),
+            Some((m, n)) => {
+                return Err(PyValueError::new_err(format!(
+                    "tiles: tile rows and columns must be at least 1, got ({m}, {n})"
+                )))
+            }
         };
-        Ok(PyOperator {
-            op,
-            geom,
-            samples: k,
-        })
+        let (acq, op) = if double {
+            let acq = acquisition::<f64>(p, codes, depth_bins, tiles, stream_codes)?;
+            let op = Op::F64(operator_of::<f64>(&acq, debiased)?);
+            (acq, op)
+        } else {
+            let acq = acquisition::<f32>(p, codes, depth_bins, tiles, stream_codes)?;
+            let op = Op::F32(operator_of::<f32>(&acq, debiased)?);
+            (acq, op)
+        };
+        Ok(PyOperator { op, acq, debiased })
     }
 
     /// y = A x for a 1-D array of M·N·K_s values of the operator's dtype.
@@ -183,7 +310,7 @@ impl PyOperator {
         })
     }
 
-    /// x = Aᵀ y for a 1-D array of K values of the operator's dtype.
+    /// x = Aᵀ y for a 1-D array of the measurements (every ADC's rows, one after the other).
     fn adjoint<'py>(&self, py: Python<'py>, y: &Bound<'py, PyAny>) -> PyResult<Py<PyAny>> {
         Ok(match &self.op {
             Op::F32(op) => apply(py, op, y, true)?.into_any().unbind(),
@@ -194,31 +321,60 @@ impl PyOperator {
     /// (M, N, K_s).
     #[getter]
     fn geometry(&self) -> (usize, usize, usize) {
-        (self.geom.m, self.geom.n, self.geom.ks)
+        let g = self.acq.geometry();
+        (g.m, g.n, g.ks)
     }
 
-    /// K = K_p + K_s − 1.
+    /// K = K_p + K_s − 1, the samples of one ADC.
     #[getter]
     fn samples(&self) -> usize {
-        self.samples
+        self.acq.samples()
+    }
+
+    /// Rows of the measurements: None for (K,), R for (R, K).
+    #[getter]
+    fn rows(&self) -> Option<usize> {
+        self.acq.rows()
+    }
+
+    /// "single", "multi_adc" or "tiles".
+    #[getter]
+    fn architecture(&self) -> &'static str {
+        self.acq.architecture().kind()
+    }
+
+    /// The tile size (A, B) of a tiled acquisition, None otherwise.
+    #[getter]
+    fn tiles(&self) -> Option<(usize, usize)> {
+        match self.acq.architecture() {
+            Architecture::Tiles(t) => Some((t.m, t.n)),
+            _ => None,
+        }
+    }
+
+    /// "compressive", "critical" or "redundant".
+    #[getter]
+    fn regime(&self) -> String {
+        self.acq.regime().to_string()
+    }
+
+    /// Whether seeded codes are regenerated block by block on every application.
+    #[getter]
+    fn streamed(&self) -> bool {
+        self.acq.is_streamed()
     }
 
     /// The instruction set of the kernels.
     #[getter]
     fn isa(&self) -> &'static str {
-        match &self.op {
-            Op::F32(op) => op.isa(),
-            Op::F64(op) => op.isa(),
-        }
+        rdlidar::lidar::kernel_isa()
     }
 
     /// The pulse the operator applies (zero-mean when built debiased), as float64.
     #[getter]
     fn pulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        let p: Vec<f64> = match &self.op {
-            Op::F32(op) => op.pulse().iter().map(|v| v.as_f64()).collect(),
-            Op::F64(op) => op.pulse().to_vec(),
-        };
+        let p = self.acq.pulse().to_vec();
+        let p = if self.debiased { zero_mean(&p) } else { p };
         p.into_pyarray(py)
     }
 
@@ -253,24 +409,33 @@ impl PyOperator {
     }
 
     fn __repr__(&self) -> String {
-        let (d, kp) = match &self.op {
-            Op::F32(op) => ("float32", op.pulse().len()),
-            Op::F64(op) => ("float64", op.pulse().len()),
+        let g = self.acq.geometry();
+        let d = match &self.op {
+            Op::F32(_) => "float32",
+            Op::F64(_) => "float64",
+        };
+        let arch = match self.acq.architecture() {
+            Architecture::MultiAdc(n) => format!(", {n} ADCs"),
+            Architecture::Tiles(t) => format!(", tiles of {t} ({} ADCs)", t.count(g.m, g.n)),
+            _ => String::new(),
         };
         format!(
-            "rdlidar operator {}x{}x{}, K_p {kp}, K {}, {d}, {}",
-            self.geom.m,
-            self.geom.n,
-            self.geom.ks,
-            self.samples,
+            "rdlidar operator {}x{}x{}, K_p {}, K {}{arch}, {d}, {}",
+            g.m,
+            g.n,
+            g.ks,
+            self.acq.pulse_len(),
+            self.acq.samples(),
             self.isa()
         )
     }
 }
 
-/// Simulates an acquisition with one ADC; returns a dict of arrays and the description.
+/// Simulates an acquisition of any architecture, as `rdlidar simulate` does; returns a dict of
+/// arrays (codes as the format says: int8, packed uint8, or None for seeded codes) and the
+/// meta.json text; with `out`, also writes the same files as the command line.
 #[pyfunction]
-#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double))]
+#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double, adcs=1, tiles=None, aperture=None, codes_format="int8", out=None, force=false))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -282,81 +447,128 @@ fn simulate<'py>(
     ternary_zero_prob: Option<f64>,
     lit_fraction: Option<f64>,
     double: bool,
+    adcs: usize,
+    tiles: Option<(usize, usize)>,
+    aperture: Option<f64>,
+    codes_format: &str,
+    out: Option<std::path::PathBuf>,
+    force: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let geometry = Geometry::new(size.0, size.1, size.2).map_err(value_error)?;
-    let spec_scene = match (scene, lit_fraction) {
-        ("paper", None) => SceneSpec::Paper,
-        ("transparent", None) => SceneSpec::Transparent,
-        ("random", f) => SceneSpec::Random {
-            lit_fraction: f.unwrap_or(0.1),
-        },
-        ("paper" | "transparent", Some(_)) => {
+    let tiles = match tiles {
+        None => None,
+        Some((m, n)) if m > 0 && n > 0 => Some(TileSize { m, n }),
+        Some((m, n)) => {
             return Err(PyValueError::new_err(format!(
-                "lit_fraction: only the random scene has one, not {scene:?}"
-            )))
-        }
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "scene: {scene:?} is not one of \"paper\", \"transparent\", \"random\""
+                "tiles: tile rows and columns must be at least 1, got ({m}, {n})"
             )))
         }
     };
-    if pulse_len == 0 {
-        return Err(PyValueError::new_err("pulse_len: must be at least 1"));
-    }
-    let spec = SimulationSpec {
-        scene: spec_scene,
+    let request = SimulationRequest {
+        scene: scene.to_string(),
+        lit_fraction,
         ternary_zero_prob,
         snr_db,
-        architecture: Architecture::Single,
-        ..SimulationSpec::new(geometry, pulse_len, seed)
+        adcs,
+        tiles,
+        aperture,
+        codes_format: codes_format.parse().map_err(value_error)?,
+        ..SimulationRequest::new(geometry, pulse_len, seed)
     };
-    spec.memory_plan::<f64>()
-        .and_then(|plan| plan.check("simulate", "use a smaller size or pulse"))
+    let spec = request.spec().map_err(value_error)?;
+    let held = if double {
+        spec.memory_plan::<f64>()
+    } else {
+        spec.memory_plan::<f32>()
+    };
+    held.and_then(|plan| plan.check("simulate", "use a smaller size or pulse"))
         .map_err(value_error)?;
     let d = PyDict::new(py);
     if double {
-        fill_simulation::<f64>(py, &spec, &d)?;
+        fill_simulation::<f64>(py, &spec, request.codes_format, out.as_deref(), force, &d)?;
     } else {
-        fill_simulation::<f32>(py, &spec, &d)?;
+        fill_simulation::<f32>(py, &spec, request.codes_format, out.as_deref(), force, &d)?;
     }
     Ok(d)
 }
 
-fn fill_simulation<'py, T: Real + numpy::Element>(
+fn fill_simulation<'py, T: Real + numpy::Element + ndarray_npy::WritableElement>(
     py: Python<'py>,
     spec: &SimulationSpec,
+    format: CodesFormat,
+    out: Option<&std::path::Path>,
+    force: bool,
     d: &Bound<'py, PyDict>,
 ) -> PyResult<()> {
     let sim = py
         .detach(|| simulate_scene::<T>(spec))
         .map_err(value_error)?;
+    let meta = match out {
+        Some(dir) => py
+            .detach(|| write_simulation(dir, &sim, format, force))
+            .map_err(value_error)?,
+        None => simulation_meta(&sim, format),
+    };
     let g = spec.geometry;
-    let codes = sim.code_sets[0].to_dense();
-    let k = codes.ncols();
-    let codes = codes
-        .into_shape_with_order((g.m, g.n, k))
-        .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
+    let k = g.samples(spec.pulse_len);
+    let multi = matches!(spec.architecture, Architecture::MultiAdc(_));
+    let codes: Option<Py<PyAny>> = match format {
+        CodesFormat::Seed => None,
+        CodesFormat::Packed => {
+            let nb = k.div_ceil(8);
+            let mut bytes = Vec::with_capacity(sim.code_sets.len() * g.pixels() * nb);
+            for c in &sim.code_sets {
+                bytes.extend(c.to_packbits().map_err(value_error)?);
+            }
+            let shape: Vec<usize> = if multi {
+                vec![sim.code_sets.len(), g.m, g.n, nb]
+            } else {
+                vec![g.m, g.n, nb]
+            };
+            let a = numpy::ndarray::ArrayD::from_shape_vec(shape, bytes)
+                .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
+            Some(a.into_pyarray(py).into_any().unbind())
+        }
+        CodesFormat::Int8 => {
+            let mut dense = Vec::with_capacity(sim.code_sets.len() * g.pixels() * k);
+            for c in &sim.code_sets {
+                let mut s = c.to_dense();
+                if let Some(active) = &sim.active {
+                    let mut keep = vec![false; g.pixels()];
+                    for &p in active {
+                        keep[p] = true;
+                    }
+                    for (p, mut row) in s.outer_iter_mut().enumerate() {
+                        if !keep[p] {
+                            row.fill(0);
+                        }
+                    }
+                }
+                dense.extend(s.iter().copied());
+            }
+            let shape: Vec<usize> = if multi {
+                vec![sim.code_sets.len(), g.m, g.n, k]
+            } else {
+                vec![g.m, g.n, k]
+            };
+            let a = numpy::ndarray::ArrayD::from_shape_vec(shape, dense)
+                .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
+            Some(a.into_pyarray(py).into_any().unbind())
+        }
+    };
+    let meas_shape: Vec<usize> = match sim.rows() {
+        None => vec![k],
+        Some(r) => vec![r, k],
+    };
+    let meas = numpy::ndarray::ArrayD::from_shape_vec(meas_shape, sim.meas)
+        .map_err(|e| PyValueError::new_err(format!("meas: {e}")))?;
+    let json = serde_json::to_string_pretty(&meta)
+        .map_err(|e| PyValueError::new_err(format!("meta: {e}")))?;
     d.set_item("scene", sim.scene.into_inner().into_pyarray(py))?;
     d.set_item("pulse", sim.pulse.into_inner().into_pyarray(py))?;
-    d.set_item("codes", codes.into_pyarray(py))?;
-    d.set_item("meas", sim.meas.into_pyarray(py))?;
-    let meta = PyDict::new(py);
-    meta.set_item("size", (g.m, g.n, g.ks))?;
-    meta.set_item("pulse_len", spec.pulse_len)?;
-    meta.set_item("samples", k)?;
-    meta.set_item("seed", spec.seed)?;
-    meta.set_item("scene", spec.scene.name())?;
-    meta.set_item("snr_db", spec.snr_db)?;
-    meta.set_item("ternary_zero_prob", spec.ternary_zero_prob)?;
-    meta.set_item(
-        "regime",
-        format!("{}", rdlidar::lidar::Regime::of(k, g.voxels())),
-    )?;
-    if let Some(noise) = &sim.noise {
-        meta.set_item("noise", format!("{noise:?}"))?;
-    }
-    d.set_item("meta", meta)?;
+    d.set_item("codes", codes)?;
+    d.set_item("meas", meas.into_pyarray(py))?;
+    d.set_item("meta", json)?;
     Ok(())
 }
 
@@ -374,44 +586,73 @@ fn report_dict<'py>(py: Python<'py>, r: &Report, d: &Bound<'py, PyDict>) -> PyRe
     Ok(())
 }
 
-/// One iteration seen from Python: takes the GIL back, lets Ctrl-C interrupt, and calls the
-/// callback (if any) with the iteration's numbers; a true return value stops the solver, an
-/// exception is kept in `failure` and stops it too.
-fn observe<T>(
-    info: &IterationInfo<'_, T>,
-    callback: Option<&Py<PyAny>>,
-    failure: &mut Option<PyErr>,
-) -> Control {
-    Python::attach(|py| {
-        let go_on = (|| -> PyResult<bool> {
-            py.check_signals()?;
-            if let Some(cb) = callback {
-                let d = PyDict::new(py);
-                d.set_item("iteration", info.iteration)?;
-                d.set_item("residual", info.residual)?;
-                d.set_item("objective", info.objective)?;
-                d.set_item("change", info.change)?;
-                d.set_item("seconds", info.elapsed.as_secs_f64())?;
-                let stop = cb.call1(py, (d,))?;
-                return Ok(!stop.bind(py).is_truthy()?);
-            }
-            Ok(true)
-        })();
-        match go_on {
-            Ok(true) => Control::Continue,
-            Ok(false) => Control::Stop,
-            Err(e) => {
-                *failure = Some(e);
-                Control::Stop
-            }
+/// What Python sees of the iterations of a solver: the callback, Ctrl-C, and the first
+/// exception raised, after which every solver is told to stop (from any worker thread).
+struct PyObserver {
+    callback: Option<Py<PyAny>>,
+    failure: Mutex<Option<PyErr>>,
+    stopped: std::sync::atomic::AtomicBool,
+}
+
+impl PyObserver {
+    fn new(callback: Option<Py<PyAny>>) -> Self {
+        PyObserver {
+            callback,
+            failure: Mutex::new(None),
+            stopped: std::sync::atomic::AtomicBool::new(false),
         }
-    })
+    }
+
+    /// One iteration (of tile `tile` for a tiled acquisition): takes the GIL back, lets Ctrl-C
+    /// interrupt, and calls the callback with the iteration's numbers; a true return value
+    /// stops the solver, an exception is kept and stops every solver.
+    fn observe<T>(&self, tile: Option<usize>, info: &IterationInfo<'_, T>) -> Control {
+        use std::sync::atomic::Ordering;
+        if self.stopped.load(Ordering::Relaxed) {
+            return Control::Stop;
+        }
+        Python::attach(|py| {
+            let go_on = (|| -> PyResult<bool> {
+                py.check_signals()?;
+                if let Some(cb) = &self.callback {
+                    let d = PyDict::new(py);
+                    d.set_item("iteration", info.iteration)?;
+                    d.set_item("residual", info.residual)?;
+                    d.set_item("objective", info.objective)?;
+                    d.set_item("change", info.change)?;
+                    d.set_item("seconds", info.elapsed.as_secs_f64())?;
+                    if let Some(t) = tile {
+                        d.set_item("tile", t)?;
+                    }
+                    let stop = cb.call1(py, (d,))?;
+                    return Ok(!stop.bind(py).is_truthy()?);
+                }
+                Ok(true)
+            })();
+            match go_on {
+                Ok(true) => Control::Continue,
+                Ok(false) => Control::Stop,
+                Err(e) => {
+                    self.stopped.store(true, Ordering::Relaxed);
+                    if let Ok(mut f) = self.failure.lock() {
+                        f.get_or_insert(e);
+                    }
+                    Control::Stop
+                }
+            }
+        })
+    }
+
+    /// The exception raised in the callback or by Ctrl-C, if any.
+    fn failure(self) -> Option<PyErr> {
+        self.failure.into_inner().ok().flatten()
+    }
 }
 
 /// The measurements as a vector of the operator's dtype and length, finite.
 fn measurements<T: Real + numpy::Element>(
     meas: &Bound<'_, PyAny>,
-    rows: usize,
+    count: usize,
 ) -> PyResult<Vec<T>> {
     let y = meas.extract::<PyReadonlyArray1<'_, T>>().map_err(|_| {
         PyTypeError::new_err(format!(
@@ -419,19 +660,14 @@ fn measurements<T: Real + numpy::Element>(
             std::any::type_name::<T>()
         ))
     })?;
-    if y.len() != rows {
+    if y.len() != count {
         return Err(PyValueError::new_err(format!(
-            "meas: expected K = {rows} values, got {}",
+            "meas: expected {count} values, got {}",
             y.len()
         )));
     }
     let y: Vec<T> = y.as_array().iter().copied().collect();
-    if let Some(i) = y.iter().position(|v| !v.is_finite()) {
-        return Err(PyValueError::new_err(format!(
-            "meas: value {i} ({}) is not finite",
-            y[i]
-        )));
-    }
+    check_finite(&y, "meas").map_err(value_error)?;
     Ok(y)
 }
 
@@ -489,20 +725,19 @@ fn fista<'py>(
 
 fn run_fista<'py, T: Real + numpy::Element>(
     py: Python<'py>,
-    op: &RdOperator<T>,
+    op: &BoxedOperator<T>,
     meas: &Bound<'py, PyAny>,
     params: &FistaParams,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let y = measurements::<T>(meas, op.nrows())?;
-    let mut failure: Option<PyErr> = None;
+    let observer = PyObserver::new(callback);
     let mut x = vec![T::zero(); op.ncols()];
     let result = py.detach(|| {
-        let mut observe =
-            |info: &IterationInfo<'_, T>| observe(info, callback.as_ref(), &mut failure);
-        fista_solver(op, &y, &mut x, params, &mut observe)
+        let mut observe = |info: &IterationInfo<'_, T>| observer.observe(None, info);
+        fista_solver(op.as_ref(), &y, &mut x, params, &mut observe)
     });
-    if let Some(e) = failure {
+    if let Some(e) = observer.failure() {
         return Err(e);
     }
     let r = result.map_err(value_error)?;
@@ -511,9 +746,10 @@ fn run_fista<'py, T: Real + numpy::Element>(
     pyo3::types::PyTuple::new(py, [x.into_pyarray(py).into_any(), report.into_any()])
 }
 
-/// Runs a reconstruction method; returns (depth, scene, report).
+/// Runs a reconstruction method on any architecture; returns (depth, scene, report).
 #[pyfunction]
-#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed))]
+#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false))]
+#[allow(clippy::too_many_arguments)]
 fn reconstruct<'py>(
     py: Python<'py>,
     operator: &PyOperator,
@@ -522,6 +758,7 @@ fn reconstruct<'py>(
     max_iter: Option<usize>,
     callback: Option<Py<PyAny>>,
     seed: u64,
+    fill_unobserved: bool,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let method: Method = solver
         .parse()
@@ -529,74 +766,124 @@ fn reconstruct<'py>(
     if max_iter == Some(0) {
         return Err(PyValueError::new_err("max_iter: must be at least 1"));
     }
+    if operator.debiased {
+        return Err(PyValueError::new_err(
+            "operator: reconstruct needs the operator of the physical pulse, not debiased",
+        ));
+    }
     let options = ReconstructOptions {
         max_iter,
         seed,
         ..ReconstructOptions::default()
     };
+    // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
+    let job = Job {
+        method,
+        options,
+        fill_unobserved,
+    };
     match &operator.op {
-        Op::F32(op) => run_reconstruct(py, op, meas, method, &options, callback),
-        Op::F64(op) => run_reconstruct(py, op, meas, method, &options, callback),
+        Op::F32(_) => run_reconstruct::<f32>(py, &operator.acq, meas, &job, callback),
+        Op::F64(_) => run_reconstruct::<f64>(py, &operator.acq, meas, &job, callback),
     }
+}
+
+/// A reconstruction request.
+struct Job {
+    method: Method,
+    options: ReconstructOptions,
+    fill_unobserved: bool,
 }
 
 fn run_reconstruct<'py, T: Real + numpy::Element>(
     py: Python<'py>,
-    op: &RdOperator<T>,
+    acq: &Acquisition,
     meas: &Bound<'py, PyAny>,
-    method: Method,
-    options: &ReconstructOptions,
+    job: &Job,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
-    let y = measurements::<T>(meas, op.nrows())?;
-    let mut failure: Option<PyErr> = None;
+    let y = measurements::<T>(meas, acq.measurements())?;
+    acq.memory_plan::<T>(10)
+        .check("reconstruct", "use a smaller acquisition or free memory")
+        .map_err(value_error)?;
+    let observer = PyObserver::new(callback);
+    let tiled = matches!(acq.architecture(), Architecture::Tiles(_));
     let result = py.detach(|| {
-        let mut observe = |info: &IterationInfo<'_, T>| -> Control {
-            Python::attach(|py| {
-                let go_on = (|| -> PyResult<bool> {
-                    py.check_signals()?;
-                    if let Some(cb) = &callback {
-                        let d = PyDict::new(py);
-                        d.set_item("iteration", info.iteration)?;
-                        d.set_item("residual", info.residual)?;
-                        d.set_item("objective", info.objective)?;
-                        d.set_item("change", info.change)?;
-                        d.set_item("seconds", info.elapsed.as_secs_f64())?;
-                        let stop = cb.call1(py, (d,))?;
-                        return Ok(!stop.bind(py).is_truthy()?);
-                    }
-                    Ok(true)
-                })();
-                match go_on {
-                    Ok(true) => Control::Continue,
-                    Ok(false) => Control::Stop,
-                    Err(e) => {
-                        failure = Some(e);
-                        Control::Stop
-                    }
-                }
-            })
+        let observe = |tile: usize, info: &IterationInfo<'_, T>| {
+            observer.observe(tiled.then_some(tile), info)
         };
-        reconstruct_observed(
-            op as &dyn LidarOperator<T>,
+        acq.reconstruct(
             &y,
-            method,
-            options,
-            &mut observe,
+            job.method,
+            &job.options,
+            &observe,
+            &|_: &TileReconstruction<T>| {},
         )
     });
-    if let Some(e) = failure {
+    if let Some(e) = observer.failure() {
         return Err(e);
     }
-    let r = result.map_err(value_error)?;
-    let depth = r.depth.depth.clone().into_pyarray(py);
+    let mut r = result.map_err(value_error)?;
+    let filled = if job.fill_unobserved {
+        r.depth_mut().fill_unobserved()
+    } else {
+        0
+    };
     let report = PyDict::new(py);
-    report.set_item("method", method.name())?;
+    report.set_item("method", job.method.name())?;
+    report.set_item("architecture", acq.architecture().kind())?;
+    report.set_item("seconds", r.elapsed().as_secs_f64())?;
+    report.set_item("filled", filled)?;
+    let (f, a, s) = r.applies();
+    match &r {
+        Reconstructed::Single(r) => {
+            single_report(py, r, &report)?;
+        }
+        Reconstructed::Tiled(t) => {
+            report.set_item("regime", t.regime().to_string())?;
+            let used: Vec<String> = t
+                .methods_used()
+                .iter()
+                .map(|(m, n)| format!("{} on {n}", m.name()))
+                .collect();
+            report.set_item("method_used", used.join(", "))?;
+            let tiles = PyList::empty(py);
+            for tile in &t.tiles {
+                let d = PyDict::new(py);
+                let p = &tile.place;
+                d.set_item("index", p.index)?;
+                d.set_item("row", p.row)?;
+                d.set_item("col", p.col)?;
+                d.set_item("shape", (p.geometry.m, p.geometry.n))?;
+                single_report(py, &tile.reconstruction, &d)?;
+                tiles.append(d)?;
+            }
+            report.set_item("tiles", tiles)?;
+        }
+    }
+    report.set_item("forward_applies", f)?;
+    report.set_item("adjoint_applies", a)?;
+    report.set_item("support_applies", s)?;
+    let depth = r.depth().depth.clone().into_pyarray(py);
+    let scene = match r {
+        Reconstructed::Single(r) => r.scene,
+        Reconstructed::Tiled(r) => r.scene,
+    };
+    let scene = scene.into_inner().into_pyarray(py);
+    pyo3::types::PyTuple::new(py, [depth.into_any(), scene.into_any(), report.into_any()])
+}
+
+/// The report of one reconstruction (of the whole array, or of a tile) into `report`.
+fn single_report<'py, T>(
+    py: Python<'py>,
+    r: &rdlidar::recon::Reconstruction<T>,
+    report: &Bound<'py, PyDict>,
+) -> PyResult<()> {
     report.set_item("method_used", r.method_used.name())?;
     report.set_item("regime", format!("{}", r.regime))?;
     report.set_item("seconds", r.elapsed.as_secs_f64())?;
     match &r.report {
-        Some(rep) => report_dict(py, rep, &report)?,
+        Some(rep) => report_dict(py, rep, report)?,
         None => {
             report.set_item("iterations", 0)?;
             report.set_item("termination", py.None())?;
@@ -617,8 +904,7 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
         stages.append(d)?;
     }
     report.set_item("stages", stages)?;
-    let scene = r.scene.into_inner().into_pyarray(py);
-    pyo3::types::PyTuple::new(py, [depth.into_any(), scene.into_any(), report.into_any()])
+    Ok(())
 }
 
 fn scene_of(a: &PyReadonlyArray3<'_, f64>, what: &str) -> PyResult<Scene<f64>> {

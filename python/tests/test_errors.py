@@ -148,7 +148,7 @@ def test_bad_simulations_and_metrics():
         (dict(scene="paper", lit_fraction=0.5), ValueError, "lit_fraction"),
         (dict(ternary_zero_prob=1.5), ValueError, "zero"),
         (dict(size=(100000, 100000, 100)), ValueError, "size"),
-        (dict(size=(4096, 4096, 100), pulse_len=10**6), ValueError, "memory"),
+        (dict(size=(4096, 4096, 100), pulse_len=10**6), MemoryError, "memory"),
         (dict(size="big"), TypeError, "size"),
         (dict(seed=-1), ValueError, "seed"),
         (dict(seed=2**64), ValueError, "seed"),

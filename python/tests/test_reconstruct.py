@@ -18,7 +18,8 @@ def test_simulate_gives_what_the_operator_measures(dtype):
     assert sim.pulse.shape == (600,) and sim.codes.shape == (12, 10, 607)
     assert sim.codes.dtype == np.int8 and set(np.unique(sim.codes)) <= {-1, 1}
     assert sim.meas.shape == (607,) and sim.meas.dtype == np.dtype(dtype)
-    assert sim.meta["pulse_len"] == 600 and sim.meta["scene"] == "paper"
+    assert sim.meta["pulse_len"] == 600 and sim.meta["scene"]["kind"] == "paper"
+    assert sim.meta["k"] == 607 and sim.meta["architecture"]["kind"] == "single"
     y = sim.operator().forward(sim.scene)
     tol = 1e-5 if dtype == np.float32 else 1e-12
     assert np.linalg.norm(y - sim.meas) <= tol * np.linalg.norm(sim.meas)
@@ -28,7 +29,7 @@ def test_simulate_gives_what_the_operator_measures(dtype):
     other = rdlidar.simulate("paper", size=(12, 10, 8), pulse_len=600, seed=4, dtype=dtype)
     assert not np.array_equal(other.codes, sim.codes)
     noisy = rdlidar.simulate("transparent", size=(6, 5, 8), pulse_len=300, seed=1, snr_db=20)
-    assert noisy.meta["snr_db"] == 20 and "noise" in noisy.meta
+    assert noisy.meta["noise"]["snr_db"] == 20 and noisy.meta["noise"]["model"] == "gaussian"
     ternary = rdlidar.simulate("random", size=(6, 5, 8), pulse_len=300, ternary_zero_prob=0.3,
                                lit_fraction=0.2)
     assert 0 in np.unique(ternary.codes)

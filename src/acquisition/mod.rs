@@ -39,6 +39,7 @@
 //! ```
 
 mod files;
+mod simulation;
 
 use std::sync::Arc;
 
@@ -58,6 +59,9 @@ use crate::recon::{
 use crate::solver::{Control, IterationInfo};
 
 pub use files::{AcquisitionFiles, InputNames};
+pub use simulation::{
+    codes_shape, simulation_meta, write_simulation, CodesFormat, SimulationRequest, SCENES,
+};
 
 /// Seeded codes of one ADC larger than this (as packed bits) are regenerated block by block
 /// on every application ([`StreamedOperator`]) under [`Streaming::Auto`].

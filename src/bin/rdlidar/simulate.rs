@@ -4,12 +4,12 @@ use std::path::PathBuf;
 
 use clap::ValueEnum;
 use ndarray_npy::WritableElement;
-use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
-use rdlidar::io::{self, StagedFile};
-use rdlidar::lidar::{
-    packed_len, simulate, Architecture, Geometry, SceneSpec, SimulationSpec, TileSize,
-    SEEDED_CODES_GENERATOR,
+use rdlidar::acquisition::{
+    codes_shape, write_simulation, CodesFormat as LibCodesFormat, SimulationRequest,
 };
+use rdlidar::io;
+use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
+use rdlidar::lidar::{simulate, Geometry, SimulationSpec, TileSize, SEEDED_CODES_GENERATOR};
 use rdlidar::Real;
 
 use crate::common::{
@@ -40,16 +40,6 @@ pub enum SceneKind {
     Random,
     /// Semi-transparent scene: 1 to 3 returns per pixel (at most K_s), amplitudes in [0.1, 1].
     Transparent,
-}
-
-impl CodesFormat {
-    fn name(self) -> &'static str {
-        match self {
-            CodesFormat::Int8 => "int8",
-            CodesFormat::Packed => "packed",
-            CodesFormat::Seed => "seed",
-        }
-    }
 }
 
 impl SceneKind {
@@ -143,98 +133,48 @@ pub struct SimulateArgs {
     pub codes_format: CodesFormat,
 }
 
-/// Checks the flags that the generators would otherwise reject later, by name, and returns the
-/// specification they select.
-fn spec_of(a: &SimulateArgs, seed: u64) -> CliResult<SimulationSpec> {
-    if let Some(f) = a.lit_fraction {
-        if a.scene != SceneKind::Random {
-            return Err(format!(
-                "--lit-fraction applies only to --scene random, not --scene {}",
-                a.scene.name()
-            )
-            .into());
-        }
-        if !(0.0..=1.0).contains(&f) {
-            return Err(format!("--lit-fraction: must be in [0, 1], got {f}").into());
-        }
-    }
-    if let Some(p) = a.ternary_zero_prob {
-        if !(0.0..1.0).contains(&p) {
-            return Err(format!("--ternary-zero-prob: must be in [0, 1), got {p}").into());
-        }
-    }
-    if let Some(s) = a.snr_db {
-        if !s.is_finite() {
-            return Err(format!("--snr-db: must be finite, got {s}").into());
-        }
-    }
-    if let Some(f) = a.aperture {
-        if !(f > 0.0 && f <= 1.0) {
-            return Err(format!("--aperture: must be in (0, 1], got {f}").into());
-        }
-    }
-    let mut chosen = Vec::new();
-    if a.adcs > 1 {
-        chosen.push(format!("--adcs {}", a.adcs));
-    }
-    if let Some(t) = a.tiles {
-        chosen.push(format!("--tiles {t}"));
-    }
-    if let Some(f) = a.aperture {
-        chosen.push(format!("--aperture {f}"));
-    }
-    if let [first @ .., last] = &chosen[..] {
-        if !first.is_empty() {
-            return Err(format!(
-                "{} and {last} are not supported together: choose one architecture",
-                first.join(", ")
-            )
-            .into());
-        }
-    }
-    if a.codes_format != CodesFormat::Int8 {
-        let name = a.codes_format.name();
-        if a.ternary_zero_prob.is_some() {
-            return Err(format!(
-                "--codes-format {name} holds ±1 codes only, not --ternary-zero-prob codes \
-                 with zeros: use --codes-format int8"
-            )
-            .into());
-        }
-        if a.aperture.is_some() {
-            return Err(format!(
-                "--codes-format {name} holds ±1 codes only, not the zero codes of \
-                 --aperture's masked pixels: use --codes-format int8"
-            )
-            .into());
-        }
-    }
-    let architecture = match (a.adcs, a.tiles, a.aperture) {
-        (_, Some(t), _) => Architecture::Tiles(t),
-        (_, _, Some(f)) => Architecture::Aperture(f),
-        (1, _, _) => Architecture::Single,
-        (n, _, _) => Architecture::MultiAdc(n),
-    };
-    let scene = match a.scene {
-        SceneKind::Paper => SceneSpec::Paper,
-        SceneKind::Random => SceneSpec::Random {
-            lit_fraction: a.lit_fraction.unwrap_or(0.5),
-        },
-        SceneKind::Transparent => SceneSpec::Transparent,
-    };
-    Ok(SimulationSpec {
-        scene,
+/// The library's name of a setting as the flag that gives it: `lit_fraction` → `--lit-fraction`.
+fn flag(name: &str) -> String {
+    format!("--{}", name.replace('_', "-"))
+}
+
+/// The request the flags make.
+fn request_of(a: &SimulateArgs, seed: u64) -> SimulationRequest {
+    SimulationRequest {
+        scene: a.scene.name().into(),
+        lit_fraction: a.lit_fraction,
         ternary_zero_prob: a.ternary_zero_prob,
-        architecture,
         snr_db: a.snr_db,
-        seeded_codes: a.codes_format == CodesFormat::Seed,
-        ..SimulationSpec::new(a.size, a.pulse_len, seed)
-    })
+        adcs: a.adcs,
+        tiles: a.tiles,
+        aperture: a.aperture,
+        codes_format: a.codes_format.into(),
+        ..SimulationRequest::new(a.size, a.pulse_len, seed)
+    }
 }
 
 /// Runs `simulate` (in f64 unless --precision says otherwise).
 pub fn run(a: &SimulateArgs, globals: &Globals) -> CliResult {
-    let spec = spec_of(a, globals.seed())?;
+    let spec = request_of(a, globals.seed()).spec().map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { name, reason } => {
+            let reason = [
+                "lit_fraction",
+                "adcs",
+                "tiles",
+                "aperture",
+                "codes_format",
+                "ternary_zero_prob",
+                "random scene",
+            ]
+            .iter()
+            .fold(reason, |r, n| match *n {
+                "random scene" => r.replace("the random scene", "--scene random"),
+                n => r.replace(&format!("{n} "), &format!("{} ", flag(n))),
+            });
+            format!("{}: {reason}", flag(name))
+        }
+        other => other.to_string(),
+    })?;
     io::check_output_dir(
         &a.out,
         a.force,
@@ -248,103 +188,31 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
     let g = spec.geometry;
     let kp = spec.pulse_len;
     let sim = simulate::<T>(spec).map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { name, reason } => {
-            format!("--{}: {reason}", name.replace('_', "-"))
-        }
+        rdlidar::Error::InvalidParameter { name, reason } => format!("{}: {reason}", flag(name)),
         e @ rdlidar::Error::TooLarge { .. } => e.to_string(),
         other => format!("--scene {}: {other}", a.scene.name()),
     })?;
-    let mut meta = SimulationMeta::new(&sim);
-    let packed = a.codes_format == CodesFormat::Packed;
-    let seeded = a.codes_format == CodesFormat::Seed;
-    meta.codes_format = a.codes_format.name().into();
-    if seeded {
-        meta.codes_generator = Some(SEEDED_CODES_GENERATOR.into());
-        meta.files.codes = "meta.json".into();
-    }
-    let mut json =
-        serde_json::to_string_pretty(&meta).map_err(|e| format!("cannot format meta.json: {e}"))?;
-    json.push('\n');
-    let k = meta.k;
-    let meas_shape = match sim.rows() {
-        None => vec![k],
-        Some(r) => vec![r, k],
-    };
-    let meas = ndarray::ArrayView::from_shape(ndarray::IxDyn(&meas_shape), &sim.meas[..])
-        .map_err(|e| format!("cannot shape the measurements: {e}"))?;
-    let last = if packed { packed_len(k) } else { k };
-    let codes_shape = match spec.architecture {
-        Architecture::MultiAdc(n) => vec![n, g.m, g.n, last],
-        _ => vec![g.m, g.n, last],
-    };
-
-    let dir = &a.out;
-    let created = !dir.exists();
-    if created {
-        std::fs::create_dir(dir)
-            .map_err(|e| format!("{}: cannot create the directory: {e}", dir.display()))?;
-    }
-    let written = (|| -> rdlidar::Result<Vec<PathBuf>> {
-        let [f_scene, f_pulse, f_codes, f_meas, f_meta] = SIMULATION_FILES.map(|f| dir.join(f));
-        let grid = (g.m, g.n);
-        let codes = &sim.code_sets[0];
-        // Each file is complete and synced before the first one is renamed into place; on an
-        // error the staged files are dropped, which removes them.
-        let mut staged: Vec<StagedFile> = vec![
-            io::stage_array(f_scene, sim.scene.data())?,
-            io::stage_array(f_pulse, &ndarray::ArrayView1::from(sim.pulse.as_slice()))?,
-        ];
-        // Seeded codes have no file: meta.json describes them.
-        if !seeded {
-            staged.push(match (spec.architecture, &sim.active, packed) {
-                (Architecture::MultiAdc(_), _, false) => {
-                    io::stage_code_sets(f_codes, grid, &sim.code_sets)?
-                }
-                (Architecture::MultiAdc(_), _, true) => {
-                    io::stage_packed_code_sets(f_codes, grid, &sim.code_sets, true)?
-                }
-                (_, Some(active), _) => io::stage_masked_codes(f_codes, grid, codes, active)?,
-                (_, None, false) => io::stage_codes(f_codes, grid, codes)?,
-                (_, None, true) => io::stage_packed_codes(f_codes, grid, codes)?,
-            });
-        }
-        staged.push(io::stage_array(f_meas, &meas)?);
-        staged.push(io::stage_bytes(f_meta, json.as_bytes())?);
-        io::commit_all(staged)
-    })();
-    if written.is_ok() && seeded {
-        // A codes.npy left by an earlier run (--force) would contradict meta.json.
-        let stale = dir.join(SIMULATION_FILES[2]);
-        if stale.exists() {
-            std::fs::remove_file(&stale)
-                .map_err(|e| format!("{}: cannot remove the old codes: {e}", stale.display()))?;
-        }
-    }
-    if let Err(e) = written {
-        if created {
-            for f in SIMULATION_FILES {
-                let _ = std::fs::remove_file(dir.join(f));
-            }
-            let _ = std::fs::remove_dir(dir);
-        }
-        return Err(e.into());
-    }
+    let format: LibCodesFormat = a.codes_format.into();
+    let meta = write_simulation(&a.out, &sim, format, a.force)?;
     let dt = npy_dtype::<T>();
-    let codes_text = match a.codes_format {
-        CodesFormat::Seed => format!(
+    let meas_shape = match sim.rows() {
+        None => vec![meta.k],
+        Some(r) => vec![r, meta.k],
+    };
+    let codes_text = match codes_shape(&sim, format) {
+        None => format!(
             "codes described by seed {} in meta.json ({SEEDED_CODES_GENERATOR})",
             meta.seeds.codes
         ),
-        CodesFormat::Packed => format!(
-            "codes.npy {} uint8 (packed bits)",
-            io::shape_text(&codes_shape)
-        ),
-        CodesFormat::Int8 => format!("codes.npy {} int8", io::shape_text(&codes_shape)),
+        Some(shape) if format == LibCodesFormat::Packed => {
+            format!("codes.npy {} uint8 (packed bits)", io::shape_text(&shape))
+        }
+        Some(shape) => format!("codes.npy {} int8", io::shape_text(&shape)),
     };
     outln!(
         "wrote {}: scene.npy ({}, {}, {}) {dt}, pulse.npy ({kp},) {dt}, {codes_text}, meas.npy \
          {} {dt}, meta.json",
-        dir.display(),
+        a.out.display(),
         g.m,
         g.n,
         g.ks,
@@ -366,6 +234,16 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
         outln!("architecture: {note}");
     }
     Ok(())
+}
+
+impl From<CodesFormat> for LibCodesFormat {
+    fn from(f: CodesFormat) -> Self {
+        match f {
+            CodesFormat::Int8 => LibCodesFormat::Int8,
+            CodesFormat::Packed => LibCodesFormat::Packed,
+            CodesFormat::Seed => LibCodesFormat::Seed,
+        }
+    }
 }
 
 /// The line that describes a multi-ADC, tiled or coded-aperture acquisition.

@@ -1,0 +1,356 @@
+//! A simulated acquisition as the command line and the Python package ask for it: the request
+//! checked setting by setting ([`SimulationRequest::spec`]), and the files it is written to
+//! ([`write_simulation`]): `scene.npy`, `pulse.npy`, `codes.npy` (int8, packed, or none for
+//! seeded codes), `meas.npy` and `meta.json`.
+
+use std::path::{Path, PathBuf};
+
+use ndarray_npy::WritableElement;
+
+use crate::error::{Error, Result};
+use crate::io::meta::{SimulationMeta, SIMULATION_FILES};
+use crate::io::{self, StagedFile};
+use crate::lidar::{
+    packed_len, Architecture, Geometry, SceneSpec, Simulation, SimulationSpec, TileSize,
+    SEEDED_CODES_GENERATOR,
+};
+use crate::limits;
+use crate::real::Real;
+
+/// How the codes of a simulation are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CodesFormat {
+    /// `codes.npy` int8 (M, N, K) (or (G, M, N, K)), entries −1, 0, +1.
+    #[default]
+    Int8,
+    /// `codes.npy` uint8 (M, N, ⌈K/8⌉) (or (G, M, N, ⌈K/8⌉)) as `np.packbits(S > 0, axis=-1)`
+    /// writes ±1 codes.
+    Packed,
+    /// No codes file: `meta.json` describes ±1 codes by their seed and stream.
+    Seed,
+}
+
+impl CodesFormat {
+    /// Every format, in the order of [`CodesFormat::name`]'s list.
+    pub const ALL: [CodesFormat; 3] = [CodesFormat::Int8, CodesFormat::Packed, CodesFormat::Seed];
+
+    /// "int8", "packed" or "seed".
+    pub fn name(self) -> &'static str {
+        match self {
+            CodesFormat::Int8 => "int8",
+            CodesFormat::Packed => "packed",
+            CodesFormat::Seed => "seed",
+        }
+    }
+}
+
+impl std::str::FromStr for CodesFormat {
+    type Err = Error;
+
+    fn from_str(text: &str) -> Result<Self> {
+        CodesFormat::ALL
+            .into_iter()
+            .find(|f| f.name() == text)
+            .ok_or_else(|| {
+                Error::param(
+                    "codes_format",
+                    format!(
+                        "{} is not one of \"int8\", \"packed\", \"seed\"",
+                        crate::io::meta::excerpt(text)
+                    ),
+                )
+            })
+    }
+}
+
+/// The scenes a simulation generates, by name.
+pub const SCENES: [&str; 3] = ["paper", "random", "transparent"];
+
+/// What a user asks `simulate` for, setting by setting, as the command line and Python take
+/// it. [`SimulationRequest::spec`] checks every setting and their combinations; errors name
+/// the setting (`lit_fraction`, `aperture`, …).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimulationRequest {
+    /// "paper", "random" or "transparent".
+    pub scene: String,
+    /// The grid.
+    pub geometry: Geometry,
+    /// K_p.
+    pub pulse_len: usize,
+    /// The base seed.
+    pub seed: u64,
+    /// A random scene's fraction of lit pixels, in [0, 1] (default 0.5).
+    pub lit_fraction: Option<f64>,
+    /// Ternary codes with zeros of this probability, in [0, 1).
+    pub ternary_zero_prob: Option<f64>,
+    /// Gaussian noise at this SNR (dB).
+    pub snr_db: Option<f64>,
+    /// G ADCs with one code set each (1: one ADC).
+    pub adcs: usize,
+    /// One ADC per tile of this size.
+    pub tiles: Option<TileSize>,
+    /// A coded aperture: the fraction of pixels that reach the ADC, in (0, 1].
+    pub aperture: Option<f64>,
+    /// How the codes are written.
+    pub codes_format: CodesFormat,
+}
+
+impl SimulationRequest {
+    /// The paper's scene on `geometry` with a pulse of `pulse_len` samples from `seed`, one
+    /// ADC, ±1 codes written as int8, no noise.
+    pub fn new(geometry: Geometry, pulse_len: usize, seed: u64) -> Self {
+        SimulationRequest {
+            scene: "paper".into(),
+            geometry,
+            pulse_len,
+            seed,
+            lit_fraction: None,
+            ternary_zero_prob: None,
+            snr_db: None,
+            adcs: 1,
+            tiles: None,
+            aperture: None,
+            codes_format: CodesFormat::Int8,
+        }
+    }
+
+    /// The specification the request selects, every setting checked.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the setting: `scene` unknown; `size` beyond
+    /// [`limits::check_geometry`]; `pulse_len` 0 or above [`limits::MAX_PULSE_LEN`];
+    /// `lit_fraction` outside [0, 1] or given for another scene than random;
+    /// `ternary_zero_prob` outside [0, 1); `snr_db` not finite; `adcs` 0 or above
+    /// [`limits::MAX_ADCS`]; `aperture` outside (0, 1]; several architectures at once;
+    /// `codes_format` packed or seed with codes that have zeros.
+    pub fn spec(&self) -> Result<SimulationSpec> {
+        limits::check_geometry(self.geometry)?;
+        limits::check_count("pulse_len", self.pulse_len, limits::MAX_PULSE_LEN)?;
+        limits::check_count("adcs", self.adcs, limits::MAX_ADCS)?;
+        let scene = match (self.scene.as_str(), self.lit_fraction) {
+            ("paper", None) => SceneSpec::Paper,
+            ("transparent", None) => SceneSpec::Transparent,
+            ("random", f) => SceneSpec::Random {
+                lit_fraction: f.unwrap_or(0.5),
+            },
+            (name @ ("paper" | "transparent"), Some(_)) => {
+                return Err(Error::param(
+                    "lit_fraction",
+                    format!("applies only to the random scene, not to the {name} scene"),
+                ))
+            }
+            (other, _) => {
+                return Err(Error::param(
+                    "scene",
+                    format!(
+                        "{} is not one of \"paper\", \"random\", \"transparent\"",
+                        crate::io::meta::excerpt(other)
+                    ),
+                ))
+            }
+        };
+        if let Some(f) = self.lit_fraction {
+            if !(0.0..=1.0).contains(&f) {
+                return Err(Error::param(
+                    "lit_fraction",
+                    format!("must be in [0, 1], got {f}"),
+                ));
+            }
+        }
+        if let Some(p) = self.ternary_zero_prob {
+            if !(0.0..1.0).contains(&p) {
+                return Err(Error::param(
+                    "ternary_zero_prob",
+                    format!("must be in [0, 1), got {p}"),
+                ));
+            }
+        }
+        if let Some(s) = self.snr_db {
+            if !s.is_finite() {
+                return Err(Error::param("snr_db", format!("must be finite, got {s}")));
+            }
+        }
+        if let Some(f) = self.aperture {
+            if !(f > 0.0 && f <= 1.0) {
+                return Err(Error::param(
+                    "aperture",
+                    format!("must be in (0, 1], got {f}"),
+                ));
+            }
+        }
+        if let Some(t) = self.tiles {
+            let count = t.count(self.geometry.m, self.geometry.n);
+            if count > limits::MAX_ADCS {
+                return Err(Error::param(
+                    "tiles",
+                    format!(
+                        "{t} splits {} into {count} tiles, more than the limit of {} ADCs",
+                        self.geometry,
+                        limits::MAX_ADCS
+                    ),
+                ));
+            }
+        }
+        let mut chosen: Vec<(&'static str, String)> = Vec::new();
+        if self.adcs > 1 {
+            chosen.push(("adcs", format!("adcs {}", self.adcs)));
+        }
+        if let Some(t) = self.tiles {
+            chosen.push(("tiles", format!("tiles {t}")));
+        }
+        if let Some(f) = self.aperture {
+            chosen.push(("aperture", format!("aperture {f}")));
+        }
+        if let [(_, first), .., (name, last)] = &chosen[..] {
+            return Err(Error::param(
+                name,
+                format!("{first} and {last} are not supported together: choose one architecture"),
+            ));
+        }
+        if self.codes_format != CodesFormat::Int8 {
+            let what = match (self.ternary_zero_prob, self.aperture) {
+                (Some(p), _) => Some(format!("the zeros of ternary_zero_prob {p} codes")),
+                (None, Some(f)) => Some(format!("the zero codes of aperture {f}'s blocked pixels")),
+                (None, None) => None,
+            };
+            if let Some(what) = what {
+                return Err(Error::param(
+                    "codes_format",
+                    format!(
+                        "codes_format {} holds ±1 codes only, not {what}: use int8",
+                        self.codes_format.name()
+                    ),
+                ));
+            }
+        }
+        let architecture = match (self.adcs, self.tiles, self.aperture) {
+            (_, Some(t), _) => Architecture::Tiles(t),
+            (_, _, Some(f)) => Architecture::Aperture(f),
+            (1, _, _) => Architecture::Single,
+            (n, _, _) => Architecture::MultiAdc(n),
+        };
+        Ok(SimulationSpec {
+            scene,
+            ternary_zero_prob: self.ternary_zero_prob,
+            architecture,
+            snr_db: self.snr_db,
+            seeded_codes: self.codes_format == CodesFormat::Seed,
+            ..SimulationSpec::new(self.geometry, self.pulse_len, self.seed)
+        })
+    }
+}
+
+/// The description of `sim` as `meta.json` holds it, with its codes written as `format`.
+pub fn simulation_meta<T: Real>(sim: &Simulation<T>, format: CodesFormat) -> SimulationMeta {
+    let mut meta = SimulationMeta::new(sim);
+    meta.codes_format = format.name().into();
+    if format == CodesFormat::Seed {
+        meta.codes_generator = Some(SEEDED_CODES_GENERATOR.into());
+        meta.files.codes = SIMULATION_FILES[4].into();
+    }
+    meta
+}
+
+/// The shape of the codes file of `sim` written as `format` (none for seeded codes).
+pub fn codes_shape<T: Real>(sim: &Simulation<T>, format: CodesFormat) -> Option<Vec<usize>> {
+    let g = sim.spec.geometry;
+    let k = g.samples(sim.spec.pulse_len);
+    let last = match format {
+        CodesFormat::Seed => return None,
+        CodesFormat::Packed => packed_len(k),
+        CodesFormat::Int8 => k,
+    };
+    Some(match sim.spec.architecture {
+        Architecture::MultiAdc(n) => vec![n, g.m, g.n, last],
+        _ => vec![g.m, g.n, last],
+    })
+}
+
+/// Writes `sim` into the folder `dir` (created if needed; an existing non-empty folder only
+/// with `force`, which replaces the five files and leaves others alone): every file is staged
+/// and synced, then all are renamed into place; on an error nothing new is left behind.
+/// Returns the description written to `meta.json`.
+///
+/// # Errors
+/// [`Error::File`] naming the folder or file that cannot be written.
+pub fn write_simulation<T: Real + WritableElement>(
+    dir: &Path,
+    sim: &Simulation<T>,
+    format: CodesFormat,
+    force: bool,
+) -> Result<SimulationMeta> {
+    io::check_output_dir(dir, force, &format!("its {}", SIMULATION_FILES.join(", ")))?;
+    let meta = simulation_meta(sim, format);
+    let mut json = serde_json::to_string_pretty(&meta)
+        .map_err(|e| io::file_error(dir, format!("cannot format meta.json: {e}")))?;
+    json.push('\n');
+    let k = meta.k;
+    let meas_shape = match sim.rows() {
+        None => vec![k],
+        Some(r) => vec![r, k],
+    };
+    let meas = ndarray::ArrayView::from_shape(ndarray::IxDyn(&meas_shape), &sim.meas[..])
+        .map_err(|e| io::file_error(dir, format!("cannot shape the measurements: {e}")))?;
+    let created = !dir.exists();
+    if created {
+        std::fs::create_dir(dir)
+            .map_err(|e| io::file_error(dir, format!("cannot create the directory: {e}")))?;
+    }
+    let g = sim.spec.geometry;
+    let written = (|| -> Result<Vec<PathBuf>> {
+        let [f_scene, f_pulse, f_codes, f_meas, f_meta] = SIMULATION_FILES.map(|f| dir.join(f));
+        let grid = (g.m, g.n);
+        let codes = &sim.code_sets[0];
+        let multi = matches!(sim.spec.architecture, Architecture::MultiAdc(_));
+        let mut staged: Vec<StagedFile> = vec![
+            io::stage_array(f_scene, sim.scene.data())?,
+            io::stage_array(f_pulse, &ndarray::ArrayView1::from(sim.pulse.as_slice()))?,
+        ];
+        // Seeded codes have no file: meta.json describes them.
+        match (format, multi, &sim.active) {
+            (CodesFormat::Seed, _, _) => {}
+            (CodesFormat::Int8, true, _) => {
+                staged.push(io::stage_code_sets(f_codes, grid, &sim.code_sets)?)
+            }
+            (CodesFormat::Packed, true, _) => staged.push(io::stage_packed_code_sets(
+                f_codes,
+                grid,
+                &sim.code_sets,
+                true,
+            )?),
+            (_, false, Some(active)) => {
+                staged.push(io::stage_masked_codes(f_codes, grid, codes, active)?)
+            }
+            (CodesFormat::Int8, false, None) => staged.push(io::stage_codes(f_codes, grid, codes)?),
+            (CodesFormat::Packed, false, None) => {
+                staged.push(io::stage_packed_codes(f_codes, grid, codes)?)
+            }
+        }
+        staged.push(io::stage_array(f_meas, &meas)?);
+        staged.push(io::stage_bytes(f_meta, json.as_bytes())?);
+        io::commit_all(staged)
+    })();
+    match written {
+        Ok(_) => {
+            if format == CodesFormat::Seed {
+                // A codes.npy left by an earlier run (--force) would contradict meta.json.
+                let stale = dir.join(SIMULATION_FILES[2]);
+                if stale.exists() {
+                    std::fs::remove_file(&stale).map_err(|e| {
+                        io::file_error(&stale, format!("cannot remove the old codes: {e}"))
+                    })?;
+                }
+            }
+            Ok(meta)
+        }
+        Err(e) => {
+            if created {
+                for f in SIMULATION_FILES {
+                    let _ = std::fs::remove_file(dir.join(f));
+                }
+                let _ = std::fs::remove_dir(dir);
+            }
+            Err(e)
+        }
+    }
+}
