@@ -86,6 +86,12 @@ pub enum Error {
         /// What to change, e.g. `"lower --size or --pulse-len"`.
         change: String,
     },
+    /// A computation was cancelled by its caller (e.g. Ctrl-C) before it finished.
+    #[error("{what}: cancelled")]
+    Cancelled {
+        /// What was cancelled.
+        what: String,
+    },
     /// The adjoint identity ⟨Ax, y⟩ = ⟨x, A*y⟩ does not hold within tolerance.
     #[error("dot test failed: relative gap {gap:.3e} above tolerance {tolerance:.3e}")]
     DotTestFailed {

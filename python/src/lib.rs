@@ -6,6 +6,7 @@
 //! to call the user's callback and to let Ctrl-C interrupt them. Errors of the library become
 //! `ValueError` with its one-line message; arguments of the wrong type become `TypeError`.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 use numpy::ndarray::Array3;
@@ -23,8 +24,8 @@ use rdlidar::acquisition::{
     SimulationRequest, Streaming,
 };
 use rdlidar::lidar::{
-    simulate as simulate_scene, zero_mean, Architecture, Codes, Geometry, Scene, SimulationSpec,
-    TileSize, DEFAULT_TAU_S,
+    simulate as simulate_scene, zero_mean, Architecture, Cancellable, Codes, Geometry, Scene,
+    SimulationSpec, TileSize, DEFAULT_TAU_S,
 };
 use rdlidar::operator::{BoxedOperator, DotTest, LinearOperator};
 use rdlidar::recon::{compare, Method, ReconstructOptions, TileReconstruction};
@@ -586,12 +587,13 @@ fn report_dict<'py>(py: Python<'py>, r: &Report, d: &Bound<'py, PyDict>) -> PyRe
     Ok(())
 }
 
-/// What Python sees of the iterations of a solver: the callback, Ctrl-C, and the first
-/// exception raised, after which every solver is told to stop (from any worker thread).
+/// What Python sees of the iterations of a solver: the callback, and the first exception
+/// raised (in the callback, or Ctrl-C), after which `cancel` is raised: every solver then ends
+/// within one operator application (see [`Cancellable`]).
 struct PyObserver {
     callback: Option<Py<PyAny>>,
     failure: Mutex<Option<PyErr>>,
-    stopped: std::sync::atomic::AtomicBool,
+    cancel: AtomicBool,
 }
 
 impl PyObserver {
@@ -599,47 +601,77 @@ impl PyObserver {
         PyObserver {
             callback,
             failure: Mutex::new(None),
-            stopped: std::sync::atomic::AtomicBool::new(false),
+            cancel: AtomicBool::new(false),
         }
     }
 
-    /// One iteration (of tile `tile` for a tiled acquisition): takes the GIL back, lets Ctrl-C
-    /// interrupt, and calls the callback with the iteration's numbers; a true return value
-    /// stops the solver, an exception is kept and stops every solver.
+    /// Keeps the first exception and cancels the work.
+    fn fail(&self, e: PyErr) {
+        if let Ok(mut f) = self.failure.lock() {
+            f.get_or_insert(e);
+        }
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// One iteration (of tile `tile` for a tiled acquisition): takes the GIL back and calls the
+    /// callback with the iteration's numbers; a true return value stops the solver, an
+    /// exception is kept and cancels every solver.
     fn observe<T>(&self, tile: Option<usize>, info: &IterationInfo<'_, T>) -> Control {
-        use std::sync::atomic::Ordering;
-        if self.stopped.load(Ordering::Relaxed) {
+        if self.cancel.load(Ordering::Relaxed) {
             return Control::Stop;
         }
+        let Some(cb) = &self.callback else {
+            return Control::Continue;
+        };
         Python::attach(|py| {
             let go_on = (|| -> PyResult<bool> {
-                py.check_signals()?;
-                if let Some(cb) = &self.callback {
-                    let d = PyDict::new(py);
-                    d.set_item("iteration", info.iteration)?;
-                    d.set_item("residual", info.residual)?;
-                    d.set_item("objective", info.objective)?;
-                    d.set_item("change", info.change)?;
-                    d.set_item("seconds", info.elapsed.as_secs_f64())?;
-                    if let Some(t) = tile {
-                        d.set_item("tile", t)?;
-                    }
-                    let stop = cb.call1(py, (d,))?;
-                    return Ok(!stop.bind(py).is_truthy()?);
+                let d = PyDict::new(py);
+                d.set_item("iteration", info.iteration)?;
+                d.set_item("residual", info.residual)?;
+                d.set_item("objective", info.objective)?;
+                d.set_item("change", info.change)?;
+                d.set_item("seconds", info.elapsed.as_secs_f64())?;
+                if let Some(t) = tile {
+                    d.set_item("tile", t)?;
                 }
-                Ok(true)
+                let stop = cb.call1(py, (d,))?;
+                Ok(!stop.bind(py).is_truthy()?)
             })();
             match go_on {
                 Ok(true) => Control::Continue,
                 Ok(false) => Control::Stop,
                 Err(e) => {
-                    self.stopped.store(true, Ordering::Relaxed);
-                    if let Ok(mut f) = self.failure.lock() {
-                        f.get_or_insert(e);
-                    }
+                    self.fail(e);
                     Control::Stop
                 }
             }
+        })
+    }
+
+    /// Runs `work` on a worker thread, the GIL released, while this thread (the interpreter's
+    /// main thread, where Python handles signals) looks for Ctrl-C every 50 ms and cancels the
+    /// work when one comes.
+    fn watch<R: Send>(&self, py: Python<'_>, work: impl FnOnce() -> R + Send) -> R {
+        py.detach(|| {
+            std::thread::scope(|s| {
+                let me = std::thread::current();
+                let worker = s.spawn(move || {
+                    let r = work();
+                    me.unpark();
+                    r
+                });
+                while !worker.is_finished() {
+                    std::thread::park_timeout(std::time::Duration::from_millis(50));
+                    if !self.cancel.load(Ordering::Relaxed) {
+                        if let Err(e) = Python::attach(|py| py.check_signals()) {
+                            self.fail(e);
+                        }
+                    }
+                }
+                worker
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
         })
     }
 
@@ -733,9 +765,10 @@ fn run_fista<'py, T: Real + numpy::Element>(
     let y = measurements::<T>(meas, op.nrows())?;
     let observer = PyObserver::new(callback);
     let mut x = vec![T::zero(); op.ncols()];
-    let result = py.detach(|| {
+    let result = observer.watch(py, || {
         let mut observe = |info: &IterationInfo<'_, T>| observer.observe(None, info);
-        fista_solver(op.as_ref(), &y, &mut x, params, &mut observe)
+        let op = Cancellable::new(op.as_ref(), &observer.cancel);
+        fista_solver(&op, &y, &mut x, params, &mut observe)
     });
     if let Some(e) = observer.failure() {
         return Err(e);
@@ -808,16 +841,17 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
         .map_err(value_error)?;
     let observer = PyObserver::new(callback);
     let tiled = matches!(acq.architecture(), Architecture::Tiles(_));
-    let result = py.detach(|| {
+    let result = observer.watch(py, || {
         let observe = |tile: usize, info: &IterationInfo<'_, T>| {
             observer.observe(tiled.then_some(tile), info)
         };
-        acq.reconstruct(
+        acq.reconstruct_cancellable(
             &y,
             job.method,
             &job.options,
             &observe,
             &|_: &TileReconstruction<T>| {},
+            &observer.cancel,
         )
     });
     if let Some(e) = observer.failure() {

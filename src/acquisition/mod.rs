@@ -41,13 +41,14 @@
 mod files;
 mod simulation;
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::lidar::{
-    multi_adc, packed_len, pixel_groups, tiles, Architecture, CodeAlphabet, Codes, DepthMap,
-    Geometry, LidarOperator, RdOperator, Regime, Scene, SeededCodes, StreamedOperator, TileSize,
-    STREAM_BLOCK_BYTES,
+    multi_adc, packed_len, pixel_groups, tiles, Architecture, Cancellable, CodeAlphabet, Codes,
+    DepthMap, Geometry, LidarOperator, RdOperator, Regime, Scene, SeededCodes, StreamedOperator,
+    TileSize, STREAM_BLOCK_BYTES,
 };
 use crate::limits::{self, MemoryPlan};
 use crate::operator::{BoxedOperator, OperatorExt};
@@ -654,18 +655,47 @@ impl Acquisition {
         observe: &(dyn Fn(usize, &IterationInfo<'_, T>) -> Control + Sync),
         on_tile: &(dyn Fn(&TileReconstruction<T>) + Sync),
     ) -> Result<Reconstructed<T>> {
+        let never = AtomicBool::new(false);
+        self.reconstruct_cancellable(y, method, options, observe, on_tile, &never)
+    }
+
+    /// [`Acquisition::reconstruct`], cancelled by `cancel`: once it is raised (from another
+    /// thread, e.g. on Ctrl-C), every solver ends within one operator application, however
+    /// deep in its work it is, and the result is [`Error::Cancelled`].
+    ///
+    /// # Errors
+    /// As [`Acquisition::reconstruct`]; [`Error::Cancelled`] when `cancel` was raised.
+    pub fn reconstruct_cancellable<T: Real>(
+        &self,
+        y: &[T],
+        method: Method,
+        options: &ReconstructOptions,
+        observe: &(dyn Fn(usize, &IterationInfo<'_, T>) -> Control + Sync),
+        on_tile: &(dyn Fn(&TileReconstruction<T>) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<Reconstructed<T>> {
         self.check_measurements(y, "meas")?;
-        if matches!(self.architecture, Architecture::Tiles(_)) {
+        let cancelled = || {
+            cancel.load(Ordering::Relaxed).then(|| Error::Cancelled {
+                what: format!("reconstruct ({})", method.name()),
+            })
+        };
+        let r = if matches!(self.architecture, Architecture::Tiles(_)) {
             let pulse = pulse_in::<T>(&self.pulse)?;
-            let r = self
-                .tiled(&pulse)?
-                .reconstruct_observed(y, method, options, observe, on_tile)?;
-            return Ok(Reconstructed::Tiled(r));
+            self.tiled(&pulse)?
+                .cancelled_by(cancel)
+                .reconstruct_observed(y, method, options, observe, on_tile)
+                .map(Reconstructed::Tiled)
+        } else {
+            let op = self.lidar_operator::<T>()?;
+            let op = Cancellable::new(op, cancel);
+            let mut observer = |info: &IterationInfo<'_, T>| observe(0, info);
+            reconstruct_observed(&op, y, method, options, &mut observer).map(Reconstructed::Single)
+        };
+        match cancelled() {
+            Some(e) => Err(e),
+            None => r,
         }
-        let op = self.lidar_operator::<T>()?;
-        let mut observer = |info: &IterationInfo<'_, T>| observe(0, info);
-        let r = reconstruct_observed(op.as_ref(), y, method, options, &mut observer)?;
-        Ok(Reconstructed::Single(r))
     }
 }
 

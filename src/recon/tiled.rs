@@ -6,10 +6,14 @@
 
 use std::time::{Duration, Instant};
 
+use std::sync::atomic::AtomicBool;
+
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::lidar::{Codes, DepthMap, Geometry, RdOperator, Regime, Scene, SeededCodes, TileSize};
+use crate::lidar::{
+    Cancellable, Codes, DepthMap, Geometry, RdOperator, Regime, Scene, SeededCodes, TileSize,
+};
 use crate::real::Real;
 
 use super::method::{Method, ReconstructOptions};
@@ -194,6 +198,7 @@ pub struct TiledArray<'a, T> {
     pulse: &'a [T],
     codes: ArrayCodes<'a>,
     tile: TileSize,
+    cancel: Option<&'a AtomicBool>,
 }
 
 impl<'a, T: Real> TiledArray<'a, T> {
@@ -221,7 +226,17 @@ impl<'a, T: Real> TiledArray<'a, T> {
             pulse,
             codes,
             tile,
+            cancel: None,
         })
+    }
+
+    /// The same array whose reconstructions stop within one application once `flag` is
+    /// raised (see [`Cancellable`]).
+    pub fn cancelled_by(self, flag: &'a AtomicBool) -> Self {
+        TiledArray {
+            cancel: Some(flag),
+            ..self
+        }
     }
 
     /// The tiles, row-major.
@@ -314,8 +329,17 @@ impl<'a, T: Real> TiledArray<'a, T> {
                 let op = self.tile_operator(place).map_err(name)?;
                 let rows = &y[place.index * k..(place.index + 1) * k];
                 let mut observer = |info: &IterationInfo<'_, T>| observe(place.index, info);
-                let reconstruction =
-                    reconstruct_observed(&op, rows, method, &inner, &mut observer).map_err(name)?;
+                let reconstruction = match self.cancel {
+                    Some(flag) => reconstruct_observed(
+                        &Cancellable::new(&op, flag),
+                        rows,
+                        method,
+                        &inner,
+                        &mut observer,
+                    ),
+                    None => reconstruct_observed(&op, rows, method, &inner, &mut observer),
+                }
+                .map_err(name)?;
                 let done = TileReconstruction {
                     place: *place,
                     reconstruction,
