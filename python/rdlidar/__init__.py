@@ -85,7 +85,7 @@ def _tiles(tiles) -> Optional[Tuple[int, int]]:
     """``tiles=(A, B)``: a tile of A rows and B columns of pixels, or None."""
     if tiles is None:
         return None
-    if isinstance(tiles, (str, bytes)) or not hasattr(tiles, "__len__") or len(tiles) != 2:
+    if not isinstance(tiles, (tuple, list, np.ndarray)) or len(tiles) != 2:
         raise TypeError(f"tiles: expected (A, B), got {tiles!r:.40}")
     return (_int(tiles[0], "tiles", 1), _int(tiles[1], "tiles", 1))
 
@@ -108,7 +108,8 @@ def _real_array(a: Any, dtype: np.dtype, what: str) -> np.ndarray:
         raise TypeError(f"{what}: complex values are not supported (the operator is real)")
     if arr.dtype.kind not in "fiub":
         raise TypeError(f"{what}: expected a real numeric array, got dtype {arr.dtype}")
-    out = np.ascontiguousarray(arr, dtype=dtype)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        out = np.ascontiguousarray(arr, dtype=dtype)
     if arr.dtype != out.dtype and arr.size:
         with np.errstate(all="ignore"):
             lost = np.isfinite(arr) & ~np.isfinite(out)
@@ -362,7 +363,7 @@ class Simulation:
 
 
 def _size(size) -> Tuple[int, int, int]:
-    if isinstance(size, (str, bytes)) or not hasattr(size, "__len__") or len(size) != 3:
+    if not isinstance(size, (tuple, list, np.ndarray)) or len(size) != 3:
         raise TypeError(f"size: expected (M, N, K_s), got {size!r:.40}")
     return tuple(_int(v, "size", 1) for v in size)
 

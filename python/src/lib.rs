@@ -62,6 +62,8 @@ fn read_code_arrays<T: Real>(
     depth_bins: usize,
     tiles: Option<TileSize>,
 ) -> PyResult<(Geometry, Vec<Arc<Codes>>)> {
+    rdlidar::limits::check_count("depth_bins", depth_bins, rdlidar::limits::MAX_DEPTH_BINS)
+        .map_err(value_error)?;
     let k = pulse_len
         .checked_add(depth_bins - 1)
         .ok_or_else(|| PyValueError::new_err("depth_bins: too large"))?;
@@ -749,20 +751,26 @@ fn fista<'py>(
             ..Stopping::default()
         },
     };
+    let acq = &operator.acq;
     match &operator.op {
-        Op::F32(op) => run_fista(py, op, meas, &params, callback),
-        Op::F64(op) => run_fista(py, op, meas, &params, callback),
+        Op::F32(op) => run_fista(py, acq, op, meas, &params, callback),
+        Op::F64(op) => run_fista(py, acq, op, meas, &params, callback),
     }
 }
 
 fn run_fista<'py, T: Real + numpy::Element>(
     py: Python<'py>,
+    acq: &Acquisition,
     op: &BoxedOperator<T>,
     meas: &Bound<'py, PyAny>,
     params: &FistaParams,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let y = measurements::<T>(meas, op.nrows())?;
+    // FISTA holds a few scenes: the iterate, the momentum point, the gradient.
+    acq.memory_plan::<T>(6)
+        .check("fista", "use a smaller acquisition or free memory")
+        .map_err(value_error)?;
     let observer = PyObserver::new(callback);
     let mut x = vec![T::zero(); op.ncols()];
     let result = observer.watch(py, || {

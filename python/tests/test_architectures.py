@@ -425,10 +425,10 @@ RECONSTRUCTIONS = [
 ]
 
 #: Where the noise-free data determine the scene and auto / model-based find it exactly.
-EXACT = {"one-adc-auto", "f32-one-adc-auto", "f32-adcs2-auto", "one-adc-model-based", "one-adc-packed-auto", "adcs3-auto",
+EXACT = {"one-adc-auto", "one-adc-model-based", "one-adc-packed-auto", "adcs3-auto",
          "adcs2-packed-model-based", "tiles4x4-auto", "tiles5x7-model-based", "seed-auto",
          "seed-adcs2-model-based", "seed-tiles4x4-auto", "aperture-auto",
-         "aperture-model-based"}
+         "aperture-model-based", "f32-one-adc-auto", "f32-adcs2-auto"}
 
 
 @pytest.mark.parametrize("case,kwargs,solver,max_iter,fill,by_path", RECONSTRUCTIONS,

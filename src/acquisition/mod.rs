@@ -13,7 +13,7 @@
 //! | architecture | codes | measurements | operator |
 //! |---|---|---|---|
 //! | one ADC | one code set | (K,) | [`RdOperator`], or [`StreamedOperator`] for large seeded codes |
-//! | G ADCs | G code sets | (G, K) | [`MultiAdcOperator`] |
+//! | G ADCs | G code sets | (G, K) | [`MultiAdcOperator`](crate::lidar::MultiAdcOperator) |
 //! | tiles of A×B pixels | one code set | (T, K) | block-diagonal: one [`RdOperator`] per tile |
 //! | coded aperture | one code set, zero codes for blocked pixels | (K,) | [`RdOperator`] |
 //!

@@ -266,7 +266,8 @@ impl<'a, T: Real> TiledArray<'a, T> {
     ///
     /// # Errors
     /// [`Error::ShapeMismatch`] if `y` does not hold one row of K samples per tile; the errors
-    /// of [`RdOperator::new`] and [`reconstruct`], naming the first tile that failed.
+    /// of [`RdOperator::new`] and [`reconstruct`](super::reconstruct()), naming the first tile
+    /// that failed.
     pub fn reconstruct(
         &self,
         y: &[T],
