@@ -113,27 +113,12 @@ fn read_code_arrays<T: Real>(
     for g in 0..sets {
         let c = match &view {
             ArrayLike::I8(a) => {
-                let flat: Vec<i8> = a
-                    .as_array()
-                    .iter()
-                    .skip(g * per_set)
-                    .take(per_set)
-                    .copied()
-                    .collect();
+                let flat = code_set(a, g, per_set);
                 let v = numpy::ndarray::ArrayView2::from_shape((m * n, k), &flat)
                     .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
                 Codes::from_dense(v)
             }
-            ArrayLike::U8(a) => {
-                let bytes: Vec<u8> = a
-                    .as_array()
-                    .iter()
-                    .skip(g * per_set)
-                    .take(per_set)
-                    .copied()
-                    .collect();
-                Codes::from_packbits(&bytes, m * n, k)
-            }
+            ArrayLike::U8(a) => Codes::from_packbits(&code_set(a, g, per_set), m * n, k),
         }
         .map_err(|e| {
             let at = if sets > 1 {
@@ -146,6 +131,20 @@ fn read_code_arrays<T: Real>(
         out.push(Arc::new(c));
     }
     Ok((geom, out))
+}
+
+/// Code set `g` of an array of code sets of `per_set` values each, copied in C order.
+fn code_set<E: numpy::Element + Copy>(
+    a: &PyReadonlyArrayDyn<'_, E>,
+    g: usize,
+    per_set: usize,
+) -> Vec<E> {
+    a.as_array()
+        .iter()
+        .skip(g * per_set)
+        .take(per_set)
+        .copied()
+        .collect()
 }
 
 /// An int8 or uint8 array of any dimension.

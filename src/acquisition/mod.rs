@@ -885,65 +885,26 @@ mod tests {
         let g = Geometry::new(4, 6, 3).unwrap();
         let p = vec![1.0, 0.0, 1.0, 1.0];
         let k = g.samples(4);
-        let one = Acquisition::new(
-            g,
-            p.clone(),
-            CodeStore::Held(codes(g, k, 1)),
-            None,
-            Streaming::Auto,
-        )
-        .unwrap();
+        let build = |sets: Vec<Arc<Codes>>, tiles, streaming| {
+            Acquisition::new(g, p.clone(), CodeStore::Held(sets), tiles, streaming)
+        };
+        let one = build(codes(g, k, 1), None, Streaming::Auto).unwrap();
         assert_eq!(one.architecture(), Architecture::Single);
         assert_eq!(one.rows(), None);
         assert_eq!(one.measurements(), k);
-        let two = Acquisition::new(
-            g,
-            p.clone(),
-            CodeStore::Held(codes(g, k, 2)),
-            None,
-            Streaming::Auto,
-        )
-        .unwrap();
+        let two = build(codes(g, k, 2), None, Streaming::Auto).unwrap();
         assert_eq!(two.architecture(), Architecture::MultiAdc(2));
         assert_eq!(two.operator::<f64>().unwrap().nrows(), 2 * k);
         let t = TileSize { m: 2, n: 4 };
-        let tiled = Acquisition::new(
-            g,
-            p.clone(),
-            CodeStore::Held(codes(g, k, 1)),
-            Some(t),
-            Streaming::Auto,
-        )
-        .unwrap();
+        let tiled = build(codes(g, k, 1), Some(t), Streaming::Auto).unwrap();
         assert_eq!(tiled.rows(), Some(4));
         assert_eq!(tiled.operator::<f32>().unwrap().nrows(), 4 * k);
         assert!(tiled.lidar_operator::<f32>().is_err());
-        let e = Acquisition::new(
-            g,
-            p.clone(),
-            CodeStore::Held(codes(g, k, 2)),
-            Some(t),
-            Streaming::Auto,
-        )
-        .unwrap_err();
+        let e = build(codes(g, k, 2), Some(t), Streaming::Auto).unwrap_err();
         assert!(e.to_string().contains("tiles"), "{e}");
-        let e = Acquisition::new(
-            g,
-            p.clone(),
-            CodeStore::Held(codes(g, k + 1, 1)),
-            None,
-            Streaming::Auto,
-        )
-        .unwrap_err();
+        let e = build(codes(g, k + 1, 1), None, Streaming::Auto).unwrap_err();
         assert!(e.to_string().contains("code set 0"), "{e}");
-        let e = Acquisition::new(
-            g,
-            p,
-            CodeStore::Held(codes(g, k, 1)),
-            None,
-            Streaming::Always,
-        )
-        .unwrap_err();
+        let e = build(codes(g, k, 1), None, Streaming::Always).unwrap_err();
         assert!(e.to_string().contains("seed"), "{e}");
     }
 
