@@ -47,8 +47,8 @@ use std::sync::Arc;
 use crate::error::{Error, Result};
 use crate::lidar::{
     multi_adc, packed_len, pixel_groups, tiles, Architecture, Cancellable, CodeAlphabet, Codes,
-    DepthMap, Geometry, LidarOperator, RdOperator, Regime, Scene, SeededCodes, StreamedOperator,
-    TileSize, STREAM_BLOCK_BYTES,
+    DepthMap, Geometry, LidarOperator, Pulse, RdOperator, Regime, Scene, SeededCodes,
+    StreamedOperator, TileSize, STREAM_BLOCK_BYTES,
 };
 use crate::limits::{self, MemoryPlan};
 use crate::operator::{BoxedOperator, OperatorExt};
@@ -105,7 +105,8 @@ pub fn count_of(n: usize, one: &str, many: &str) -> String {
     format!("{n} {}", if n == 1 { one } else { many })
 }
 
-/// Checks a pulse: at least one sample, finite, ≥ 0, not all zero.
+/// Checks a pulse: at most [`limits::MAX_PULSE_LEN`] samples, and the rules of
+/// [`Pulse::new`]: at least one sample, finite, ≥ 0, not all zero.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] (`pulse`) naming the first bad sample.
@@ -123,30 +124,8 @@ pub fn check_pulse(pulse: &[f64]) -> Result<()> {
             ),
         ));
     }
-    if let Some(i) = pulse.iter().position(|v| !v.is_finite()) {
-        return Err(Error::param(
-            "pulse",
-            format!("sample {i} is {}, not a finite value", pulse[i]),
-        ));
-    }
-    if let Some(i) = pulse.iter().position(|&v| v < 0.0) {
-        return Err(Error::param(
-            "pulse",
-            format!(
-                "sample {i} is negative ({}): a pulse is light intensity, which must be ≥ 0",
-                pulse[i]
-            ),
-        ));
-    }
-    if pulse.iter().all(|&v| v == 0.0) {
-        return Err(Error::param(
-            "pulse",
-            format!(
-                "all {} samples are zero: nothing is transmitted",
-                pulse.len()
-            ),
-        ));
-    }
+    // The rules themselves are the pulse's own.
+    Pulse::new(pulse.to_vec())?;
     Ok(())
 }
 

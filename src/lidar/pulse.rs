@@ -16,28 +16,33 @@ impl<T: Real> Pulse<T> {
     /// Validates and wraps `p`.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] for an empty or all-zero pulse or a negative value (naming its
-    /// index), [`Error::NonFinite`] for NaN or infinite values.
+    /// [`Error::InvalidParameter`] (`pulse`) for an empty or all-zero pulse, or a negative, NaN
+    /// or infinite value (naming its index): the one place of the rules about pulses.
     pub fn new(p: Vec<T>) -> Result<Self> {
         if p.is_empty() {
             return Err(Error::param("pulse", "must have at least one sample"));
         }
         if let Some(i) = p.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite {
-                what: format!("pulse sample {i} ({})", p[i]),
-            });
+            return Err(Error::param(
+                "pulse",
+                format!("sample at index {i} is {}, not a finite value", p[i]),
+            ));
         }
         if let Some(i) = p.iter().position(|&v| v < T::zero()) {
             return Err(Error::param(
                 "pulse",
                 format!(
-                    "sample {i} is negative ({}); light intensity must be ≥ 0",
+                    "sample at index {i} is negative ({}): a pulse is light intensity, which \
+                     must be ≥ 0",
                     p[i]
                 ),
             ));
         }
         if p.iter().all(|&v| v == T::zero()) {
-            return Err(Error::param("pulse", "is all zero: nothing is transmitted"));
+            return Err(Error::param(
+                "pulse",
+                format!("is all zero ({} samples): nothing is transmitted", p.len()),
+            ));
         }
         Ok(Pulse { p })
     }

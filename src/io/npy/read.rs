@@ -36,24 +36,6 @@ pub fn read_scene<T: Real>(path: impl AsRef<Path>) -> Result<Scene<T>> {
 pub fn read_pulse<T: Real>(path: impl AsRef<Path>) -> Result<Pulse<T>> {
     let path = path.as_ref();
     let a = into_dim::<T, Ix1>(path, read_real(path, "a pulse", 1, "(K_p,)")?)?;
-    if let Some((i, v)) = a.indexed_iter().find(|(_, v)| **v < T::zero()) {
-        return Err(file_error(
-            path,
-            format!(
-                "pulse value {v} at index {i} is negative: a pulse is light intensity, which \
-                 must be ≥ 0"
-            ),
-        ));
-    }
-    if a.iter().all(|v| *v == T::zero()) {
-        return Err(file_error(
-            path,
-            format!(
-                "pulse is all zero ({} samples): nothing is transmitted",
-                a.len()
-            ),
-        ));
-    }
     Pulse::new(a.into_raw_vec_and_offset().0).map_err(|e| file_error(path, e.to_string()))
 }
 
