@@ -54,8 +54,8 @@ use crate::limits::{self, MemoryPlan};
 use crate::operator::{BoxedOperator, OperatorExt};
 use crate::real::Real;
 use crate::recon::{
-    reconstruct_observed, ArrayCodes, Method, ReconstructOptions, Reconstruction,
-    TileReconstruction, TiledArray, TiledReconstruction,
+    reconstruct_observed, tile_places, ArrayCodes, Method, ReconstructOptions, Reconstruction,
+    TilePlace, TileReconstruction, TiledArray, TiledReconstruction,
 };
 use crate::solver::{Control, IterationInfo};
 
@@ -579,6 +579,42 @@ impl Acquisition {
         TiledArray::new(self.geometry, pulse, codes, t)
     }
 
+    /// The tiles of a tiled acquisition, row-major (edge tiles clipped); none otherwise.
+    pub fn tile_places(&self) -> Vec<TilePlace> {
+        match self.architecture {
+            Architecture::Tiles(t) => tile_places(self.geometry, t).unwrap_or_default(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The sub-acquisition of one tile of a tiled acquisition: one ADC summing the tile's
+    /// pixels, on the tile's own grid, with their codes (seeded codes are generated for the
+    /// tile's pixels only). Its measurements are row `place.index` of the whole one's.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`tiles`) when the acquisition is not tiled or `place` is
+    /// not one of its tiles.
+    pub fn tile(&self, place: &TilePlace) -> Result<Acquisition> {
+        if !self.tile_places().contains(place) {
+            return Err(Error::param(
+                "tiles",
+                format!("tile {} is not a tile of this acquisition", place.index),
+            ));
+        }
+        let pixels = place.pixels(self.geometry);
+        let codes = match &self.codes {
+            CodeStore::Held(sets) => sets[0].select_pixels(&pixels)?,
+            CodeStore::Seeded(s) => s.select(0, &pixels)?,
+        };
+        Acquisition::new(
+            place.geometry,
+            self.pulse.clone(),
+            CodeStore::Held(vec![Arc::new(codes)]),
+            None,
+            Streaming::Never,
+        )
+    }
+
     /// Checks measurements for this acquisition: [`Acquisition::measurements`] values (rows
     /// of K samples, one per ADC), every one finite. `what` names them (`meas`, a flag).
     ///
@@ -885,6 +921,44 @@ mod tests {
         assert!(e.to_string().contains("code set 0"), "{e}");
         let e = build(codes(g, k, 1), None, Streaming::Always).unwrap_err();
         assert!(e.to_string().contains("seed"), "{e}");
+    }
+
+    #[test]
+    fn a_tile_is_the_acquisition_of_its_rows() {
+        let g = Geometry::new(6, 7, 3).unwrap();
+        let p = vec![1.0, 0.0, 1.0, 1.0, 0.5];
+        let k = g.samples(p.len());
+        let t = TileSize { m: 4, n: 3 };
+        let seeded = CodeStore::Seeded(SeededCodes::new(5, 1, g.pixels(), k).unwrap());
+        for store in [CodeStore::Held(codes(g, k, 1)), seeded] {
+            let acq = Acquisition::new(g, p.clone(), store, Some(t), Streaming::Auto).unwrap();
+            let x: Vec<f64> = (0..g.voxels())
+                .map(|i| ((i * 7) % 5) as f64 - 1.5)
+                .collect();
+            let mut y = vec![0.0; acq.measurements()];
+            acq.operator::<f64>().unwrap().apply(&x, &mut y);
+            let places = acq.tile_places();
+            assert_eq!(places.len(), 6);
+            for place in &places {
+                let sub = acq.tile(place).unwrap();
+                assert_eq!(sub.architecture(), Architecture::Single);
+                assert_eq!(sub.geometry(), place.geometry);
+                let xs: Vec<f64> = place
+                    .pixels(g)
+                    .iter()
+                    .flat_map(|&px| x[px * 3..px * 3 + 3].to_vec())
+                    .collect();
+                let mut ys = vec![0.0; k];
+                sub.operator::<f64>().unwrap().apply(&xs, &mut ys);
+                let rows = &y[place.index * k..(place.index + 1) * k];
+                for (a, b) in ys.iter().zip(rows) {
+                    assert!((a - b).abs() <= 1e-12 * (1.0 + b.abs()), "{a} vs {b}");
+                }
+            }
+        }
+        let one =
+            Acquisition::new(g, p, CodeStore::Held(codes(g, k, 1)), None, Streaming::Auto).unwrap();
+        assert!(one.tile_places().is_empty());
     }
 
     #[test]
