@@ -416,6 +416,11 @@ def simulate(
         raise TypeError(f"codes_format: expected one of {', '.join(CODES_FORMATS)}")
     if out is not None and not isinstance(out, (str, os.PathLike)):
         raise TypeError(f"out: expected a path, got {type(out).__name__}")
+    if out is not None and not force and os.path.isdir(out) and os.listdir(out):
+        raise ValueError(
+            f"out: {os.fspath(out)!r:.60} exists and is not empty; pass force=True to replace its "
+            "scene.npy, pulse.npy, codes.npy, meas.npy and meta.json"
+        )
     d = _rdlidar.simulate(
         scene,
         _size(size),

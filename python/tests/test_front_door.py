@@ -512,3 +512,16 @@ def test_bad_architecture_requests_of_simulate_are_refused():
         with pytest.raises(TypeError) as e:
             rdlidar.simulate(**base, **kwargs)
         one_line(e, name)
+
+
+def test_simulate_out_is_refused_when_not_empty_unless_forced(tmp_path):
+    base = dict(size=(4, 4, 3), pulse_len=20)
+    (tmp_path / "keep.txt").write_text("mine")
+    with pytest.raises(ValueError) as e:
+        rdlidar.simulate(**base, out=tmp_path)
+    one_line(e, "out", "force=True")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.txt"]
+    sim = rdlidar.simulate(**base, out=tmp_path, force=True)
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["codes.npy", "keep.txt", "meas.npy", "meta.json", "pulse.npy", "scene.npy"]
+    assert sim.files == str(tmp_path)
