@@ -71,8 +71,8 @@ pub enum Error {
     #[error(
         "{request}: needs {} ({needed} bytes: {parts}), more than the {} of memory available; \
          {change}",
-        crate::limits::bytes_text(*needed),
-        crate::limits::bytes_text(*available)
+        crate::units::bytes(*needed),
+        crate::units::bytes(*available)
     )]
     TooLarge {
         /// What was asked, with its flags, e.g. `"--size 100000x100000x100 --pulse-len 10"`.

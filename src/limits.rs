@@ -19,7 +19,6 @@
 //! [`Error::TooLarge`] stating the bytes needed, what they are for, and what to change.
 
 use crate::error::{Error, Result};
-use crate::lidar::Geometry;
 
 /// The most pixel rows, and the most pixel columns, of a scene.
 pub const MAX_SIDE: usize = 4096;
@@ -34,21 +33,22 @@ pub const MAX_THREADS: usize = 1024;
 /// The most timed repeats of one measurement.
 pub const MAX_REPEATS: usize = 10_000;
 
-/// Checks a scene grid against [`MAX_SIDE`] and [`MAX_DEPTH_BINS`].
+/// Checks a scene grid of `m`×`n` pixels and `ks` depth bins against [`MAX_SIDE`] and
+/// [`MAX_DEPTH_BINS`] (`Geometry::check_bounds` in `lidar` calls it).
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] `size` naming the bound exceeded.
-pub fn check_geometry(g: Geometry) -> Result<()> {
-    if g.m > MAX_SIDE || g.n > MAX_SIDE {
+pub fn check_grid(m: usize, n: usize, ks: usize) -> Result<()> {
+    if m > MAX_SIDE || n > MAX_SIDE {
         return Err(Error::param(
             "size",
-            format!("{g}: at most {MAX_SIDE} pixel rows and {MAX_SIDE} columns"),
+            format!("{m}x{n}x{ks}: at most {MAX_SIDE} pixel rows and {MAX_SIDE} columns"),
         ));
     }
-    if g.ks > MAX_DEPTH_BINS {
+    if ks > MAX_DEPTH_BINS {
         return Err(Error::param(
             "size",
-            format!("{g}: at most {MAX_DEPTH_BINS} depth bins"),
+            format!("{m}x{n}x{ks}: at most {MAX_DEPTH_BINS} depth bins"),
         ));
     }
     Ok(())
@@ -101,7 +101,7 @@ impl MemoryPlan {
         parts.sort_by_key(|p| std::cmp::Reverse(p.1));
         parts
             .iter()
-            .map(|(what, b)| format!("{what} {}", bytes_text(*b)))
+            .map(|(what, b)| format!("{what} {}", crate::units::bytes(*b)))
             .collect::<Vec<_>>()
             .join(", ")
     }
@@ -124,22 +124,6 @@ impl MemoryPlan {
             }),
             _ => Ok(()),
         }
-    }
-}
-
-/// Bytes as text: `512 B`, `1.5 kB`, `3.2 GB`, `8.0 TB` (powers of 1000).
-pub fn bytes_text(bytes: u128) -> String {
-    let units = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
-    let mut v = bytes as f64;
-    let mut u = 0;
-    while v >= 1000.0 && u + 1 < units.len() {
-        v /= 1000.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{bytes} B")
-    } else {
-        format!("{v:.1} {}", units[u])
     }
 }
 
@@ -208,7 +192,7 @@ mod tests {
         assert_eq!(p.total(), u128::MAX);
         let small = MemoryPlan::new().add("scene", 1000, 8).add("codes", 3, 1);
         assert_eq!(small.total(), 8003);
-        assert_eq!(small.describe(), "scene 8.0 kB, codes 3 B");
+        assert_eq!(small.describe(), "scene 8 kB, codes 3 B");
     }
 
     #[test]
@@ -218,8 +202,6 @@ mod tests {
         assert_eq!(parse_bytes("42"), Some(42));
         assert_eq!(parse_bytes("-1"), None);
         assert_eq!(parse_bytes("lots"), None);
-        assert_eq!(bytes_text(999), "999 B");
-        assert_eq!(bytes_text(8_000_000_000_000), "8.0 TB");
     }
 
     #[test]
@@ -231,9 +213,9 @@ mod tests {
 
     #[test]
     fn bounds_are_checked() {
-        assert!(check_geometry(Geometry::new(4096, 4096, 65_536).unwrap()).is_ok());
-        assert!(check_geometry(Geometry::new(4097, 1, 1).unwrap()).is_err());
-        assert!(check_geometry(Geometry::new(1, 1, 65_537).unwrap()).is_err());
+        assert!(check_grid(4096, 4096, 65_536).is_ok());
+        assert!(check_grid(4097, 1, 1).is_err());
+        assert!(check_grid(1, 1, 65_537).is_err());
         assert!(check_count("threads", 1024, MAX_THREADS).is_ok());
         assert!(check_count("threads", 1025, MAX_THREADS).is_err());
         assert!(check_count("repeats", 0, MAX_REPEATS).is_err());

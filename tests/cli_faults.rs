@@ -278,7 +278,7 @@ fn requests_beyond_the_memory_are_refused_before_allocating() {
         "--out",
         s(&out),
     ]);
-    assert_one_line_error(&res, &["bytes", "scene", "more than the 1.0 MB", "--size"]);
+    assert_one_line_error(&res, &["bytes", "scene", "more than the 1.05 MB", "--size"]);
     assert!(tmp.listing().is_empty());
     let res = limited(&["bench", "--size", "100x100x40", "--pulse-len", "30000"]);
     assert_one_line_error(&res, &["bench --size 100x100x40", "bytes", "--pulse-len"]);

@@ -71,7 +71,7 @@ fn the_paper_experiment_is_compressive_with_its_physical_scales() {
     ));
 
     let m = &b.memory;
-    assert_eq!(m.codes_packed_bytes, 1250 * 30_039); // 37.5 MB (DESIGN.md §5)
+    assert_eq!(m.codes_packed_bytes, 1250 * 30_039); // 37.5 MB: one bit per ±1 code
     assert_eq!(m.codes_int8_bytes, 10_000 * 30_039);
     // ⌈30 039 / 8⌉ = 3755 bytes per pixel.
     assert_eq!(m.codes_packbits_bytes, 10_000 * 3755);

@@ -1,6 +1,6 @@
-//! The frame behaviour of DESIGN.md §4: as K_p grows, AᵀA/(K_p/4) tends to blockdiag(I + 11ᵀ) for a
-//! 0/1 pulse, Ãᵀ A/(K_p/4) to I with the zero-mean pulse Ã, and AᵀA/K_p to I for a ±1 pulse — with
-//! a deviation shrinking like 1/√K_p.
+//! The frame behaviour of docs/math.md §4: as K_p grows, AᵀA/(K_p/4) tends to
+//! blockdiag(I + 11ᵀ) for a 0/1 pulse, Ãᵀ A/(K_p/4) to I with the zero-mean pulse Ã, and AᵀA/K_p
+//! to I for a ±1 pulse — with a deviation shrinking like 1/√K_p.
 
 use std::sync::Arc;
 

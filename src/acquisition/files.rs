@@ -148,7 +148,7 @@ impl AcquisitionFiles {
         };
         let (m, n) = grid_of_codes;
         let geometry = Geometry::new(m, n, depth_bins)
-            .and_then(|g| limits::check_geometry(g).map(|()| g))
+            .and_then(|g| g.check_bounds().map(|()| g))
             .map_err(|e| fail(format!("the codes' grid: {e}")))?;
         if let Some(want) = grid {
             if want != (m, n) {

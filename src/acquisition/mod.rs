@@ -219,7 +219,7 @@ impl Acquisition {
     ///
     /// # Errors
     /// [`Error::InvalidParameter`]: the pulse ([`check_pulse`]); a geometry beyond
-    /// [`limits::check_geometry`] (`size`); no code sets, more than [`limits::MAX_ADCS`], or
+    /// [`Geometry::check_bounds`](crate::lidar::Geometry::check_bounds) (`size`); no code sets, more than [`limits::MAX_ADCS`], or
     /// code sets without M·N pixels and K samples (`codes`); tiles with several code sets, or
     /// more tiles than [`limits::MAX_ADCS`] (`tiles`); streaming asked of codes that are not
     /// seeded codes of one ADC (`stream`).
@@ -231,7 +231,7 @@ impl Acquisition {
         streaming: Streaming,
     ) -> Result<Self> {
         check_pulse(&pulse)?;
-        limits::check_geometry(geometry)?;
+        geometry.check_bounds()?;
         let k = geometry.samples(pulse.len());
         let sets = match &codes {
             CodeStore::Held(sets) => {

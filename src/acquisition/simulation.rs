@@ -118,13 +118,13 @@ impl SimulationRequest {
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] naming the setting: `scene` unknown; `size` beyond
-    /// [`limits::check_geometry`]; `pulse_len` 0 or above [`limits::MAX_PULSE_LEN`];
+    /// [`Geometry::check_bounds`](crate::lidar::Geometry::check_bounds); `pulse_len` 0 or above [`limits::MAX_PULSE_LEN`];
     /// `lit_fraction` outside [0, 1] or given for another scene than random;
     /// `ternary_zero_prob` outside [0, 1); `snr_db` not finite; `adcs` 0 or above
     /// [`limits::MAX_ADCS`]; `aperture` outside (0, 1]; several architectures at once;
     /// `codes_format` packed or seed with codes that have zeros.
     pub fn spec(&self) -> Result<SimulationSpec> {
-        limits::check_geometry(self.geometry)?;
+        self.geometry.check_bounds()?;
         limits::check_count("pulse_len", self.pulse_len, limits::MAX_PULSE_LEN)?;
         limits::check_count("adcs", self.adcs, limits::MAX_ADCS)?;
         let scene = match (self.scene.as_str(), self.lit_fraction) {

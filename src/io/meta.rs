@@ -1,4 +1,5 @@
-//! `meta.json`, the description `rdlidar simulate` writes next to its arrays (DESIGN.md §8):
+//! `meta.json`, the description `rdlidar simulate` writes next to its arrays (docs/guide.md shows
+//! one, docs/architectures.md the fields of codes described by a seed):
 //! the geometry, the seeds of every draw, the scene, the codes, the architecture, the regime
 //! and the noise.
 
@@ -339,7 +340,7 @@ pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
     }
     let GeometryMeta { m, n, ks } = meta.geometry;
     let geometry = Geometry::new(m, n, ks)
-        .and_then(|g| limits::check_geometry(g).map(|()| g))
+        .and_then(|g| g.check_bounds().map(|()| g))
         .map_err(|_| {
             fail(format!(
                 "geometry {m} × {n} × {ks} is outside the bounds: 1 to {} pixel rows and \

@@ -1,4 +1,5 @@
-//! Files: the `.npy` arrays other tools exchange with the crate (DESIGN.md §8) and atomic writes.
+//! Files: the `.npy` arrays other tools exchange with the crate (their shapes and dtypes are in
+//! docs/guide.md, Conventions, and docs/architectures.md) and atomic writes.
 //!
 //! Every problem with a file is reported as [`Error::File`], whose message
 //! starts with the file's path.

@@ -4,7 +4,7 @@
 //!
 //! Once the flag is raised every application writes zeros, which makes the rest of a solver's
 //! work take no time; what the solver returns then means nothing, and the caller that raised
-//! the flag discards it ([`Acquisition::reconstruct`](crate::acquisition::Acquisition::reconstruct)
+//! the flag discards it (`Acquisition::reconstruct_cancellable` of `rdlidar::acquisition`
 //! returns [`Error::Cancelled`](crate::Error::Cancelled)).
 //!
 //! ```

@@ -31,6 +31,16 @@ impl Geometry {
         Ok(Geometry { m, n, ks })
     }
 
+    /// Checks the grid against the bounds of [`crate::limits`]: at most
+    /// [`MAX_SIDE`](crate::limits::MAX_SIDE) pixel rows and columns and
+    /// [`MAX_DEPTH_BINS`](crate::limits::MAX_DEPTH_BINS) depth bins.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] `size` naming the bound exceeded.
+    pub fn check_bounds(&self) -> Result<()> {
+        crate::limits::check_grid(self.m, self.n, self.ks)
+    }
+
     /// Parses `"MxNxKS"` (e.g. `"100x100x40"`).
     ///
     /// # Errors

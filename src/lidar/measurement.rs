@@ -38,7 +38,8 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
     fn apply_sparse(&self, x: &[T], y: &mut [T]);
 
     /// The same operator with the zero-mean pulse p − mean(p): its adjoint is the debiased
-    /// backprojection (DESIGN.md §4).
+    /// backprojection, without the floor the pulse's mean puts under every bin of a lit pixel
+    /// (docs/math.md §4).
     fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_>;
 
     /// Per pixel, whether it reaches an ADC (some code of it is nonzero); `None` when every

@@ -124,7 +124,7 @@ impl<T: Real> Pulse<T> {
     }
 
     /// p − mean(p) on the pulse's support: the zero-mean pulse of the debiased matched filter
-    /// (DESIGN.md §4). Not a physical pulse, so returned as a plain vector.
+    /// (docs/math.md §4). Not a physical pulse, so returned as a plain vector.
     pub fn zero_mean(&self) -> Vec<T> {
         zero_mean(&self.p)
     }
@@ -141,7 +141,7 @@ fn mean<T: Real>(p: &[T]) -> f64 {
     p.iter().map(|v| v.as_f64() / n).sum()
 }
 
-/// p − mean(p): the zero-mean pulse of the debiased matched filter (DESIGN.md §4), for any
+/// p − mean(p): the zero-mean pulse of the debiased matched filter (docs/math.md §4), for any
 /// pulse samples (an empty slice gives an empty vector). Finite for finite samples of one sign.
 pub fn zero_mean<T: Real>(p: &[T]) -> Vec<T> {
     let m = mean(p);

@@ -100,7 +100,7 @@ fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
 }
 
 /// The measurement operator of the random-demodulation lidar, computed directly from bit-packed
-/// codes (DESIGN.md §5):
+/// codes (the fast formulation of docs/math.md §5, implemented as docs/lidar.md describes):
 ///
 /// `y[k] = Σ_p s[p, k] · Σ_j x[p, j] · p[k − j]`,  k < K = K_p + K_s − 1,
 ///
@@ -238,8 +238,9 @@ impl<T: Real> RdOperator<T> {
     }
 
     /// The operator with the zero-mean pulse p − mean(p) ([`zero_mean`](super::zero_mean)),
-    /// sharing the codes: its adjoint is the debiased backprojection (DESIGN.md §4), whose
-    /// per-pixel Gram block tends to (K_p/4)·I. Built on the first call and kept.
+    /// sharing the codes: its adjoint is the debiased backprojection, whose per-pixel Gram
+    /// block tends to (K_p/4)·I instead of the plain adjoint's (K_p/4)·(I + 11ᵀ) (docs/math.md
+    /// §4). Built on the first call and kept.
     pub fn zero_mean(&self) -> &RdOperator<T> {
         self.twin.get_or_init(|| {
             let p = super::zero_mean(&self.pulse);

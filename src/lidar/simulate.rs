@@ -188,7 +188,7 @@ impl SimulationSpec {
     /// `adcs`).
     pub fn memory_plan<T: Real>(&self) -> Result<MemoryPlan> {
         let g = self.geometry;
-        limits::check_geometry(g)?;
+        g.check_bounds()?;
         limits::check_count("pulse_len", self.pulse_len, limits::MAX_PULSE_LEN)?;
         let sets = self.architecture.code_sets();
         limits::check_count("adcs", sets, limits::MAX_ADCS)?;

@@ -167,7 +167,7 @@ impl<T: Real> VoxelOperator<T> for RdOperator<T> {
         self.geometry().ks
     }
 
-    /// The debiased correlation: the adjoint with the zero-mean pulse (DESIGN.md §4).
+    /// The debiased correlation: the adjoint with the zero-mean pulse (docs/math.md §4).
     fn correlate(&self, r: &[T], u: &mut [T]) {
         self.apply_adjoint_debiased(r, u)
     }

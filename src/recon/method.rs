@@ -13,7 +13,8 @@ use crate::solver::{
     ReflectorAmpParams, Report, Restart, StepRule, Stopping, TvDepthParams,
 };
 
-use super::peaks::backproject;
+use super::names::by_name;
+use super::peaks::{backproject, PeakThreshold};
 use super::pursuit::{support_pursuit, PURSUIT_ROUNDS};
 use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
 
@@ -129,79 +130,6 @@ impl FromStr for Method {
     /// [`Error::InvalidParameter`] (`method`) listing the valid names.
     fn from_str(s: &str) -> Result<Self> {
         by_name(s, &Method::NAMES, &Method::ALL, "method", "method")
-    }
-}
-
-/// The entry of `all` whose command-line name in `names` (same order) is `s`.
-///
-/// # Errors
-/// [`Error::InvalidParameter`] (`param`) naming the unknown `what` and listing the valid names.
-fn by_name<V: Copy>(
-    s: &str,
-    names: &[&str],
-    all: &[V],
-    param: &'static str,
-    what: &str,
-) -> Result<V> {
-    names
-        .iter()
-        .position(|&n| n == s)
-        .map(|i| all[i])
-        .ok_or_else(|| {
-            Error::param(
-                param,
-                format!("unknown {what} {s:?}; expected one of {}", names.join(", ")),
-            )
-        })
-}
-
-/// How the backprojections decide which per-pixel peaks are returns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum PeakThreshold {
-    /// The paper's rule (default): a pixel's peak counts when it reaches 0.4 times the 99th
-    /// percentile of all per-pixel peaks ([`PAPER_FRACTION`](super::PAPER_FRACTION) of the
-    /// [`PAPER_QUANTILE`](super::PAPER_QUANTILE)): a level relative to the strong returns, which
-    /// reproduces the quality of the paper's Fig. 2 on scenes with many lit pixels. It assumes
-    /// the scene has returns: on an empty scene it keeps the strongest cross-talk.
-    #[default]
-    Paper,
-    /// Median + 3σ of all backprojected values (σ = 1.4826·MAD): a level relative to the
-    /// cross-talk and noise floor. It keeps fewer false returns on noisy or sparsely lit scenes
-    /// and misses more weak ones.
-    Robust,
-}
-
-impl PeakThreshold {
-    /// The command-line names, in the order of [`PeakThreshold::ALL`].
-    pub const NAMES: [&'static str; 2] = ["paper", "robust"];
-    /// Every rule.
-    pub const ALL: [PeakThreshold; 2] = [PeakThreshold::Paper, PeakThreshold::Robust];
-
-    /// The command-line name.
-    pub fn name(self) -> &'static str {
-        let i = PeakThreshold::ALL
-            .iter()
-            .position(|&t| t == self)
-            .expect("ALL lists every rule");
-        PeakThreshold::NAMES[i]
-    }
-}
-
-impl FromStr for PeakThreshold {
-    type Err = Error;
-
-    /// Parses `paper` or `robust`.
-    ///
-    /// # Errors
-    /// [`Error::InvalidParameter`] (`threshold`) listing the valid names.
-    fn from_str(s: &str) -> Result<Self> {
-        by_name(
-            s,
-            &PeakThreshold::NAMES,
-            &PeakThreshold::ALL,
-            "threshold",
-            "threshold rule",
-        )
     }
 }
 

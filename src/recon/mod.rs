@@ -6,6 +6,7 @@
 mod auto;
 mod method;
 mod metrics;
+mod names;
 mod peaks;
 mod pursuit;
 mod reconstruct;
@@ -13,13 +14,11 @@ mod refit;
 mod tiled;
 
 pub use auto::{Stage, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
-pub use method::{
-    estimate_returns, Method, PeakThreshold, ReconstructOptions, MAX_RETURNS_ESTIMATE,
-};
+pub use method::{estimate_returns, Method, ReconstructOptions, MAX_RETURNS_ESTIMATE};
 pub use metrics::{
     compare, compare_depth, compare_observed, relative_error, Metrics, ObservedComparison,
 };
-pub use peaks::{PAPER_FRACTION, PAPER_QUANTILE};
+pub use peaks::{PeakThreshold, PAPER_FRACTION, PAPER_QUANTILE};
 pub use pursuit::explained_tolerance;
 pub use reconstruct::{
     is_piecewise_smooth, reconstruct, reconstruct_observed, Reconstruction, SMOOTH_BINS,

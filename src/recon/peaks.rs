@@ -6,7 +6,59 @@ use crate::lidar::{Geometry, LidarOperator};
 use crate::real::Real;
 use crate::solver::{backprojection, Backprojection, Threshold};
 
-use super::method::PeakThreshold;
+use std::str::FromStr;
+
+use super::names::by_name;
+
+/// How the backprojections decide which per-pixel peaks are returns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum PeakThreshold {
+    /// The paper's rule (default): a pixel's peak counts when it reaches 0.4 times the 99th
+    /// percentile of all per-pixel peaks ([`PAPER_FRACTION`] of the
+    /// [`PAPER_QUANTILE`]): a level relative to the strong returns, which
+    /// reproduces the quality of the paper's Fig. 2 on scenes with many lit pixels. It assumes
+    /// the scene has returns: on an empty scene it keeps the strongest cross-talk.
+    #[default]
+    Paper,
+    /// Median + 3σ of all backprojected values (σ = 1.4826·MAD): a level relative to the
+    /// cross-talk and noise floor. It keeps fewer false returns on noisy or sparsely lit scenes
+    /// and misses more weak ones.
+    Robust,
+}
+
+impl PeakThreshold {
+    /// The command-line names, in the order of [`PeakThreshold::ALL`].
+    pub const NAMES: [&'static str; 2] = ["paper", "robust"];
+    /// Every rule.
+    pub const ALL: [PeakThreshold; 2] = [PeakThreshold::Paper, PeakThreshold::Robust];
+
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        let i = PeakThreshold::ALL
+            .iter()
+            .position(|&t| t == self)
+            .expect("ALL lists every rule");
+        PeakThreshold::NAMES[i]
+    }
+}
+
+impl FromStr for PeakThreshold {
+    type Err = Error;
+
+    /// Parses `paper` or `robust`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`threshold`) listing the valid names.
+    fn from_str(s: &str) -> Result<Self> {
+        by_name(
+            s,
+            &PeakThreshold::NAMES,
+            &PeakThreshold::ALL,
+            "threshold",
+            "threshold rule",
+        )
+    }
+}
 
 /// How many robust standard deviations above the median a value must be to count as a return
 /// ([`Threshold::Auto`]).

@@ -3,8 +3,9 @@
 //! fused operator, and the estimated time of one application of the operator.
 //!
 //! The time estimate is a throughput model. The dense forward and the adjoint of
-//! [`RdOperator`] do the work of a matrix product of 2·M·N·K·K_s flops (DESIGN.md §5); the
-//! sparse forward over one return in every pixel costs M·N·K_p voxel-samples. A
+//! [`RdOperator`] do the work of a matrix product of 2·M·N·K·K_s flops (the matrix form
+//! Z = S₂ᵀX₂, X̃₂ = S₂W of docs/math.md §5); the sparse forward over one return in every
+//! pixel costs M·N·K_p voxel-samples. A
 //! [`Throughput`] gives the rate of each, either the documented rates measured on the
 //! reference machine ([`Throughput::documented`]) or rates measured on this machine by timing
 //! a small problem ([`Throughput::calibrate`]); the estimate is work divided by rate.

@@ -69,38 +69,7 @@ pub fn seconds(v: f64) -> String {
     format!("{x:.decimals$} {unit}")
 }
 
-/// Bytes with a decimal prefix and three significant digits (`"37.5 MB"`, `"1.2 GB"`).
-pub fn bytes(b: u64) -> String {
-    if b < 1000 {
-        return format!("{b} B");
-    }
-    let x = b as f64;
-    let (scale, prefix) = [
-        (1e18, "E"),
-        (1e15, "P"),
-        (1e12, "T"),
-        (1e9, "G"),
-        (1e6, "M"),
-    ]
-    .into_iter()
-    .find(|(s, _)| x >= *s * 0.9995)
-    .unwrap_or((1e3, "k"));
-    let y = x / scale;
-    let decimals = if y >= 99.95 {
-        0
-    } else if y >= 9.995 {
-        1
-    } else {
-        2
-    };
-    let text = format!("{y:.decimals$}");
-    let text = if text.contains('.') {
-        text.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        text
-    };
-    format!("{text} {prefix}B")
-}
+pub use crate::units::bytes;
 
 /// A rate of frames per second: four significant digits below 100, whole frames up to 10⁷,
 /// scientific notation above.
@@ -141,9 +110,5 @@ mod tests {
         assert_eq!(si(1.199_169_832, "m"), "1.199 m");
         assert_eq!(si(200e-12, "s"), "200 ps");
         assert_eq!(si(0.0921, "s"), "92.1 ms");
-        assert_eq!(bytes(37_548_750), "37.5 MB");
-        assert_eq!(bytes(1_201_560_000), "1.2 GB");
-        assert_eq!(bytes(120_000), "120 kB");
-        assert_eq!(bytes(999), "999 B");
     }
 }

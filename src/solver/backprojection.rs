@@ -63,7 +63,7 @@ pub struct BackprojectionResult<T> {
 /// threshold.
 ///
 /// Pass the operator whose adjoint is the matched filter: for the lidar, the plain operator gives
-/// the paper's backprojection, its zero-mean-pulse version the debiased one (DESIGN.md §4).
+/// the paper's backprojection, its zero-mean-pulse version the debiased one (docs/math.md §4).
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] if `column_len` is zero or does not divide the number of unknowns,

@@ -121,7 +121,7 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
 }
 
 fn print_table(report: &BenchReport, g: Geometry) -> CliResult {
-    // The equivalent dense matrix product costs 2·M·N·K·K_s flops (DESIGN.md §5).
+    // The equivalent dense matrix product costs 2·M·N·K·K_s flops (docs/math.md §5).
     let flops = 2.0 * g.pixels() as f64 * report.samples as f64 * g.ks as f64;
     outln!(
         "rdlidar bench: paper scene {g} ({} nonzero voxels), K_p {}, K {}, {}, binary codes",

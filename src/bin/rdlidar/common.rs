@@ -205,10 +205,10 @@ pub fn parse_depth_bins(text: &str) -> Result<usize, String> {
     parse_bounded(text, limits::MAX_DEPTH_BINS)
 }
 
-/// A grid `MxNxKS` within [`limits::check_geometry`].
+/// A grid `MxNxKS` within [`Geometry::check_bounds`].
 pub fn parse_size(text: &str) -> Result<Geometry, String> {
     let g = Geometry::parse(text).map_err(|e| e.to_string())?;
-    limits::check_geometry(g).map_err(|e| match e {
+    g.check_bounds().map_err(|e| match e {
         rdlidar::Error::InvalidParameter { reason, .. } => reason,
         other => other.to_string(),
     })?;

@@ -1,4 +1,5 @@
-//! NumPy `.npy` arrays: the scene, pulse, codes, measurements and depth files of DESIGN.md §8.
+//! NumPy `.npy` arrays: the scene, pulse, codes, measurements and depth files other tools read
+//! and write (docs/guide.md, Conventions).
 //!
 //! | file         | shape       | dtype read                       | dtype written      |
 //! |--------------|-------------|----------------------------------|--------------------|

@@ -173,7 +173,7 @@ impl ExperimentConfig {
         }
         let g = self.size;
         Geometry::new(g.m, g.n, g.ks)?;
-        crate::limits::check_geometry(g)?;
+        g.check_bounds()?;
         if g.ks > i32::MAX as usize {
             return Err(Error::param("size", format!("{g}: too many depth bins")));
         }

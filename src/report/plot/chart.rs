@@ -7,7 +7,6 @@ use crate::error::{Error, Result};
 
 use super::axis::Axis;
 use super::colour::Rgb;
-use super::draw::render;
 use super::Bitmap;
 
 /// The shape of a series' markers.
@@ -111,7 +110,7 @@ impl SeriesStyle {
 ///
 /// Its colour and marker default to the `i`-th entries of [`super::PALETTE`] and
 /// [`Marker::ALL`] for the `i`-th series of the chart; its style defaults to the plot's
-/// ([`scatter_plot`]: markers, [`line_plot`]: lines and markers).
+/// ([`scatter_plot`](super::scatter_plot): markers, [`line_plot`](super::line_plot): lines and markers).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Series {
     pub(super) name: String,
@@ -187,7 +186,7 @@ pub(super) struct RefLine {
     pub label: String,
 }
 
-/// The description of an XY chart, drawn by [`scatter_plot`] or [`line_plot`].
+/// The description of an XY chart, drawn by [`scatter_plot`](super::scatter_plot) or [`line_plot`](super::line_plot).
 ///
 /// ```
 /// use rdlidar::report::plot::{line_plot, Chart, Series};
@@ -369,29 +368,6 @@ impl ChartFigure {
     pub fn save_png(&self, path: impl AsRef<Path>) -> Result<()> {
         self.image.save_png(path.as_ref())
     }
-}
-
-/// Draws `chart` with markers only, except for series styled otherwise (e.g. "time against
-/// error" for every run of a set of solvers).
-///
-/// # Errors
-/// [`Error::InvalidParameter`] for a chart without any point (`series`), a zero or oversized
-/// image (`width`, `height`) or one too small for its labels (`size`), an axis range that is
-/// reversed, empty or not positive on a logarithmic axis (`x_range`, `y_range`), a point or
-/// reference line at a value ≤ 0 on a logarithmic axis (`log_x`, `log_y`), or data spanning
-/// more than `f64` can hold with margins (`range`); [`Error::NonFinite`] for a NaN or infinite
-/// coordinate.
-pub fn scatter_plot(chart: &Chart) -> Result<ChartFigure> {
-    render(chart, SeriesStyle::Markers)
-}
-
-/// Draws `chart` with each series' points joined by lines in the order given, and marked (e.g.
-/// "error against pulse length", with the critical length as a vertical line).
-///
-/// # Errors
-/// As [`scatter_plot`].
-pub fn line_plot(chart: &Chart) -> Result<ChartFigure> {
-    render(chart, SeriesStyle::LinesAndMarkers)
 }
 
 /// Everything a chart needs, checked.

@@ -157,6 +157,29 @@ struct Plan<'a> {
     ref_w: Vec<i32>,
 }
 
+/// Draws `chart` with markers only, except for series styled otherwise (e.g. "time against
+/// error" for every run of a set of solvers).
+///
+/// # Errors
+/// [`Error::InvalidParameter`] for a chart without any point (`series`), a zero or oversized
+/// image (`width`, `height`) or one too small for its labels (`size`), an axis range that is
+/// reversed, empty or not positive on a logarithmic axis (`x_range`, `y_range`), a point or
+/// reference line at a value ≤ 0 on a logarithmic axis (`log_x`, `log_y`), or data spanning
+/// more than `f64` can hold with margins (`range`); [`Error::NonFinite`] for a NaN or infinite
+/// coordinate.
+pub fn scatter_plot(chart: &Chart) -> Result<ChartFigure> {
+    render(chart, SeriesStyle::Markers)
+}
+
+/// Draws `chart` with each series' points joined by lines in the order given, and marked (e.g.
+/// "error against pulse length", with the critical length as a vertical line).
+///
+/// # Errors
+/// As [`scatter_plot`].
+pub fn line_plot(chart: &Chart) -> Result<ChartFigure> {
+    render(chart, SeriesStyle::LinesAndMarkers)
+}
+
 /// Draws `chart`, each series by default in `default_style`.
 pub(super) fn render(chart: &Chart, default_style: SeriesStyle) -> Result<ChartFigure> {
     validate(chart)?;

@@ -56,11 +56,10 @@ use plotters::prelude::{BitMapBackend, IntoDrawingArea, WHITE};
 
 use crate::error::{Error, Result};
 
-pub use chart::{
-    line_plot, scatter_plot, Chart, ChartFigure, LegendPosition, Marker, Series, SeriesStyle,
-};
+pub use chart::{Chart, ChartFigure, LegendPosition, Marker, Series, SeriesStyle};
 pub use colour::{series_colour, viridis, Rgb, PALETTE};
 pub use depth::{depth_panels, DepthFigure, DepthOptions, NO_RETURN_COLOUR, UNOBSERVED_COLOUR};
+pub use draw::{line_plot, scatter_plot};
 
 /// The largest side of a figure, in pixels.
 pub const MAX_SIDE: usize = 16_384;
