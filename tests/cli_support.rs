@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use ndarray::Array1;
+
 /// Runs `rdlidar` with `args`.
 pub fn rdlidar(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rdlidar"))
@@ -116,4 +118,33 @@ pub fn npy_bytes(dict: &str, data: &[u8]) -> Vec<u8> {
     bytes.extend_from_slice(header.as_bytes());
     bytes.extend_from_slice(data);
     bytes
+}
+
+/// Simulates the 4x5x6 paper problem with a pulse of 50 into `dir`, noise-free.
+pub(crate) fn simulate_small(dir: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "4x5x6",
+        "--pulse-len",
+        "50",
+        "--seed",
+        "7",
+        "--out",
+        s(dir),
+    ];
+    args.extend_from_slice(extra);
+    let out = rdlidar(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+/// Largest |a − b| over the largest |b|.
+pub(crate) fn max_rel_diff(a: &Array1<f64>, b: &Array1<f64>) -> f64 {
+    let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
 }

@@ -13,7 +13,7 @@ use crate::solver::{
     ReflectorAmpParams, Report, Restart, StepRule, Stopping, TvDepthParams,
 };
 
-use super::names::by_name;
+use super::names::{by_name, name_of, names, values};
 use super::peaks::{backproject, PeakThreshold};
 use super::pursuit::{support_pursuit, PURSUIT_ROUNDS};
 use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
@@ -75,43 +75,31 @@ pub enum Method {
 }
 
 impl Method {
-    /// Every method, in the order of the command-line help.
-    pub const ALL: [Method; 11] = [
-        Method::Backprojection,
-        Method::BackprojectionDebiased,
-        Method::Cgls,
-        Method::Fista,
-        Method::Iht,
-        Method::Cosamp,
-        Method::SupportLs,
-        Method::Amp,
-        Method::ModelBased,
-        Method::Tv,
-        Method::Auto,
+    /// Every method with its command-line name, in the order of the command-line help: the
+    /// one table of methods.
+    const TABLE: [(Method, &'static str); 11] = [
+        (Method::Backprojection, "backprojection"),
+        (Method::BackprojectionDebiased, "backprojection-debiased"),
+        (Method::Cgls, "cgls"),
+        (Method::Fista, "fista"),
+        (Method::Iht, "iht"),
+        (Method::Cosamp, "cosamp"),
+        (Method::SupportLs, "support-ls"),
+        (Method::Amp, "amp"),
+        (Method::ModelBased, "model-based"),
+        (Method::Tv, "tv"),
+        (Method::Auto, "auto"),
     ];
 
+    /// Every method, in the order of the command-line help.
+    pub const ALL: [Method; 11] = values(&Method::TABLE);
+
     /// The command-line names of [`Method::ALL`].
-    pub const NAMES: [&'static str; 11] = [
-        "backprojection",
-        "backprojection-debiased",
-        "cgls",
-        "fista",
-        "iht",
-        "cosamp",
-        "support-ls",
-        "amp",
-        "model-based",
-        "tv",
-        "auto",
-    ];
+    pub const NAMES: [&'static str; 11] = names(&Method::TABLE);
 
     /// The command-line name (`"model-based"`, …).
     pub fn name(self) -> &'static str {
-        let i = Method::ALL
-            .iter()
-            .position(|&m| m == self)
-            .expect("ALL lists every method");
-        Method::NAMES[i]
+        name_of(&Method::TABLE, self)
     }
 }
 
@@ -129,7 +117,7 @@ impl FromStr for Method {
     /// # Errors
     /// [`Error::InvalidParameter`] (`method`) listing the valid names.
     fn from_str(s: &str) -> Result<Self> {
-        by_name(s, &Method::NAMES, &Method::ALL, "method", "method")
+        by_name(s, &Method::TABLE, "method", "method")
     }
 }
 
@@ -208,6 +196,21 @@ impl<T> crate::solver::Observer<T> for NoProgress {
 /// Two observers in turn: the run stops when either asks to.
 struct Tee<'a, T>(&'a mut dyn Observer<T>, &'a mut dyn Observer<T>);
 
+/// Runs `solve` with a progress bar of `max_iter` iterations (when `options` ask for one)
+/// seeing every iteration before `observer`, and clears the bar after: the one progress chain
+/// of every iterative method.
+fn with_progress<T, R>(
+    max_iter: usize,
+    options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
+    solve: impl FnOnce(&mut dyn Observer<T>) -> R,
+) -> R {
+    let mut progress = progress_bar(max_iter, options);
+    let r = solve(&mut Tee(&mut progress, observer));
+    progress.finish();
+    r
+}
+
 impl<T> Observer<T> for Tee<'_, T> {
     fn observe(&mut self, info: &IterationInfo<'_, T>) -> Control {
         let a = self.0.observe(info);
@@ -266,16 +269,9 @@ pub(super) fn run<T: Real>(
                     options,
                 ),
             };
-            let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = cgls(
-                op,
-                y,
-                &mut x,
-                &params,
-                &mut Tee(&mut progress, &mut *observer),
-            )?;
-            progress.finish();
-            r
+            with_progress(params.stopping.max_iter, options, observer, |obs| {
+                cgls(op, y, &mut x, &params, obs)
+            })?
         }
         Method::Fista => {
             let params = FistaParams {
@@ -306,15 +302,9 @@ pub(super) fn run<T: Real>(
                     options,
                 ),
             };
-            let mut progress = progress_bar(params.stopping.max_iter, options);
-            let mut r = fista(
-                op,
-                y,
-                &mut x,
-                &params,
-                &mut Tee(&mut progress, &mut *observer),
-            )?;
-            progress.finish();
+            let mut r = with_progress(params.stopping.max_iter, options, observer, |obs| {
+                fista(op, y, &mut x, &params, obs)
+            })?;
             if options.debias {
                 if let Some(refit) = refit_support(op, y, &mut x, REFIT_MAX_ITER, REFIT_ROUNDS)? {
                     r.absorb_applies(&refit);
@@ -335,16 +325,9 @@ pub(super) fn run<T: Real>(
                 ),
                 ..d
             };
-            let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = iht(
-                op,
-                y,
-                &mut x,
-                &params,
-                &mut Tee(&mut progress, &mut *observer),
-            )?;
-            progress.finish();
-            r
+            with_progress(params.stopping.max_iter, options, observer, |obs| {
+                iht(op, y, &mut x, &params, obs)
+            })?
         }
         Method::Cosamp => {
             let s = estimate_sparsity(op, y)?;
@@ -366,16 +349,9 @@ pub(super) fn run<T: Real>(
                 },
                 ..d
             };
-            let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = cosamp(
-                op,
-                y,
-                &mut x,
-                &params,
-                &mut Tee(&mut progress, &mut *observer),
-            )?;
-            progress.finish();
-            r
+            with_progress(params.stopping.max_iter, options, observer, |obs| {
+                cosamp(op, y, &mut x, &params, obs)
+            })?
         }
         Method::SupportLs => {
             let rounds = options.max_iter.unwrap_or(PURSUIT_ROUNDS);
@@ -389,16 +365,9 @@ pub(super) fn run<T: Real>(
                 stopping: stopping(d.stopping, options),
                 ..d
             };
-            let mut progress = progress_bar(params.stopping.max_iter, options);
-            let r = reflector_amp(
-                op,
-                y,
-                &mut x,
-                &params,
-                &mut Tee(&mut progress, &mut *observer),
-            )?;
-            progress.finish();
-            r
+            with_progress(params.stopping.max_iter, options, observer, |obs| {
+                reflector_amp(op, y, &mut x, &params, obs)
+            })?
         }
         Method::ModelBased => {
             let mut params = model_params(options);
@@ -412,15 +381,9 @@ pub(super) fn run<T: Real>(
                     k
                 }
             };
-            let mut progress = progress_bar(params.stopping.max_iter, options);
-            let mut r = model_based(
-                op,
-                y,
-                &mut x,
-                &params,
-                &mut Tee(&mut progress, &mut *observer),
-            )?;
-            progress.finish();
+            let mut r = with_progress(params.stopping.max_iter, options, observer, |obs| {
+                model_based(op, y, &mut x, &params, obs)
+            })?;
             if let Some(p) = pursuit {
                 r.absorb_applies(&p);
             }
@@ -431,17 +394,9 @@ pub(super) fn run<T: Real>(
                 model: model_params(options),
                 ..TvDepthParams::default()
             };
-            let mut progress = progress_bar(params.model.stopping.max_iter, options);
-            let r = tv_depth(
-                op,
-                (g.m, g.n),
-                y,
-                &mut x,
-                &params,
-                &mut Tee(&mut progress, &mut *observer),
-            )?;
-            progress.finish();
-            r
+            with_progress(params.model.stopping.max_iter, options, observer, |obs| {
+                tv_depth(op, (g.m, g.n), y, &mut x, &params, obs)
+            })?
         }
         Method::Auto => unreachable!("Auto is resolved before run"),
     };

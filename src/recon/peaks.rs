@@ -8,7 +8,7 @@ use crate::solver::{backprojection, Backprojection, Threshold};
 
 use std::str::FromStr;
 
-use super::names::by_name;
+use super::names::{by_name, name_of, names, values};
 
 /// How the backprojections decide which per-pixel peaks are returns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -27,18 +27,19 @@ pub enum PeakThreshold {
 }
 
 impl PeakThreshold {
+    /// Every rule with its command-line name: the one table of rules.
+    const TABLE: [(PeakThreshold, &'static str); 2] = [
+        (PeakThreshold::Paper, "paper"),
+        (PeakThreshold::Robust, "robust"),
+    ];
     /// The command-line names, in the order of [`PeakThreshold::ALL`].
-    pub const NAMES: [&'static str; 2] = ["paper", "robust"];
+    pub const NAMES: [&'static str; 2] = names(&PeakThreshold::TABLE);
     /// Every rule.
-    pub const ALL: [PeakThreshold; 2] = [PeakThreshold::Paper, PeakThreshold::Robust];
+    pub const ALL: [PeakThreshold; 2] = values(&PeakThreshold::TABLE);
 
     /// The command-line name.
     pub fn name(self) -> &'static str {
-        let i = PeakThreshold::ALL
-            .iter()
-            .position(|&t| t == self)
-            .expect("ALL lists every rule");
-        PeakThreshold::NAMES[i]
+        name_of(&PeakThreshold::TABLE, self)
     }
 }
 
@@ -50,13 +51,7 @@ impl FromStr for PeakThreshold {
     /// # Errors
     /// [`Error::InvalidParameter`] (`threshold`) listing the valid names.
     fn from_str(s: &str) -> Result<Self> {
-        by_name(
-            s,
-            &PeakThreshold::NAMES,
-            &PeakThreshold::ALL,
-            "threshold",
-            "threshold rule",
-        )
+        by_name(s, &PeakThreshold::TABLE, "threshold", "threshold rule")
     }
 }
 

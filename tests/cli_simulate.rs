@@ -1,0 +1,212 @@
+//! `rdlidar simulate`, run as a user would: the five files it writes, their shapes, dtypes and
+//! metadata, its options, and the errors that leave nothing behind.
+
+use ndarray::{Array1, Array3};
+use ndarray_npy::read_npy;
+
+use crate::cli_support::{listing, rdlidar, s, simulate_small, stderr, TempDir};
+
+#[test]
+fn simulate_writes_the_five_files_with_their_shapes_dtypes_and_metadata() {
+    let tmp = TempDir::new("simulate");
+    let dir = tmp.path("run");
+    simulate_small(&dir, &[]);
+    assert_eq!(
+        listing(&dir),
+        [
+            "codes.npy",
+            "meas.npy",
+            "meta.json",
+            "pulse.npy",
+            "scene.npy"
+        ],
+        "only the five outputs, no temporary files"
+    );
+    let scene: Array3<f64> = read_npy(dir.join("scene.npy")).unwrap();
+    assert_eq!(scene.dim(), (4, 5, 6));
+    let pulse: Array1<f64> = read_npy(dir.join("pulse.npy")).unwrap();
+    assert_eq!(pulse.len(), 50);
+    assert!(pulse.iter().all(|&v| v == 0.0 || v == 1.0));
+    let codes: Array3<i8> = read_npy(dir.join("codes.npy")).unwrap();
+    assert_eq!(codes.dim(), (4, 5, 55));
+    assert!(codes.iter().all(|&v| v == 1 || v == -1));
+    let meas: Array1<f64> = read_npy(dir.join("meas.npy")).unwrap();
+    assert_eq!(meas.len(), 55);
+    assert!(meas.iter().any(|&v| v != 0.0));
+
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
+    assert_eq!(meta["geometry"]["m"], 4);
+    assert_eq!(meta["geometry"]["n"], 5);
+    assert_eq!(meta["geometry"]["ks"], 6);
+    assert_eq!(meta["pulse_len"], 50);
+    assert_eq!(meta["k"], 55);
+    assert_eq!(meta["seed"], 7);
+    assert_eq!(meta["seeds"]["pulse"], 7);
+    assert_eq!(meta["seeds"]["codes"], 8);
+    assert_eq!(meta["seeds"]["noise"], 9);
+    assert_eq!(meta["scene"]["kind"], "paper");
+    assert_eq!(meta["code_alphabet"], "binary");
+    assert_eq!(meta["regime"], "compressive");
+    assert_eq!(meta["critical_pulse_len"], 19 * 6 + 1);
+    assert_eq!(meta["noise"]["model"], "none");
+    assert_eq!(meta["prng"], "ChaCha8");
+    assert_eq!(meta["crate_version"], env!("CARGO_PKG_VERSION"));
+    assert_eq!(meta["precision"], "f64");
+}
+
+#[test]
+fn simulate_is_reproducible_and_honours_precision_alphabet_and_noise() {
+    let tmp = TempDir::new("simulate-options");
+    let (a, b) = (tmp.path("a"), tmp.path("b"));
+    let extra = [
+        "--precision",
+        "f32",
+        "--ternary-zero-prob",
+        "0.3",
+        "--snr-db",
+        "-3",
+    ];
+    simulate_small(&a, &extra);
+    simulate_small(&b, &extra);
+    for f in [
+        "scene.npy",
+        "pulse.npy",
+        "codes.npy",
+        "meas.npy",
+        "meta.json",
+    ] {
+        assert_eq!(
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap(),
+            "{f} differs between two runs"
+        );
+    }
+    let scene: Array3<f32> = read_npy(a.join("scene.npy")).unwrap();
+    assert_eq!(scene.dim(), (4, 5, 6));
+    let codes: Array3<i8> = read_npy(a.join("codes.npy")).unwrap();
+    assert!(codes.iter().any(|&v| v == 0));
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("meta.json")).unwrap()).unwrap();
+    assert_eq!(meta["code_alphabet"], "ternary");
+    assert_eq!(meta["noise"]["model"], "gaussian");
+    assert_eq!(meta["noise"]["snr_db"], -3.0);
+    assert!(meta["noise"]["sigma"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn simulate_random_and_transparent_scenes() {
+    let tmp = TempDir::new("simulate-scenes");
+    for (kind, extra) in [
+        ("random", vec!["--lit-fraction", "0.4"]),
+        ("transparent", vec![]),
+    ] {
+        let dir = tmp.path(kind);
+        let mut args = vec![
+            "simulate",
+            "--scene",
+            kind,
+            "--size",
+            "3x4x8",
+            "--pulse-len",
+            "30",
+            "--out",
+            s(&dir),
+        ];
+        args.extend(extra);
+        let out = rdlidar(&args);
+        assert!(out.status.success(), "{kind}: {}", stderr(&out));
+        let meta: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
+        assert_eq!(meta["scene"]["kind"], kind);
+        assert_eq!(meta["seeds"]["scene"], 3);
+    }
+}
+
+#[test]
+fn simulate_refuses_a_non_empty_directory_without_force() {
+    let tmp = TempDir::new("no-force");
+    let dir = tmp.path("run");
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::write(dir.join("keep.txt"), "mine").unwrap();
+    let args = [
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "4x5x6",
+        "--pulse-len",
+        "50",
+        "--out",
+        s(&dir),
+    ];
+    let out = rdlidar(&args);
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains(s(&dir)) && err.contains("--force"), "{err}");
+    assert_eq!(listing(&dir), ["keep.txt"]);
+
+    // With --force the five files are written and other files are left alone.
+    let mut forced = args.to_vec();
+    forced.push("--force");
+    let out = rdlidar(&forced);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(
+        listing(&dir),
+        [
+            "codes.npy",
+            "keep.txt",
+            "meas.npy",
+            "meta.json",
+            "pulse.npy",
+            "scene.npy"
+        ]
+    );
+}
+
+#[test]
+fn simulate_errors_leave_nothing_behind() {
+    let tmp = TempDir::new("sim-errors");
+    let dir = tmp.path("run");
+    for (extra, needle) in [
+        (vec!["--lit-fraction", "0.3"], "--lit-fraction"),
+        (
+            vec!["--ternary-zero-prob", "1.5", "--scene", "random"],
+            "--ternary-zero-prob",
+        ),
+    ] {
+        let mut args = vec![
+            "simulate",
+            "--size",
+            "4x5x6",
+            "--pulse-len",
+            "50",
+            "--out",
+            s(&dir),
+        ];
+        if !extra.contains(&"--scene") {
+            args.extend(["--scene", "paper"]);
+        }
+        args.extend(extra);
+        let out = rdlidar(&args);
+        assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+        assert!(stderr(&out).contains(needle), "{}", stderr(&out));
+        assert!(!dir.exists());
+    }
+    // A missing parent directory.
+    let deep = tmp.path("a").join("b");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "4x5x6",
+        "--pulse-len",
+        "50",
+        "--out",
+        s(&deep),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains(s(&deep)), "{}", stderr(&out));
+    assert!(listing(&tmp.0).is_empty());
+}

@@ -1,0 +1,191 @@
+//! The file readers and writers of `rdlidar::io`: codes, code sets, masked codes, depth maps and
+//! measurement rows round trip through `.npy` and are checked when read, and atomic writes leave
+//! the destination whole.
+
+use ndarray::{Array1, Array3};
+use ndarray_npy::{read_npy, write_npy};
+
+use crate::cli_support::{listing, s, TempDir};
+
+#[test]
+fn io_codes_and_depth_round_trip_through_npy() {
+    use rdlidar::io::{read_codes, read_depth, write_codes, write_depth, ShapeExpectation};
+    use rdlidar::lidar::Codes;
+    let tmp = TempDir::new("io-roundtrip");
+    let expect = ShapeExpectation {
+        pulse_len: 9,
+        depth_bins: 4,
+        grid: Some((3, 5)),
+    };
+    for codes in [
+        Codes::random_binary(15, 12, 1).unwrap(),
+        Codes::random_ternary(15, 12, 0.4, 2).unwrap(),
+    ] {
+        let p = tmp.path("codes.npy");
+        write_codes(&p, (3, 5), &codes).unwrap();
+        let dense: Array3<i8> = read_npy(&p).unwrap();
+        assert_eq!(dense.dim(), (3, 5, 12));
+        let ((m, n), back) = read_codes(&p, &expect).unwrap();
+        assert_eq!((m, n), (3, 5));
+        assert_eq!(back.to_dense(), codes.to_dense());
+    }
+    let depth = ndarray::array![[0i32, -1, 3], [2, 1, -1]];
+    let p = tmp.path("depth.npy");
+    write_depth(&p, &depth).unwrap();
+    assert_eq!(read_depth(&p, Some(4)).unwrap(), depth);
+    let err = read_depth(&p, Some(3)).unwrap_err().to_string();
+    assert!(
+        err.contains(s(&p)) && err.contains("depth bin 3 at index (0, 2)"),
+        "{err}"
+    );
+    let err = read_depth(tmp.path("codes.npy"), None)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("dtype int8") && err.contains("int32"), "{err}");
+}
+
+#[test]
+fn io_atomic_writes_leave_the_destination_whole() {
+    use rdlidar::io::{write_atomic, StagedFile};
+    let tmp = TempDir::new("io-atomic");
+    let dest = tmp.path("data.bin");
+    std::fs::write(&dest, b"old").unwrap();
+    // A writer that fails part-way: the old contents survive, no temporary file remains.
+    let err = write_atomic(&dest, |w| {
+        use std::io::Write;
+        w.write_all(b"partial").unwrap();
+        Err(rdlidar::Error::File {
+            path: "data.bin".into(),
+            reason: "simulated failure".into(),
+        })
+    });
+    assert!(err.is_err());
+    assert_eq!(std::fs::read(&dest).unwrap(), b"old");
+    assert_eq!(listing(&tmp.0), ["data.bin"]);
+    // A staged file dropped without commit leaves nothing.
+    {
+        let mut f = StagedFile::create(tmp.path("other.bin")).unwrap();
+        std::io::Write::write_all(f.writer(), b"abc").unwrap();
+    }
+    assert_eq!(listing(&tmp.0), ["data.bin"]);
+    // A committed one replaces the destination.
+    write_atomic(&dest, |w| {
+        std::io::Write::write_all(w, b"new").map_err(|e| rdlidar::Error::File {
+            path: "data.bin".into(),
+            reason: e.to_string(),
+        })
+    })
+    .unwrap();
+    assert_eq!(std::fs::read(&dest).unwrap(), b"new");
+    assert_eq!(listing(&tmp.0), ["data.bin"]);
+}
+
+#[test]
+fn io_code_sets_and_measurement_rows_are_read_only_when_asked() {
+    use ndarray::{Array2, Array4};
+    use rdlidar::io::{
+        read_code_sets, read_codes, read_measurement_rows, read_measurements, write_code_sets,
+        write_masked_codes, ShapeExpectation,
+    };
+    use rdlidar::lidar::Codes;
+    let tmp = TempDir::new("io-arch");
+    let expect = ShapeExpectation {
+        pulse_len: 9,
+        depth_bins: 4,
+        grid: Some((3, 5)),
+    };
+    let sets = vec![
+        Codes::random_binary(15, 12, 1).unwrap(),
+        Codes::random_ternary(15, 12, 0.4, 2).unwrap(),
+    ];
+    let p = tmp.path("sets.npy");
+    write_code_sets(&p, (3, 5), &sets).unwrap();
+    let dense: Array4<i8> = read_npy(&p).unwrap();
+    assert_eq!(dense.dim(), (2, 3, 5, 12));
+    let ((m, n), back) = read_code_sets(&p, &expect).unwrap();
+    assert_eq!((m, n), (3, 5));
+    assert_eq!(back.len(), 2);
+    for (a, b) in back.iter().zip(&sets) {
+        assert_eq!(a.to_dense(), b.to_dense());
+    }
+    // The (M, N, K) reader does not take G sets, nor the (G, M, N, K) reader one set.
+    let err = read_codes(&p, &expect).unwrap_err().to_string();
+    assert!(err.contains(s(&p)) && err.contains("3 dimensions"), "{err}");
+    let one = tmp.path("one.npy");
+    rdlidar::io::write_codes(&one, (3, 5), &sets[0]).unwrap();
+    let err = read_code_sets(&one, &expect).unwrap_err().to_string();
+    assert!(
+        err.contains(s(&one)) && err.contains("4 dimensions"),
+        "{err}"
+    );
+    // Values, grid and K are checked in every set.
+    let mut bad = dense.clone();
+    bad[[1, 2, 4, 7]] = 3;
+    write_npy(&p, &bad).unwrap();
+    let err = read_code_sets(&p, &expect).unwrap_err().to_string();
+    assert!(
+        err.contains("value 3") && err.contains("(1, 2, 4, 7)"),
+        "{err}"
+    );
+    let wrong_k = ShapeExpectation {
+        pulse_len: 10,
+        ..expect
+    };
+    write_code_sets(&p, (3, 5), &sets).unwrap();
+    let err = read_code_sets(&p, &wrong_k).unwrap_err().to_string();
+    assert!(
+        err.contains("K = K_p + K_s − 1") && err.contains("found 12"),
+        "{err}"
+    );
+    assert!(write_code_sets::<Codes>(&p, (3, 5), &[]).is_err());
+    assert!(write_code_sets(&p, (5, 5), &sets).is_err());
+
+    // Masked codes: zero rows outside the active pixels.
+    let masked = tmp.path("masked.npy");
+    write_masked_codes(&masked, (3, 5), &sets[0], &[0, 7, 14]).unwrap();
+    let d: Array3<i8> = read_npy(&masked).unwrap();
+    for (i, lane) in d.lanes(ndarray::Axis(2)).into_iter().enumerate() {
+        assert_eq!(
+            lane.iter().any(|&v| v != 0),
+            [0, 7, 14].contains(&i),
+            "pixel {i}"
+        );
+    }
+    assert!(write_masked_codes(&masked, (3, 5), &sets[0], &[15]).is_err());
+
+    // Measurement rows.
+    let y = tmp.path("rows.npy");
+    let rows = Array2::from_shape_fn((3, 12), |(i, k)| (i * 12 + k) as f32);
+    write_npy(&y, &rows).unwrap();
+    let got = read_measurement_rows::<f64>(&y, Some(&expect), Some(3)).unwrap();
+    assert_eq!(got, rows.mapv(f64::from));
+    let err = read_measurement_rows::<f64>(&y, Some(&expect), Some(4))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(s(&y)) && err.contains("3 rows, expected 4"),
+        "{err}"
+    );
+    let err = read_measurement_rows::<f64>(&y, Some(&wrong_k), None)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("13"), "{err}");
+    let err = read_measurements::<f64>(&y, None).unwrap_err().to_string();
+    assert!(err.contains(s(&y)) && err.contains("1 dimension"), "{err}");
+    let mut nan = rows.mapv(f64::from);
+    nan[[2, 5]] = f64::NAN;
+    write_npy(&y, &nan).unwrap();
+    let err = read_measurement_rows::<f64>(&y, None, None)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("NaN") && err.contains("(2, 5)"), "{err}");
+    let vec_file = tmp.path("vec.npy");
+    write_npy(&vec_file, &Array1::<f64>::zeros(12)).unwrap();
+    let err = read_measurement_rows::<f64>(&vec_file, None, None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(s(&vec_file)) && err.contains("2 dimensions"),
+        "{err}"
+    );
+}
