@@ -52,8 +52,11 @@ impl CosampParams {
         }
     }
 
-    /// Checks everything but the upper bound of the sparsity, which needs the operator.
-    pub(super) fn validate_settings(&self) -> Result<()> {
+    /// Checks every setting that needs no operator (all but the sparsity's upper bound).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate(&self) -> Result<()> {
         self.stopping.validate()?;
         self.inner.stopping.validate()?;
         if !(self.inner.damp.is_finite() && self.inner.damp >= 0.0) {
@@ -65,9 +68,13 @@ impl CosampParams {
         check_tolerance("fixed_point_tol", self.fixed_point_tol)
     }
 
-    fn validate(&self, n: usize) -> Result<()> {
-        self.validate_settings()?;
-        check_sparsity(self.sparsity, n)
+    /// [`CosampParams::validate`], and the sparsity against the `unknowns` of a problem.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate_for(&self, unknowns: usize) -> Result<()> {
+        self.validate()?;
+        check_sparsity(self.sparsity, unknowns)
     }
 }
 
@@ -110,7 +117,7 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
     }
 
     fn check_params(params: &CosampParams) -> Result<()> {
-        params.validate_settings()?;
+        params.validate()?;
         super::check_nonzero_sparsity(params.sparsity)
     }
 
@@ -121,7 +128,7 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
         params: &CosampParams,
     ) -> Result<ControlFlow<Termination, Self>> {
         let (m, n) = (op.nrows(), op.ncols());
-        params.validate(n)?;
+        params.validate_for(n)?;
         check_problem(Self::NAME, m, n, y, x)?;
         let ynorm = norm2(y);
         if ynorm == 0.0 {

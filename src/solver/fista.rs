@@ -120,7 +120,11 @@ impl Default for FistaParams {
 }
 
 impl FistaParams {
-    pub(super) fn validate(&self) -> Result<()> {
+    /// Checks every setting that needs no operator.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate(&self) -> Result<()> {
         self.stopping.validate()?;
         let (value, what) = match self.lambda {
             Lambda::Absolute(v) => (v, "λ"),

@@ -72,8 +72,11 @@ impl IhtParams {
         }
     }
 
-    /// Checks everything but the upper bound of the sparsity, which needs the operator.
-    pub(super) fn validate_settings(&self) -> Result<()> {
+    /// Checks every setting that needs no operator (all but the sparsity's upper bound).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate(&self) -> Result<()> {
         self.stopping.validate()?;
         check_tolerance("fixed_point_tol", self.fixed_point_tol)?;
         if let IhtStep::PowerIteration { settings, margin } = self.step {
@@ -82,9 +85,13 @@ impl IhtParams {
         Ok(())
     }
 
-    fn validate(&self, n: usize) -> Result<()> {
-        self.validate_settings()?;
-        check_sparsity(self.sparsity, n)
+    /// [`IhtParams::validate`], and the sparsity against the `unknowns` of a problem.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate_for(&self, unknowns: usize) -> Result<()> {
+        self.validate()?;
+        check_sparsity(self.sparsity, unknowns)
     }
 }
 
@@ -154,7 +161,7 @@ impl<T: Real> Iteration<T> for IhtIteration<T> {
     }
 
     fn check_params(params: &IhtParams) -> Result<()> {
-        params.validate_settings()?;
+        params.validate()?;
         super::check_nonzero_sparsity(params.sparsity)
     }
 
@@ -165,7 +172,7 @@ impl<T: Real> Iteration<T> for IhtIteration<T> {
         params: &IhtParams,
     ) -> Result<ControlFlow<Termination, Self>> {
         let (m, n) = (op.nrows(), op.ncols());
-        params.validate(n)?;
+        params.validate_for(n)?;
         check_problem(Self::NAME, m, n, y, x)?;
         let s = params.sparsity;
         let ynorm = norm2(y);

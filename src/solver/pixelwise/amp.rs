@@ -65,7 +65,11 @@ impl Default for ReflectorAmpParams {
 }
 
 impl ReflectorAmpParams {
-    pub(crate) fn validate(&self) -> Result<()> {
+    /// Checks every setting that needs no operator.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate(&self) -> Result<()> {
         self.stopping.validate()?;
         for (name, v) in [
             ("lit_probability", self.lit_probability),

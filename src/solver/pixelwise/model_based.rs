@@ -96,7 +96,11 @@ impl Default for ModelBasedParams {
 }
 
 impl ModelBasedParams {
-    fn validate(&self) -> Result<()> {
+    /// Checks every setting that needs no operator.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate(&self) -> Result<()> {
         self.stopping.validate()?;
         self.inner.stopping.validate()?;
         if let Some(a) = &self.amp {

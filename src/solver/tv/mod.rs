@@ -105,7 +105,11 @@ impl TvParams {
         Ok(self)
     }
 
-    fn validate(&self) -> Result<()> {
+    /// Checks every setting that needs no operator.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
+    pub fn validate(&self) -> Result<()> {
         if !(self.lambda.is_finite() && self.lambda >= 0.0) {
             return Err(Error::param(
                 "lambda",
