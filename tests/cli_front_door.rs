@@ -839,3 +839,87 @@ fn codes_of_one_code_set_in_four_dimensions_are_read() {
     assert_ok(&out, "dottest");
     assert_no_plural_after_one(&stdout(&out));
 }
+
+// ---------------------------------------------------------------------------------------------
+// Found in review of the fixes above.
+
+// A FIFO output that nobody reads is refused at once, never waited on.
+#[test]
+fn a_fifo_output_without_a_reader_is_refused_at_once() {
+    let tmp = TempDir::new("fifo-no-reader");
+    let sim = simulate(&tmp, "sim", "8x8x6", &[]);
+    let fifo = tmp.path("y.npy");
+    if !mkfifo(&fifo) {
+        return;
+    }
+    let args: Vec<String> = [
+        "forward",
+        "--quiet",
+        "--pulse",
+        s(&sim.join("pulse.npy")),
+        "--codes",
+        s(&sim.join("codes.npy")),
+        "--scene",
+        s(&sim.join("scene.npy")),
+        "--out",
+        s(&fifo),
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .collect();
+    let out = run_with_deadline(&args, Duration::from_secs(30));
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert_one_line_error(&out, &["y.npy", "nobody reads"]);
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+}
+
+// Codes with a code-set axis and --tiles, codes without any code set, and meta.json fields
+// that contradict seeded codes (a ternary alphabet, a tile on another architecture, a file
+// far too large to be a description) are refused before any work, naming the file.
+#[test]
+fn codes_and_descriptions_that_contradict_the_request_are_refused() {
+    let tmp = TempDir::new("contradictions");
+    let sim = simulate(&tmp, "multi", "8x8x6", &["--adcs", "2"]);
+    let codes: ndarray::Array4<i8> = ndarray_npy::read_npy(sim.join("codes.npy")).unwrap();
+    let one = tmp.path("one_set.npy");
+    ndarray_npy::write_npy(&one, &codes.slice(ndarray::s![0..1, .., .., ..]).to_owned()).unwrap();
+    let none = tmp.path("no_set.npy");
+    ndarray_npy::write_npy(
+        &none,
+        &codes.slice(ndarray::s![0..0, .., .., ..]).to_owned(),
+    )
+    .unwrap();
+    let out_dir = tmp.path("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let mut args = command("adjoint", &sim, &one, "6", &out_dir);
+    args.extend(["--tiles".to_string(), "4x4".to_string()]);
+    let out = run(&args);
+    assert_refused(
+        &out,
+        &["one_set.npy", "--tiles 4x4", "code-set axis"],
+        &out_dir,
+    );
+    let out = run(&command("forward", &sim, &none, "6", &out_dir));
+    assert_refused(&out, &["no_set.npy", "no code set"], &out_dir);
+
+    let seed = seeded(&tmp, "seed", &[]);
+    let ternary = edited_meta(&tmp, &seed, "ternary.json", |m| {
+        m["code_alphabet"] = json!("ternary");
+        m["ternary_zero_prob"] = json!(0.3);
+    });
+    let tile = edited_meta(&tmp, &seed, "tile_on_single.json", |m| {
+        m["architecture"]["tile"] = json!([2, 2]);
+    });
+    let big = tmp.path("big.json");
+    let mut text = std::fs::read_to_string(seed.join("meta.json")).unwrap();
+    text.push_str(&" ".repeat(2 << 20));
+    std::fs::write(&big, text).unwrap();
+    for (file, words) in [
+        (&ternary, ["ternary.json", "code_alphabet"]),
+        (&tile, ["tile_on_single.json", "architecture.tile"]),
+        (&big, ["big.json", "bytes"]),
+    ] {
+        let out = run(&command("adjoint", &seed, file, "6", &out_dir));
+        assert_refused(&out, &words, &out_dir);
+    }
+}

@@ -138,6 +138,8 @@ def _codes_argument(codes: Any):
             "codes: expected a 3-D array (M, N, K), a 4-D array (G, M, N, K) of G code sets "
             f"(packed: last axis ceil(K/8)), or the path of a seeded meta.json; got shape {c.shape}"
         )
+    if c.dtype == np.bool_:
+        raise TypeError("codes: expected int8 codes of -1, 0, 1 or packed uint8 bytes, not bool")
     if c.dtype in (np.uint8, np.int8):
         return c
     if c.dtype.kind == "c" or c.dtype.kind not in "fiub":
@@ -350,10 +352,8 @@ class Simulation:
         if self.codes is not None:
             return RdOperator(self.pulse, self.codes, ks, dtype=dt, debiased=debiased,
                               tiles=self.tiles, stream_codes=stream_codes)
-        if self.files is not None:
-            return RdOperator(self.pulse, os.path.join(self.files, "meta.json"), ks, dtype=dt,
-                              debiased=debiased, stream_codes=stream_codes)
-        # Seeded codes: their description, as meta.json holds it, in a file of its own.
+        # Seeded codes: their description, as meta.json holds it, in a file of its own (not
+        # the folder's, which may have changed since).
         with tempfile.TemporaryDirectory() as d:
             path = os.path.join(d, "meta.json")
             with open(path, "w") as f:
@@ -416,6 +416,12 @@ def simulate(
         raise TypeError(f"codes_format: expected one of {', '.join(CODES_FORMATS)}")
     if out is not None and not isinstance(out, (str, os.PathLike)):
         raise TypeError(f"out: expected a path, got {type(out).__name__}")
+    if out is not None:
+        parent = os.path.dirname(os.path.abspath(os.fspath(out)))
+        if os.path.exists(out) and not os.path.isdir(out):
+            raise ValueError(f"out: {os.fspath(out)!r:.60} exists and is not a folder")
+        if not os.path.isdir(parent):
+            raise ValueError(f"out: the parent folder {parent!r:.60} does not exist")
     if out is not None and not force and os.path.isdir(out) and os.listdir(out):
         raise ValueError(
             f"out: {os.fspath(out)!r:.60} exists and is not empty; pass force=True to replace its "

@@ -21,7 +21,7 @@ use pyo3::types::{PyDict, PyList};
 use rdlidar::acquisition::{
     check_finite, check_finite_result, check_pulse, pulse_in, simulation_meta, write_simulation,
     Acquisition, AcquisitionFiles, CodeStore, CodesFormat, InputNames, Reconstructed,
-    SimulationRequest, Streaming,
+    SimulationRequest, Streaming, Use,
 };
 use rdlidar::lidar::{
     simulate as simulate_scene, zero_mean, Architecture, Cancellable, Codes, Geometry, Scene,
@@ -61,7 +61,7 @@ fn read_code_arrays<T: Real>(
     pulse_len: usize,
     depth_bins: usize,
     tiles: Option<TileSize>,
-) -> PyResult<(Geometry, Vec<Arc<Codes>>)> {
+) -> PyResult<(Geometry, Vec<Arc<Codes>>, bool)> {
     rdlidar::limits::check_count("depth_bins", depth_bins, rdlidar::limits::MAX_DEPTH_BINS)
         .map_err(value_error)?;
     let k = pulse_len
@@ -108,17 +108,16 @@ fn read_code_arrays<T: Real>(
     }
     let geom = Acquisition::check_arrays::<T>((sets, m, n), depth_bins, pulse_len, tiles, 2)
         .map_err(value_error)?;
-    let per_set = m * n * last;
     let mut out = Vec::with_capacity(sets);
     for g in 0..sets {
         let c = match &view {
             ArrayLike::I8(a) => {
-                let flat = code_set(a, g, per_set);
+                let flat = code_set(a, g);
                 let v = numpy::ndarray::ArrayView2::from_shape((m * n, k), &flat)
                     .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
                 Codes::from_dense(v)
             }
-            ArrayLike::U8(a) => Codes::from_packbits(&code_set(a, g, per_set), m * n, k),
+            ArrayLike::U8(a) => Codes::from_packbits(&code_set(a, g), m * n, k),
         }
         .map_err(|e| {
             let at = if sets > 1 {
@@ -130,21 +129,21 @@ fn read_code_arrays<T: Real>(
         })?;
         out.push(Arc::new(c));
     }
-    Ok((geom, out))
+    Ok((geom, out, shape.len() == 4))
 }
 
-/// Code set `g` of an array of code sets of `per_set` values each, copied in C order.
-fn code_set<E: numpy::Element + Copy>(
-    a: &PyReadonlyArrayDyn<'_, E>,
-    g: usize,
-    per_set: usize,
-) -> Vec<E> {
-    a.as_array()
-        .iter()
-        .skip(g * per_set)
-        .take(per_set)
-        .copied()
-        .collect()
+/// Code set `g` of an array of code sets (its first axis, when it has four), copied in C
+/// order.
+fn code_set<E: numpy::Element + Copy>(a: &PyReadonlyArrayDyn<'_, E>, g: usize) -> Vec<E> {
+    let view = a.as_array();
+    if view.ndim() == 4 {
+        view.index_axis(numpy::ndarray::Axis(0), g)
+            .iter()
+            .copied()
+            .collect()
+    } else {
+        view.iter().copied().collect()
+    }
 }
 
 /// An int8 or uint8 array of any dimension.
@@ -198,7 +197,7 @@ fn acquisition<T: Real>(
         )
         .map_err(value_error)?;
         files
-            .check_memory::<T>("RdOperator", 2)
+            .check_memory::<T>("RdOperator", 2, Use::Operator)
             .map_err(value_error)?;
         return files.load(pulse).map_err(value_error);
     }
@@ -208,9 +207,18 @@ fn acquisition<T: Real>(
              the meta.json of `simulate --codes-format seed` as codes",
         ));
     }
-    let (geom, sets) = read_code_arrays::<T>(codes, pulse.len(), depth_bins, tiles)?;
-    Acquisition::new(geom, pulse, CodeStore::Held(sets), tiles, Streaming::Never)
-        .map_err(value_error)
+    let (geom, sets, axis) = read_code_arrays::<T>(codes, pulse.len(), depth_bins, tiles)?;
+    if let (true, 1, Some(t)) = (axis, sets.len(), tiles) {
+        return Err(PyValueError::new_err(format!(
+            "codes: codes with a code-set axis (G, M, N, K); tiles=({}, {}) needs one code set \
+             (M, N, K)",
+            t.m, t.n
+        )));
+    }
+    let acq = Acquisition::new(geom, pulse, CodeStore::Held(sets), tiles, Streaming::Never)
+        .map_err(value_error)?;
+    // One code set with a code-set axis reads as the command line reads such a file.
+    Ok(if axis { acq.with_code_set_axis() } else { acq })
 }
 
 /// The operator of `acq` in `T`, with the zero-mean pulse if `debiased`.
@@ -767,7 +775,7 @@ fn run_fista<'py, T: Real + numpy::Element>(
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let y = measurements::<T>(meas, op.nrows())?;
     // FISTA holds a few scenes: the iterate, the momentum point, the gradient.
-    acq.memory_plan::<T>(6)
+    acq.solver_memory_plan::<T>(6)
         .check("fista", "use a smaller acquisition or free memory")
         .map_err(value_error)?;
     let observer = PyObserver::new(callback);
@@ -843,7 +851,7 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
     callback: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let y = measurements::<T>(meas, acq.measurements())?;
-    acq.memory_plan::<T>(10)
+    acq.solver_memory_plan::<T>(10)
         .check("reconstruct", "use a smaller acquisition or free memory")
         .map_err(value_error)?;
     let observer = PyObserver::new(callback);

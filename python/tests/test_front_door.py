@@ -525,3 +525,30 @@ def test_simulate_out_is_refused_when_not_empty_unless_forced(tmp_path):
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["codes.npy", "keep.txt", "meas.npy", "meta.json", "pulse.npy", "scene.npy"]
     assert sim.files == str(tmp_path)
+
+
+def test_one_code_set_with_a_set_axis_reads_as_the_command_line_reads_it(problem):
+    pulse, codes = problem
+    one = codes[None]
+    op = rdlidar.RdOperator(pulse, one, 5, dtype=np.float64)
+    assert op.architecture == "multi_adc" and op.rows == 1 and op.meas_shape == (1, 24)
+    plain = rdlidar.RdOperator(pulse, codes, 5, dtype=np.float64)
+    x = np.random.default_rng(3).random(60)
+    assert np.array_equal(op.matvec(x), plain.matvec(x))
+    with pytest.raises(ValueError) as e:
+        rdlidar.RdOperator(pulse, one, 5, tiles=(2, 2))
+    one_line(e, "codes", "tiles=(2, 2)")
+    with pytest.raises(TypeError) as e:
+        rdlidar.RdOperator(pulse, codes > 0, 5)
+    one_line(e, "codes", "bool")
+
+
+def test_simulate_out_is_checked_before_simulating(tmp_path):
+    base = dict(size=(4, 4, 3), pulse_len=20)
+    with pytest.raises(ValueError) as e:
+        rdlidar.simulate(**base, out=tmp_path / "no" / "such")
+    one_line(e, "out", "parent")
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(ValueError) as e:
+        rdlidar.simulate(**base, out=tmp_path / "file")
+    one_line(e, "out", "not a folder")

@@ -11,7 +11,7 @@ use crate::lidar::{Architecture, Geometry, SeededCodes, TileSize};
 use crate::limits::{self, MemoryPlan};
 use crate::real::Real;
 
-use super::{count_of, plan, stream_block, streams, Acquisition, CodeStore, Streaming};
+use super::{count_of, held, plan, streams, Acquisition, CodeStore, Streaming, Use};
 
 /// The codes file of an acquisition, described from its header (or its `meta.json`) and
 /// checked against the pulse length, the depth bins and the architecture, before any data are
@@ -98,18 +98,10 @@ impl AcquisitionFiles {
         let fail = |why: String| file_error(codes, why);
         let k = pulse_len + depth_bins - 1;
         let (grid_of_codes, sets, seeded, described) = if is_codes_description(codes) {
+            // Its samples are checked against K in `load`, after the measurements, as for
+            // a codes file.
             let file = read_seeded_codes(codes)?;
             let g = file.geometry;
-            if file.codes.len() != k {
-                return Err(fail(format!(
-                    "describes codes of K = {} samples (pulse_len {}, geometry.ks {}), but the \
-                     pulse of {pulse_len} samples and {depth_bins} depth bins give K = \
-                     {pulse_len} + {depth_bins} − 1 = {k}",
-                    file.codes.len(),
-                    file.pulse_len,
-                    g.ks
-                )));
-            }
             let sets = file.codes.sets();
             ((g.m, g.n), sets, Some(file.codes), Some(file.architecture))
         } else {
@@ -142,6 +134,22 @@ impl AcquisitionFiles {
                     io::shape_text(&h.shape),
                     limits::MAX_ADCS
                 )));
+            }
+            if sets == 0 {
+                return Err(fail(format!(
+                    "codes of shape {} hold no code set",
+                    io::shape_text(&h.shape)
+                )));
+            }
+            if h.shape.len() == 4 && sets == 1 {
+                if let Some(t) = tiles {
+                    return Err(fail(format!(
+                        "codes of shape {} have a code-set axis (G, M, N, K); {} needs one \
+                         code set (M, N, K)",
+                        io::shape_text(&h.shape),
+                        names.tile(t)
+                    )));
+                }
             }
             let described = (h.shape.len() == 4).then_some(Architecture::MultiAdc(sets));
             ((m, n), sets, None, described)
@@ -257,26 +265,31 @@ impl AcquisitionFiles {
 
     /// The memory a request on the loaded acquisition needs in `T` (see
     /// [`Acquisition::memory_plan`]), before anything is read.
-    pub fn memory_plan<T: Real>(&self, scenes: u128) -> MemoryPlan {
-        let g = self.geometry;
-        let held = match (self.seeded, self.architecture) {
-            (Some(_), _) if self.streamed => (stream_block(g, self.samples()), 1),
-            (Some(_), Architecture::Tiles(t)) => (
-                Geometry::new(t.m.min(g.m), t.n.min(g.n), g.ks).unwrap_or(g),
-                rayon::current_num_threads(),
-            ),
-            _ => (g, self.architecture.code_sets()),
-        };
-        plan::<T>(g, self.pulse_len, held, self.rows().unwrap_or(1), scenes)
+    pub fn memory_plan<T: Real>(&self, scenes: u128, request: Use) -> MemoryPlan {
+        let held = held(
+            self.geometry,
+            self.samples(),
+            self.architecture,
+            self.seeded.is_some(),
+            self.streamed,
+            request,
+        );
+        plan::<T>(
+            self.geometry,
+            self.pulse_len,
+            &held,
+            self.rows().unwrap_or(1),
+            scenes,
+        )
     }
 
     /// Checks [`AcquisitionFiles::memory_plan`] against the memory available; `command` names
     /// the request in the message.
     ///
     /// # Errors
-    /// [`Error::TooLarge`].
-    pub fn check_memory<T: Real>(&self, command: &str, scenes: u128) -> Result<()> {
-        self.memory_plan::<T>(scenes).check(
+    /// [`Error::TooLarge`](crate::Error::TooLarge).
+    pub fn check_memory<T: Real>(&self, command: &str, scenes: u128, request: Use) -> Result<()> {
+        self.memory_plan::<T>(scenes, request).check(
             &format!(
                 "{command} on {} with K_p = {} ({} {})",
                 self.geometry,
@@ -310,6 +323,21 @@ impl AcquisitionFiles {
             grid: Some((self.geometry.m, self.geometry.n)),
         };
         let codes = match self.seeded {
+            Some(s) if s.len() != self.samples() => {
+                return Err(file_error(
+                    &self.codes,
+                    format!(
+                        "describes codes of K = {} samples, but the pulse of {} samples and {} \
+                         depth bins give K = {} + {} − 1 = {}",
+                        s.len(),
+                        self.pulse_len,
+                        self.geometry.ks,
+                        self.pulse_len,
+                        self.geometry.ks,
+                        self.samples()
+                    ),
+                ))
+            }
             Some(s) => CodeStore::Seeded(s),
             None if self.shape.len() == 4 => {
                 let (_, sets) = io::read_code_sets(&self.codes, &expect)?;

@@ -125,8 +125,7 @@ pub fn check_pulse(pulse: &[f64]) -> Result<()> {
         ));
     }
     // The rules themselves are the pulse's own.
-    Pulse::new(pulse.to_vec())?;
-    Ok(())
+    Pulse::check(pulse)
 }
 
 /// The pulse in `T`, refused if converting it overflows or loses every nonzero sample.
@@ -359,16 +358,22 @@ impl Acquisition {
             }
             None => sets,
         };
-        plan::<T>(g, pulse_len, (g, sets), rows, scenes).check(
-            &format!("an acquisition of {g} with K_p = {pulse_len}"),
-            "use smaller arrays or free memory",
-        )?;
+        plan::<T>(g, pulse_len, &[(g, sets)], rows, scenes)
+            .add(
+                "a copy of one code set",
+                (m * n) as u128,
+                g.samples(pulse_len),
+            )
+            .check(
+                &format!("an acquisition of {g} with K_p = {pulse_len}"),
+                "use smaller arrays or free memory",
+            )?;
         Ok(g)
     }
 
-    /// One code set read from an array with a code-set axis (G = 1): one ADC whose
-    /// measurements are one row (1, K).
-    fn with_code_set_axis(mut self) -> Self {
+    /// One code set given with a code-set axis ((1, M, N, K) codes): one ADC whose
+    /// measurements are one row (1, K), as the command line reads such a file.
+    pub fn with_code_set_axis(mut self) -> Self {
         if self.architecture == Architecture::Single {
             self.architecture = Architecture::MultiAdc(1);
         }
@@ -461,30 +466,47 @@ impl Acquisition {
     }
 
     /// The memory one request on this acquisition needs in `T`: the codes held at once with
-    /// the operators' buffers, `scenes` scenes (inputs, outputs, a solver's working copies)
-    /// and two copies of the measurements.
-    pub fn memory_plan<T: Real>(&self, scenes: u128) -> MemoryPlan {
-        let held = self.held_codes();
+    /// the operators' buffers (as `request` uses them), `scenes` scenes (inputs, outputs, a
+    /// solver's working copies) and two copies of the measurements.
+    pub fn memory_plan<T: Real>(&self, scenes: u128, request: Use) -> MemoryPlan {
+        let held = held(
+            self.geometry,
+            self.samples(),
+            self.architecture,
+            matches!(self.codes, CodeStore::Seeded(_)),
+            self.streamed,
+            request,
+        );
         plan::<T>(
             self.geometry,
             self.pulse.len(),
-            held,
+            &held,
             self.rows().unwrap_or(1),
             scenes,
         )
     }
 
-    /// The grid and count of the code sets held at once (see [`plan`]).
-    fn held_codes(&self) -> (Geometry, usize) {
-        let g = self.geometry;
-        match (&self.codes, self.architecture) {
-            (CodeStore::Seeded(_), _) if self.streamed => (stream_block(g, self.samples()), 1),
-            (CodeStore::Seeded(_), Architecture::Tiles(t)) => (
-                Geometry::new(t.m.min(g.m), t.n.min(g.n), g.ks).unwrap_or(g),
-                rayon::current_num_threads(),
+    /// The memory a solver adds to an operator already built: `scenes` scenes and two copies
+    /// of the measurements (and, for a tiled acquisition, the tiles being solved).
+    pub fn solver_memory_plan<T: Real>(&self, scenes: u128) -> MemoryPlan {
+        let held: Vec<(Geometry, usize)> = match self.architecture {
+            Architecture::Tiles(_) => held(
+                self.geometry,
+                self.samples(),
+                self.architecture,
+                true,
+                false,
+                Use::Reconstruct,
             ),
-            _ => (g, self.architecture.code_sets()),
-        }
+            _ => Vec::new(),
+        };
+        plan::<T>(
+            self.geometry,
+            self.pulse.len(),
+            &held,
+            self.rows().unwrap_or(1),
+            scenes,
+        )
     }
 
     /// The measurement operator of any architecture, in `T`, with the acquisition's pulse.
@@ -764,6 +786,45 @@ pub(crate) fn streams(
     }
 }
 
+/// What a request does with an acquisition, for its memory plan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Use {
+    /// Applies the whole operator (forward, adjoint, a dot test): a tiled acquisition holds
+    /// the whole array's codes and every tile's copy of its own.
+    Operator,
+    /// Reconstructs: a tiled acquisition holds only the tiles being solved (one per thread)
+    /// beside the array's codes, if they are held at all.
+    Reconstruct,
+}
+
+/// The codes held at once, as (grid, count) pairs of code sets with their operators' buffers:
+/// what [`plan`] counts.
+fn held(
+    g: Geometry,
+    k: usize,
+    architecture: Architecture,
+    seeded: bool,
+    streamed: bool,
+    request: Use,
+) -> Vec<(Geometry, usize)> {
+    if streamed {
+        return vec![(stream_block(g, k), 1)];
+    }
+    match (architecture, request) {
+        (Architecture::Tiles(_), Use::Operator) => vec![(g, 2)],
+        (Architecture::Tiles(t), Use::Reconstruct) => {
+            let tile = Geometry::new(t.m.min(g.m), t.n.min(g.n), g.ks).unwrap_or(g);
+            let threads = rayon::current_num_threads();
+            if seeded {
+                vec![(tile, threads)]
+            } else {
+                vec![(g, 1), (tile, threads)]
+            }
+        }
+        (a, _) => vec![(g, a.code_sets())],
+    }
+}
+
 /// The grid of one block of streamed codes.
 fn stream_block(g: Geometry, k: usize) -> Geometry {
     let per_pixel = packed_len(k).max(1);
@@ -771,22 +832,22 @@ fn stream_block(g: Geometry, k: usize) -> Geometry {
     Geometry::new(1, block, g.ks).unwrap_or(g)
 }
 
-/// The memory plan of a request in `T`: `sets` code sets of the grid `held` held at once with
-/// their operators' buffers, `scenes` scenes of `g` and two copies of `rows`·K measurements.
+/// The memory plan of a request in `T`: the code sets `held` held at once (grid and count)
+/// with their operators' buffers, `scenes` scenes of `g` and two copies of `rows`·K
+/// measurements.
 pub(crate) fn plan<T: Real>(
     g: Geometry,
     pulse_len: usize,
-    (held, sets): (Geometry, usize),
+    held: &[(Geometry, usize)],
     rows: usize,
     scenes: u128,
 ) -> MemoryPlan {
     let size = std::mem::size_of::<T>();
+    let codes = held.iter().fold(0u128, |a, &(grid, sets)| {
+        a.saturating_add(operator_memory::<T>(grid, sets, pulse_len))
+    });
     MemoryPlan::new()
-        .add(
-            "codes and operator",
-            operator_memory::<T>(held, sets, pulse_len),
-            1,
-        )
+        .add("codes and operator", codes, 1)
         .add("scenes", scenes.saturating_mul(g.voxels() as u128), size)
         .add(
             "measurements",
@@ -959,6 +1020,23 @@ mod tests {
         let one =
             Acquisition::new(g, p, CodeStore::Held(codes(g, k, 1)), None, Streaming::Auto).unwrap();
         assert!(one.tile_places().is_empty());
+    }
+
+    #[test]
+    fn a_tiled_operator_is_planned_with_the_whole_array_s_codes() {
+        // Applying the whole operator holds every tile's codes; reconstructing seeded tiles
+        // holds one tile per thread.
+        let g = Geometry::new(256, 256, 8).unwrap();
+        let p = vec![1.0; 2000];
+        let k = g.samples(p.len());
+        let seeded = CodeStore::Seeded(SeededCodes::new(5, 1, g.pixels(), k).unwrap());
+        let t = TileSize { m: 8, n: 8 };
+        let acq = Acquisition::new(g, p, seeded, Some(t), Streaming::Auto).unwrap();
+        let whole = acq.memory_plan::<f32>(2, Use::Operator).total();
+        let tiles = acq.memory_plan::<f32>(2, Use::Reconstruct).total();
+        let codes = (g.pixels() as u128 / 8) * k as u128;
+        assert!(whole >= 2 * codes, "{whole} vs codes {codes}");
+        assert!(tiles < whole / 2, "{tiles} vs {whole}");
     }
 
     #[test]

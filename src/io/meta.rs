@@ -313,6 +313,18 @@ fn shortened(text: &str) -> String {
 /// or an `adcs` that disagrees with its tiles. Quoted values are shortened to an excerpt.
 pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
     let fail = |why: String| super::file_error(path, why);
+    // A description is a few kilobytes: refuse what cannot be one before reading it.
+    const MAX_BYTES: u64 = 1 << 20;
+    let info = std::fs::metadata(path).map_err(|e| fail(format!("cannot read: {e}")))?;
+    if !info.is_file() {
+        return Err(fail("is not a regular file".to_string()));
+    }
+    if info.len() > MAX_BYTES {
+        return Err(fail(format!(
+            "is {} bytes, more than a meta.json holds (at most {MAX_BYTES})",
+            info.len()
+        )));
+    }
     let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot read: {e}")))?;
     let meta: SimulationMeta = serde_json::from_str(&text).map_err(|e| {
         fail(format!(
@@ -337,6 +349,14 @@ pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
                 other.map_or("(missing)".to_string(), excerpt)
             )))
         }
+    }
+    if meta.code_alphabet != "binary" || meta.ternary_zero_prob.is_some() {
+        return Err(fail(format!(
+            "code_alphabet {} (ternary_zero_prob {:?}): codes described by a seed are ±1 \
+             (\"binary\")",
+            excerpt(&meta.code_alphabet),
+            meta.ternary_zero_prob
+        )));
     }
     let GeometryMeta { m, n, ks } = meta.geometry;
     let geometry = Geometry::new(m, n, ks)
@@ -370,6 +390,12 @@ pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
         )));
     }
     let arch = &meta.architecture;
+    if arch.kind != "tiles" && arch.tile.is_some() {
+        return Err(fail(format!(
+            "architecture.tile is given for the {} architecture, which has no tiles",
+            excerpt(&arch.kind)
+        )));
+    }
     let architecture = match arch.kind.as_str() {
         "single" => Architecture::Single,
         "multi_adc" => {

@@ -139,6 +139,42 @@ pub fn check_output_dir(dir: &Path, force: bool, replaced: &str) -> Result<()> {
     Ok(())
 }
 
+/// Opens an existing destination that is not a regular file for writing in place. A FIFO
+/// without a reader is refused at once instead of waiting for one: it is opened without
+/// blocking (ENXIO when nobody reads), then switched back to blocking writes.
+fn open_in_place(dest: &Path) -> Result<File> {
+    let fail = |e: std::io::Error| file_error(dest, format!("cannot open for writing: {e}"));
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        use std::os::unix::io::AsRawFd;
+        let file = OpenOptions::new()
+            .write(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(dest)
+            .map_err(|e| {
+                if e.raw_os_error() == Some(libc::ENXIO) {
+                    file_error(dest, "is a FIFO that nobody reads: start its reader first")
+                } else {
+                    fail(e)
+                }
+            })?;
+        // SAFETY: `file` owns a valid descriptor for the duration of both calls.
+        let flags = unsafe { libc::fcntl(file.as_raw_fd(), libc::F_GETFL) };
+        if flags < 0
+            || unsafe { libc::fcntl(file.as_raw_fd(), libc::F_SETFL, flags & !libc::O_NONBLOCK) }
+                < 0
+        {
+            return Err(fail(std::io::Error::last_os_error()));
+        }
+        Ok(file)
+    }
+    #[cfg(not(unix))]
+    {
+        OpenOptions::new().write(true).open(dest).map_err(fail)
+    }
+}
+
 /// Distinguishes the temporary files of one process.
 static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
 
@@ -191,10 +227,7 @@ impl StagedFile {
         }
         if let Ok(meta) = std::fs::metadata(&dest) {
             if !meta.is_file() {
-                let file = OpenOptions::new()
-                    .write(true)
-                    .open(&dest)
-                    .map_err(|e| file_error(&dest, format!("cannot open for writing: {e}")))?;
+                let file = open_in_place(&dest)?;
                 return Ok(StagedFile {
                     dest,
                     tmp: None,

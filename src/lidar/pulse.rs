@@ -13,12 +13,11 @@ pub struct Pulse<T> {
 }
 
 impl<T: Real> Pulse<T> {
-    /// Validates and wraps `p`.
+    /// Checks `p` against the rules of [`Pulse::new`] without copying it.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] (`pulse`) for an empty or all-zero pulse, or a negative, NaN
-    /// or infinite value (naming its index): the one place of the rules about pulses.
-    pub fn new(p: Vec<T>) -> Result<Self> {
+    /// As [`Pulse::new`].
+    pub fn check(p: &[T]) -> Result<()> {
         if p.is_empty() {
             return Err(Error::param("pulse", "must have at least one sample"));
         }
@@ -44,6 +43,16 @@ impl<T: Real> Pulse<T> {
                 format!("is all zero ({} samples): nothing is transmitted", p.len()),
             ));
         }
+        Ok(())
+    }
+
+    /// Validates and wraps `p`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`pulse`) for an empty or all-zero pulse, or a negative, NaN
+    /// or infinite value (naming its index): the one place of the rules about pulses.
+    pub fn new(p: Vec<T>) -> Result<Self> {
+        Self::check(&p)?;
         Ok(Pulse { p })
     }
 

@@ -327,6 +327,15 @@ impl<'a, T: Real> TiledArray<'a, T> {
                         ),
                     )
                 };
+                // A cancelled reconstruction does not even build the tiles still to come.
+                if self
+                    .cancel
+                    .is_some_and(|f| f.load(std::sync::atomic::Ordering::Relaxed))
+                {
+                    return Err(Error::Cancelled {
+                        what: format!("tile {}", place.index),
+                    });
+                }
                 let op = self.tile_operator(place).map_err(name)?;
                 let rows = &y[place.index * k..(place.index + 1) * k];
                 let mut observer = |info: &IterationInfo<'_, T>| observe(place.index, info);

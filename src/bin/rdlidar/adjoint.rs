@@ -7,7 +7,7 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, Scene, TileSize};
 use rdlidar::Real;
 
-use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames};
+use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames, Use};
 
 use crate::common::{
     architecture_note, at_pulse, check_finite_result, check_out_file, npy_dtype, outln, parse_tile,
@@ -66,7 +66,7 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
         InputNames::COMMAND_LINE,
     )?;
     let y = files.read_measurements::<T>(&a.files.meas)?;
-    files.check_memory::<T>("adjoint", 2)?;
+    files.check_memory::<T>("adjoint", 2, Use::Operator)?;
     let acq = files.load(p.into_inner())?;
     let g = acq.geometry();
     let pulse = pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;

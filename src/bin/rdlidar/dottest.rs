@@ -7,7 +7,7 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, TileSize};
 use rdlidar::operator::DotTest;
 
-use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames};
+use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames, Use};
 
 use crate::common::{
     architecture_note, errln, outln, parse_depth_bins, parse_tile, streaming, CliResult, Globals,
@@ -59,7 +59,7 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
         streaming(a.stream_codes),
         InputNames::COMMAND_LINE,
     )?;
-    files.check_memory::<f64>("dottest", 6)?;
+    files.check_memory::<f64>("dottest", 6, Use::Operator)?;
     let acq = files.load(p.into_inner())?;
     let p64 = acq.pulse().to_vec();
     let p32 = pulse_in::<f32>(&p64).map_err(|e| {
@@ -69,16 +69,21 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
         )
     })?;
     let test = DotTest::new().seed(seed);
+    // One operator at a time: each holds the codes (and a tiled one its tiles' copies).
+    let measure32 =
+        |p: Vec<f32>| -> CliResult<_> { Ok(test.measure(&acq.operator_with_pulse(p)?)) };
+    let measure64 =
+        |p: Vec<f64>| -> CliResult<_> { Ok(test.measure(&acq.operator_with_pulse(p)?)) };
     let rows = [
         (
             "pulse as given",
-            test.measure(&acq.operator_with_pulse(p32.clone())?),
-            test.measure(&acq.operator_with_pulse(p64.clone())?),
+            measure32(p32.clone())?,
+            measure64(p64.clone())?,
         ),
         (
             "zero-mean pulse",
-            test.measure(&acq.operator_with_pulse(zero_mean(&p32))?),
-            test.measure(&acq.operator_with_pulse(zero_mean(&p64))?),
+            measure32(zero_mean(&p32))?,
+            measure64(zero_mean(&p64))?,
         ),
     ];
     outln!(

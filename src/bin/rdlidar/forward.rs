@@ -7,7 +7,7 @@ use rdlidar::io;
 use rdlidar::lidar::TileSize;
 use rdlidar::Real;
 
-use rdlidar::acquisition::{AcquisitionFiles, InputNames};
+use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames, Use};
 
 use crate::common::{
     architecture_note, at_pulse, check_finite_result, check_out_file, npy_dtype, outln, parse_tile,
@@ -76,9 +76,10 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
         streaming(a.stream_codes),
         InputNames::COMMAND_LINE,
     )?;
-    files.check_memory::<T>("forward", 2)?;
+    files.check_memory::<T>("forward", 2, Use::Operator)?;
     let acq = files.load(p.into_inner())?;
-    let op = acq.operator::<T>().map_err(at_pulse(&a.pulse))?;
+    let pulse = pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.pulse))?;
+    let op = acq.operator_with_pulse(pulse)?;
     let mut y = vec![T::zero(); op.nrows()];
     op.apply(x.as_slice(), &mut y);
     check_finite_result(&y, "measurements", &a.scene, "--scene")?;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
 use rdlidar::acquisition::{
-    observe_nothing, pulse_in, AcquisitionFiles, InputNames, Reconstructed,
+    observe_nothing, pulse_in, AcquisitionFiles, InputNames, Reconstructed, Use,
 };
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
@@ -181,7 +181,7 @@ fn reconstruct_files<T: Real + WritableElement>(
     )?;
     let y = files.read_measurements::<T>(&a.files.meas)?;
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
-    files.check_memory::<T>("reconstruct", 10)?;
+    files.check_memory::<T>("reconstruct", 10, Use::Reconstruct)?;
     let acq = files.load(p.into_inner())?;
     pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;
     let g = acq.geometry();
