@@ -389,66 +389,7 @@ pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
             meta.k
         )));
     }
-    let arch = &meta.architecture;
-    if arch.kind != "tiles" && arch.tile.is_some() {
-        return Err(fail(format!(
-            "architecture.tile is given for the {} architecture, which has no tiles",
-            excerpt(&arch.kind)
-        )));
-    }
-    let architecture = match arch.kind.as_str() {
-        "single" => Architecture::Single,
-        "multi_adc" => {
-            limits::check_count("architecture.adcs", arch.adcs, limits::MAX_ADCS)
-                .map_err(|e| fail(e.to_string()))?;
-            Architecture::MultiAdc(arch.adcs)
-        }
-        "tiles" => {
-            let t = match arch.tile {
-                Some([tm, tn]) if tm > 0 && tn > 0 => TileSize { m: tm, n: tn },
-                Some([tm, tn]) => {
-                    return Err(fail(format!(
-                        "architecture.tile [{tm}, {tn}]: tile rows and columns must be at \
-                         least 1"
-                    )))
-                }
-                None => {
-                    return Err(fail(
-                        "architecture.tile is missing for the tiles architecture".to_string(),
-                    ))
-                }
-            };
-            Architecture::Tiles(t)
-        }
-        "aperture" => {
-            return Err(fail(
-                "architecture \"aperture\" has no seeded codes (its blocked pixels have zero \
-                 codes, which a seed does not describe)"
-                    .to_string(),
-            ))
-        }
-        other => {
-            return Err(fail(format!(
-                "architecture.kind {} is not one of \"single\", \"multi_adc\", \"tiles\"",
-                excerpt(other)
-            )))
-        }
-    };
-    let rows = architecture.rows(m, n).unwrap_or(1);
-    if rows > limits::MAX_ADCS {
-        return Err(fail(format!(
-            "architecture.tile: {rows} tiles of {m} × {n} pixels, more than the limit of {} \
-             ADCs",
-            limits::MAX_ADCS
-        )));
-    }
-    if arch.adcs != rows {
-        return Err(fail(format!(
-            "architecture.adcs = {} disagrees with the architecture, which has {rows} {}",
-            arch.adcs,
-            if rows == 1 { "ADC" } else { "ADCs" }
-        )));
-    }
+    let architecture = seeded_architecture(&meta.architecture, m, n).map_err(fail)?;
     let codes = SeededCodes::new(
         meta.seeds.codes,
         architecture.code_sets(),
@@ -462,4 +403,74 @@ pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
         architecture,
         codes,
     })
+}
+
+/// The architecture a seeded `meta.json` describes (`architecture` of an `m`×`n` array),
+/// checked: a known kind with seeded codes, a tile only for tiles and of at least one pixel,
+/// at most [`limits::MAX_ADCS`] ADCs, and `adcs` equal to the architecture's.
+fn seeded_architecture(
+    arch: &ArchitectureMeta,
+    m: usize,
+    n: usize,
+) -> std::result::Result<Architecture, String> {
+    if arch.kind != "tiles" && arch.tile.is_some() {
+        return Err(format!(
+            "architecture.tile is given for the {} architecture, which has no tiles",
+            excerpt(&arch.kind)
+        ));
+    }
+    let architecture = match arch.kind.as_str() {
+        "single" => Architecture::Single,
+        "multi_adc" => {
+            limits::check_count("architecture.adcs", arch.adcs, limits::MAX_ADCS)
+                .map_err(|e| e.to_string())?;
+            Architecture::MultiAdc(arch.adcs)
+        }
+        "tiles" => {
+            let t = match arch.tile {
+                Some([tm, tn]) if tm > 0 && tn > 0 => TileSize { m: tm, n: tn },
+                Some([tm, tn]) => {
+                    return Err(format!(
+                        "architecture.tile [{tm}, {tn}]: tile rows and columns must be at \
+                         least 1"
+                    ))
+                }
+                None => {
+                    return Err(
+                        "architecture.tile is missing for the tiles architecture".to_string()
+                    )
+                }
+            };
+            Architecture::Tiles(t)
+        }
+        "aperture" => {
+            return Err(
+                "architecture \"aperture\" has no seeded codes (its blocked pixels have zero \
+                 codes, which a seed does not describe)"
+                    .to_string(),
+            )
+        }
+        other => {
+            return Err(format!(
+                "architecture.kind {} is not one of \"single\", \"multi_adc\", \"tiles\"",
+                excerpt(other)
+            ))
+        }
+    };
+    let rows = architecture.rows(m, n).unwrap_or(1);
+    if rows > limits::MAX_ADCS {
+        return Err(format!(
+            "architecture.tile: {rows} tiles of {m} × {n} pixels, more than the limit of {} \
+             ADCs",
+            limits::MAX_ADCS
+        ));
+    }
+    if arch.adcs != rows {
+        return Err(format!(
+            "architecture.adcs = {} disagrees with the architecture, which has {rows} {}",
+            arch.adcs,
+            if rows == 1 { "ADC" } else { "ADCs" }
+        ));
+    }
+    Ok(architecture)
 }
