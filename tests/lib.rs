@@ -32,6 +32,7 @@ mod errors;
 mod experiments;
 mod info;
 mod io_files;
+mod iteration;
 #[cfg(feature = "lapack")]
 mod lapack;
 mod metrics;

@@ -307,6 +307,15 @@ fn counted_operators_count_the_applications_of_their_restrictions() {
     let rr = r.restrict_columns(vec![1]).unwrap();
     rr.apply(&[1.0], &mut y);
     assert_eq!(y, vec![0.0, 5.0, 10.0]);
-    assert_eq!((counted.forward_count(), counted.adjoint_count()), (2, 1));
+    // Applications of restrictions are support applications, whichever their direction.
+    let counts = (
+        counted.forward_count(),
+        counted.adjoint_count(),
+        counted.support_count(),
+    );
+    assert_eq!(counts, (0, 0, 3));
+    counted.apply(&[1.0, 0.0, 0.0, 0.0, 0.0], &mut y);
+    counted.apply_adjoint(&[1.0, 0.0, 0.0], &mut [0.0; 5]);
+    assert_eq!(counted.forward_count() + counted.adjoint_count(), 2);
     assert!(r.describe().contains("Counted"));
 }

@@ -136,6 +136,10 @@ where
         self.inner.uniform_pixel_gram()
     }
 
+    fn structured_columns(&self) -> bool {
+        self.inner.structured_columns()
+    }
+
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
         if self.cancelled() {
             return vec![0.0; columns.len()];

@@ -8,7 +8,7 @@
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
-use crate::operator::{LinearOperator, VStack, VoxelOperator};
+use crate::operator::{Counted, LinearOperator, VStack, VoxelOperator};
 use crate::real::Real;
 
 use super::codes::Codes;
@@ -71,6 +71,58 @@ impl<T: Real> LidarOperator<T> for RdOperator<T> {
     fn observed_pixels(&self) -> Option<Vec<bool>> {
         let observed = self.codes().observed_pixels();
         observed.iter().any(|&o| !o).then_some(observed)
+    }
+}
+
+/// A reference to a lidar operator is one.
+impl<T: Real, A: LidarOperator<T> + ?Sized> LidarOperator<T> for &A {
+    fn geometry(&self) -> Geometry {
+        (**self).geometry()
+    }
+    fn pulse(&self) -> &[T] {
+        (**self).pulse()
+    }
+    fn code_sets(&self) -> usize {
+        (**self).code_sets()
+    }
+    fn apply_sparse(&self, x: &[T], y: &mut [T]) {
+        (**self).apply_sparse(x, y)
+    }
+    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
+        (**self).zero_mean_operator()
+    }
+    fn observed_pixels(&self) -> Option<Vec<bool>> {
+        (**self).observed_pixels()
+    }
+    fn regime(&self) -> Regime {
+        (**self).regime()
+    }
+}
+
+/// The lidar operator, every application counted: its sparse forward as a support
+/// application, the zero-mean operator's applications as forward and adjoint ones.
+impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Counted<A> {
+    fn geometry(&self) -> Geometry {
+        self.inner().geometry()
+    }
+    fn pulse(&self) -> &[T] {
+        self.inner().pulse()
+    }
+    fn code_sets(&self) -> usize {
+        self.inner().code_sets()
+    }
+    fn apply_sparse(&self, x: &[T], y: &mut [T]) {
+        self.count_support();
+        self.inner().apply_sparse(x, y)
+    }
+    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
+        self.counting_full(self.inner().zero_mean_operator())
+    }
+    fn observed_pixels(&self) -> Option<Vec<bool>> {
+        self.inner().observed_pixels()
+    }
+    fn regime(&self) -> Regime {
+        self.inner().regime()
     }
 }
 
@@ -190,6 +242,10 @@ impl<T: Real> VoxelOperator<T> for MultiAdcOperator<T> {
 
     fn uniform_pixel_gram(&self) -> bool {
         self.parts.iter().all(|op| op.uniform_pixel_gram())
+    }
+
+    fn structured_columns(&self) -> bool {
+        self.parts.iter().all(|op| op.structured_columns())
     }
 
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {

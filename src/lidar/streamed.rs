@@ -282,6 +282,11 @@ impl<T: Real> VoxelOperator<T> for StreamedOperator<T> {
         true
     }
 
+    /// Column queries from the pulse (the probe's), no application.
+    fn structured_columns(&self) -> bool {
+        true
+    }
+
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
         let ks = self.geom.ks;
         let local: Vec<usize> = columns.iter().map(|&c| c % ks).collect();

@@ -241,6 +241,11 @@ impl<T: Real> VoxelOperator<T> for RdOperator<T> {
         self.codes().minus_plane().is_none()
     }
 
+    /// Column queries from the pulse and the codes, no application.
+    fn structured_columns(&self) -> bool {
+        true
+    }
+
     /// ‖p‖ for ±1 codes; with ternary codes the pulse energy over the nonzero codes of the window.
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
         let ks = self.geometry().ks;

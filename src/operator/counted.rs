@@ -5,26 +5,37 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use crate::error::Result;
 use crate::real::Real;
 
-use super::LinearOperator;
+use super::pixel::{column_norms_by_applies, pixel_gram_by_applies, self_correlations_by_applies};
+use super::{LinearOperator, VoxelOperator};
 
-/// Wraps an operator and counts its forward and adjoint applications (thread-safe).
+/// Wraps an operator and counts its applications (thread-safe), in three kinds:
 ///
-/// Solvers report operator-apply counts through it; tests use it to check that an algorithm applies
+/// * forward applications of the whole operator (its correlations of
+///   [`VoxelOperator::correlate`] count as adjoint applications);
+/// * adjoint applications of the whole operator;
+/// * support applications: applications, in either direction, of a restriction to a few
+///   columns ([`LinearOperator::restrict_columns`]), and the column queries of an operator whose
+///   columns are [structured](VoxelOperator::structured_columns), one per call. Column queries
+///   answered by applications of the whole operator count as those applications.
+///
+/// Every solver reports its counts through it; tests use it to check that an algorithm applies
 /// the operator as often as it claims.
 #[derive(Debug)]
 pub struct Counted<A> {
     inner: A,
     forward: AtomicUsize,
     adjoint: AtomicUsize,
+    support: AtomicUsize,
 }
 
 impl<A> Counted<A> {
-    /// Wraps `inner` with both counters at zero.
+    /// Wraps `inner` with every counter at zero.
     pub fn new(inner: A) -> Self {
         Counted {
             inner,
             forward: AtomicUsize::new(0),
             adjoint: AtomicUsize::new(0),
+            support: AtomicUsize::new(0),
         }
     }
 
@@ -38,10 +49,22 @@ impl<A> Counted<A> {
         self.adjoint.load(Ordering::Relaxed)
     }
 
-    /// Sets both counters back to zero.
+    /// Number of support applications so far.
+    pub fn support_count(&self) -> usize {
+        self.support.load(Ordering::Relaxed)
+    }
+
+    /// Counts one support application that the wrapped operator performs outside this wrapper
+    /// (e.g. a sparse forward).
+    pub fn count_support(&self) {
+        self.support.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Sets every counter back to zero.
     pub fn reset(&self) {
         self.forward.store(0, Ordering::Relaxed);
         self.adjoint.store(0, Ordering::Relaxed);
+        self.support.store(0, Ordering::Relaxed);
     }
 
     /// The wrapped operator.
@@ -52,6 +75,21 @@ impl<A> Counted<A> {
     /// Unwraps the operator.
     pub fn into_inner(self) -> A {
         self.inner
+    }
+
+    /// `derived`, an operator the wrapped one derives whose applications cost as much as its own
+    /// (e.g. the same operator with another pulse), counting into this wrapper's forward and
+    /// adjoint counters.
+    pub fn counting_full<'a, T: Real>(
+        &'a self,
+        derived: Box<dyn LinearOperator<T> + 'a>,
+    ) -> Box<dyn LinearOperator<T> + 'a> {
+        Box::new(CountedPart {
+            inner: derived,
+            forward: &self.forward,
+            adjoint: &self.adjoint,
+            support: &self.support,
+        })
     }
 }
 
@@ -76,21 +114,68 @@ impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for Counted<A> {
     fn describe(&self) -> String {
         format!("Counted({})", self.inner.describe())
     }
-    /// The inner operator's restriction, whose applications count as applications of this one.
+    /// The inner operator's restriction, whose applications count as support applications of
+    /// this one.
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
         Ok(Box::new(CountedPart {
             inner: self.inner.restrict_columns(columns)?,
-            forward: &self.forward,
-            adjoint: &self.adjoint,
+            forward: &self.support,
+            adjoint: &self.support,
+            support: &self.support,
         }))
     }
 }
 
-/// A restriction of a [`Counted`] operator, counting into its counters.
+/// The per-pixel capability of the wrapped operator, every application counted: correlations as
+/// adjoint applications, structured column queries as one support application each, the others
+/// through this wrapper's own applications.
+impl<T: Real, A: VoxelOperator<T>> VoxelOperator<T> for Counted<A> {
+    fn column_len(&self) -> usize {
+        self.inner.column_len()
+    }
+    fn correlate(&self, r: &[T], u: &mut [T]) {
+        self.adjoint.fetch_add(1, Ordering::Relaxed);
+        self.inner.correlate(r, u)
+    }
+    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
+        if self.inner.structured_columns() {
+            self.count_support();
+            self.inner.self_correlations(voxels)
+        } else {
+            self_correlations_by_applies(self, voxels)
+        }
+    }
+    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
+        if self.inner.structured_columns() {
+            self.count_support();
+            self.inner.pixel_gram(pixel)
+        } else {
+            pixel_gram_by_applies(self, pixel)
+        }
+    }
+    fn uniform_pixel_gram(&self) -> bool {
+        self.inner.uniform_pixel_gram()
+    }
+    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
+        if self.inner.structured_columns() {
+            self.count_support();
+            self.inner.column_norms(columns)
+        } else {
+            column_norms_by_applies(self, columns)
+        }
+    }
+    fn structured_columns(&self) -> bool {
+        self.inner.structured_columns()
+    }
+}
+
+/// An operator derived from a [`Counted`] one (a restriction, or the same operator with another
+/// pulse), counting into its counters.
 struct CountedPart<'a, T> {
     inner: Box<dyn LinearOperator<T> + 'a>,
     forward: &'a AtomicUsize,
     adjoint: &'a AtomicUsize,
+    support: &'a AtomicUsize,
 }
 
 impl<T: Real> LinearOperator<T> for CountedPart<'_, T> {
@@ -114,11 +199,13 @@ impl<T: Real> LinearOperator<T> for CountedPart<'_, T> {
     fn describe(&self) -> String {
         format!("Counted({})", self.inner.describe())
     }
+    /// A restriction of the part, whose applications count as support applications.
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
         Ok(Box::new(CountedPart {
             inner: self.inner.restrict_columns(columns)?,
-            forward: self.forward,
-            adjoint: self.adjoint,
+            forward: self.support,
+            adjoint: self.support,
+            support: self.support,
         }))
     }
 }

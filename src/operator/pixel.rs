@@ -28,46 +28,14 @@ pub trait VoxelOperator<T: Real>: LinearOperator<T> {
     /// correlations, which lets a solver judge a pixel's depth with its current reflector added
     /// back. Returned row by row (`voxels.len() · column_len` values).
     fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
-        let ks = self.column_len();
-        let mut e = vec![T::zero(); self.ncols()];
-        let mut a = vec![T::zero(); self.nrows()];
-        let mut u = vec![T::zero(); self.ncols()];
-        let mut out = Vec::with_capacity(voxels.len() * ks);
-        for &c in voxels {
-            e[c] = T::one();
-            self.apply(&e, &mut a);
-            e[c] = T::zero();
-            self.correlate(&a, &mut u);
-            let p0 = c / ks * ks;
-            out.extend(u[p0..p0 + ks].iter().map(|v| v.as_f64()));
-        }
-        out
+        self_correlations_by_applies(self, voxels)
     }
 
     /// The Gram block AₚᵀAₚ of pixel `pixel`'s `column_len` columns, row-major, in f64 (the
     /// plain inner products, whatever [`correlate`](Self::correlate) uses). By default from
     /// `column_len` forward applications.
     fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
-        let ks = self.column_len();
-        let mut e = vec![T::zero(); self.ncols()];
-        let cols: Vec<Vec<T>> = (0..ks)
-            .map(|j| {
-                let mut a = vec![T::zero(); self.nrows()];
-                e[pixel * ks + j] = T::one();
-                self.apply(&e, &mut a);
-                e[pixel * ks + j] = T::zero();
-                a
-            })
-            .collect();
-        let mut g = vec![0.0; ks * ks];
-        for i in 0..ks {
-            for j in i..ks {
-                let v = dot(&cols[i], &cols[j]);
-                g[i * ks + j] = v;
-                g[j * ks + i] = v;
-            }
-        }
-        g
+        pixel_gram_by_applies(self, pixel)
     }
 
     /// Whether every pixel has the same Gram block, so that [`pixel_gram`](Self::pixel_gram)
@@ -78,18 +46,111 @@ pub trait VoxelOperator<T: Real>: LinearOperator<T> {
 
     /// ‖A e_c‖ for each of `columns`.
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
-        let mut e = vec![T::zero(); self.ncols()];
-        let mut a = vec![T::zero(); self.nrows()];
-        columns
-            .iter()
-            .map(|&c| {
-                e[c] = T::one();
-                self.apply(&e, &mut a);
-                e[c] = T::zero();
-                dot(&a, &a).sqrt()
-            })
-            .collect()
+        column_norms_by_applies(self, columns)
     }
+
+    /// Whether [`self_correlations`](Self::self_correlations), [`pixel_gram`](Self::pixel_gram)
+    /// and [`column_norms`](Self::column_norms) come from the operator's structure, each call
+    /// costing about one application restricted to the columns asked for (`true`), or from
+    /// applications of the whole operator, as the defaults do (`false`, the default). A counting
+    /// wrapper ([`Counted`](super::Counted)) counts the first kind as one support application
+    /// per call and the second kind application by application.
+    fn structured_columns(&self) -> bool {
+        false
+    }
+}
+
+/// A reference to a per-pixel operator is one (so that wrappers such as
+/// [`Counted`](super::Counted) can hold a borrowed operator).
+impl<T: Real, A: VoxelOperator<T> + ?Sized> VoxelOperator<T> for &A {
+    fn column_len(&self) -> usize {
+        (**self).column_len()
+    }
+    fn correlate(&self, r: &[T], u: &mut [T]) {
+        (**self).correlate(r, u)
+    }
+    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
+        (**self).self_correlations(voxels)
+    }
+    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
+        (**self).pixel_gram(pixel)
+    }
+    fn uniform_pixel_gram(&self) -> bool {
+        (**self).uniform_pixel_gram()
+    }
+    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
+        (**self).column_norms(columns)
+    }
+    fn structured_columns(&self) -> bool {
+        (**self).structured_columns()
+    }
+}
+
+/// [`VoxelOperator::self_correlations`] from applications of `op`: one forward application and
+/// one correlation per voxel.
+pub(crate) fn self_correlations_by_applies<T: Real, A: VoxelOperator<T> + ?Sized>(
+    op: &A,
+    voxels: &[usize],
+) -> Vec<f64> {
+    let ks = op.column_len();
+    let mut e = vec![T::zero(); op.ncols()];
+    let mut a = vec![T::zero(); op.nrows()];
+    let mut u = vec![T::zero(); op.ncols()];
+    let mut out = Vec::with_capacity(voxels.len() * ks);
+    for &c in voxels {
+        e[c] = T::one();
+        op.apply(&e, &mut a);
+        e[c] = T::zero();
+        op.correlate(&a, &mut u);
+        let p0 = c / ks * ks;
+        out.extend(u[p0..p0 + ks].iter().map(|v| v.as_f64()));
+    }
+    out
+}
+
+/// [`VoxelOperator::pixel_gram`] from `column_len` forward applications of `op`.
+pub(crate) fn pixel_gram_by_applies<T: Real, A: VoxelOperator<T> + ?Sized>(
+    op: &A,
+    pixel: usize,
+) -> Vec<f64> {
+    let ks = op.column_len();
+    let mut e = vec![T::zero(); op.ncols()];
+    let cols: Vec<Vec<T>> = (0..ks)
+        .map(|j| {
+            let mut a = vec![T::zero(); op.nrows()];
+            e[pixel * ks + j] = T::one();
+            op.apply(&e, &mut a);
+            e[pixel * ks + j] = T::zero();
+            a
+        })
+        .collect();
+    let mut g = vec![0.0; ks * ks];
+    for i in 0..ks {
+        for j in i..ks {
+            let v = dot(&cols[i], &cols[j]);
+            g[i * ks + j] = v;
+            g[j * ks + i] = v;
+        }
+    }
+    g
+}
+
+/// [`VoxelOperator::column_norms`] from one forward application of `op` per column.
+pub(crate) fn column_norms_by_applies<T: Real, A: VoxelOperator<T> + ?Sized>(
+    op: &A,
+    columns: &[usize],
+) -> Vec<f64> {
+    let mut e = vec![T::zero(); op.ncols()];
+    let mut a = vec![T::zero(); op.nrows()];
+    columns
+        .iter()
+        .map(|&c| {
+            e[c] = T::one();
+            op.apply(&e, &mut a);
+            e[c] = T::zero();
+            dot(&a, &a).sqrt()
+        })
+        .collect()
 }
 
 /// Any operator seen as pixels of `column_len` columns: restriction through the operator algebra

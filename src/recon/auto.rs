@@ -3,6 +3,7 @@
 
 use crate::error::Result;
 use crate::lidar::LidarOperator;
+use crate::operator::{Counted, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{Observer, Report, Termination};
 
@@ -402,14 +403,14 @@ fn hidden_returns<T: Real>(
     report: Option<&mut Report>,
 ) -> (usize, usize) {
     let ks = op.geometry().ks;
+    let op = Counted::new(op);
     let mut ax = vec![T::zero(); y.len()];
     op.apply_sparse(x, &mut ax);
     let r: Vec<T> = y.iter().zip(&ax).map(|(&a, &b)| a - b).collect();
     let mut u = vec![T::zero(); x.len()];
-    crate::operator::VoxelOperator::correlate(op, &r, &mut u);
+    op.correlate(&r, &mut u);
     if let Some(rep) = report {
-        rep.support_applies += 1;
-        rep.adjoint_applies += 1;
+        rep.add_counts(&op);
     }
     let mut all: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
     let med = crate::linalg::median(&mut all);

@@ -2,10 +2,11 @@
 //! concrete method on the lidar operator.
 
 use std::str::FromStr;
+use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::lidar::{LidarOperator, NO_RETURN};
-use crate::operator::PowerIteration;
+use crate::operator::{Counted, PowerIteration};
 use crate::real::Real;
 use crate::solver::{
     cgls, cosamp, fista, iht, model_based, reflector_amp, tv_depth, CglsParams, Control,
@@ -248,10 +249,15 @@ pub(super) fn run<T: Real>(
     options: &ReconstructOptions,
     observer: &mut dyn Observer<T>,
 ) -> Result<(Vec<T>, Option<Report>)> {
+    let started = Instant::now();
+    // Every application of the method counted here, those of its preparation (a sparsity
+    // estimate, a pursuit) and of its refits included.
+    let counted = Counted::new(op);
+    let op: &dyn LidarOperator<T> = &counted;
     let g = op.geometry();
     let n = g.voxels();
     let mut x = vec![T::zero(); n];
-    let report = match method {
+    let mut report = match method {
         Method::Backprojection | Method::BackprojectionDebiased => {
             let debiased = method == Method::BackprojectionDebiased;
             let bp = backproject(op, y, debiased, options.threshold)?;
@@ -274,41 +280,12 @@ pub(super) fn run<T: Real>(
             })?
         }
         Method::Fista => {
-            let params = FistaParams {
-                lambda: Lambda::Fraction(FISTA_LAMBDA_FRACTION),
-                nonnegative: true,
-                step: StepRule::PowerIteration {
-                    settings: PowerIteration {
-                        seed: options.seed,
-                        max_iter: options
-                            .power_iterations
-                            .unwrap_or(PowerIteration::default().max_iter),
-                        ..PowerIteration::default()
-                    },
-                    margin: if options.power_iterations.is_some() {
-                        1.05
-                    } else {
-                        1.01
-                    },
-                },
-                restart: Restart::Function,
-                stopping: stopping(
-                    Stopping {
-                        max_iter: FISTA_MAX_ITER,
-                        rel_residual: Some(1e-6),
-                        rel_change: Some(1e-6),
-                        ..Stopping::default()
-                    },
-                    options,
-                ),
-            };
-            let mut r = with_progress(params.stopping.max_iter, options, observer, |obs| {
+            let params = fista_params(options);
+            let r = with_progress(params.stopping.max_iter, options, observer, |obs| {
                 fista(op, y, &mut x, &params, obs)
             })?;
             if options.debias {
-                if let Some(refit) = refit_support(op, y, &mut x, REFIT_MAX_ITER, REFIT_ROUNDS)? {
-                    r.absorb_applies(&refit);
-                }
+                refit_support(op, y, &mut x, REFIT_MAX_ITER, REFIT_ROUNDS)?;
             }
             r
         }
@@ -331,24 +308,7 @@ pub(super) fn run<T: Real>(
         }
         Method::Cosamp => {
             let s = estimate_sparsity(op, y)?;
-            let d = CosampParams::new(s);
-            let params = CosampParams {
-                stopping: stopping(
-                    Stopping {
-                        max_iter: GREEDY_MAX_ITER,
-                        ..d.stopping
-                    },
-                    options,
-                ),
-                inner: CglsParams {
-                    stopping: Stopping {
-                        max_iter: COSAMP_INNER_ITER,
-                        ..d.inner.stopping
-                    },
-                    ..d.inner
-                },
-                ..d
-            };
+            let params = cosamp_params(s, options);
             with_progress(params.stopping.max_iter, options, observer, |obs| {
                 cosamp(op, y, &mut x, &params, obs)
             })?
@@ -371,23 +331,13 @@ pub(super) fn run<T: Real>(
         }
         Method::ModelBased => {
             let mut params = model_params(options);
-            let mut pursuit = None;
             params.max_returns = match options.max_returns {
                 Some(k) => k,
-                None => {
-                    let p = support_pursuit(op, y, PURSUIT_ROUNDS)?;
-                    let k = estimate_returns(&p.x, g.ks);
-                    pursuit = Some(p.report);
-                    k
-                }
+                None => estimate_returns(&support_pursuit(op, y, PURSUIT_ROUNDS)?.x, g.ks),
             };
-            let mut r = with_progress(params.stopping.max_iter, options, observer, |obs| {
+            with_progress(params.stopping.max_iter, options, observer, |obs| {
                 model_based(op, y, &mut x, &params, obs)
-            })?;
-            if let Some(p) = pursuit {
-                r.absorb_applies(&p);
-            }
-            r
+            })?
         }
         Method::Tv => {
             let params = TvDepthParams {
@@ -400,7 +350,64 @@ pub(super) fn run<T: Real>(
         }
         Method::Auto => unreachable!("Auto is resolved before run"),
     };
+    report.count_from(&counted);
+    report.elapsed = started.elapsed();
     Ok((x, Some(report)))
+}
+
+/// FISTA's parameters for reconstruction: λ a fraction of ‖Aᵀy‖∞, nonnegative, the step from
+/// a power iteration, function restarts.
+fn fista_params(options: &ReconstructOptions) -> FistaParams {
+    FistaParams {
+        lambda: Lambda::Fraction(FISTA_LAMBDA_FRACTION),
+        nonnegative: true,
+        step: StepRule::PowerIteration {
+            settings: PowerIteration {
+                seed: options.seed,
+                max_iter: options
+                    .power_iterations
+                    .unwrap_or(PowerIteration::default().max_iter),
+                ..PowerIteration::default()
+            },
+            margin: if options.power_iterations.is_some() {
+                1.05
+            } else {
+                1.01
+            },
+        },
+        restart: Restart::Function,
+        stopping: stopping(
+            Stopping {
+                max_iter: FISTA_MAX_ITER,
+                rel_residual: Some(1e-6),
+                rel_change: Some(1e-6),
+                ..Stopping::default()
+            },
+            options,
+        ),
+    }
+}
+
+/// CoSaMP's parameters for reconstruction at sparsity `s`.
+fn cosamp_params(s: usize, options: &ReconstructOptions) -> CosampParams {
+    let d = CosampParams::new(s);
+    CosampParams {
+        stopping: stopping(
+            Stopping {
+                max_iter: GREEDY_MAX_ITER,
+                ..d.stopping
+            },
+            options,
+        ),
+        inner: CglsParams {
+            stopping: Stopping {
+                max_iter: COSAMP_INNER_ITER,
+                ..d.inner.stopping
+            },
+            ..d.inner
+        },
+        ..d
+    }
 }
 
 /// The most returns per pixel [`estimate_returns`] proposes.

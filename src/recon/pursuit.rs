@@ -2,13 +2,14 @@
 //! explains the measurements — the cheap first stage of [`Method::Auto`](super::Method::Auto) and
 //! a method of its own ([`Method::SupportLs`](super::Method::SupportLs)).
 
-use std::time::Instant;
+use std::ops::ControlFlow;
 
 use crate::error::Result;
 use crate::lidar::LidarOperator;
 use crate::linalg::{dot, median, robust_sigma};
+use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
-use crate::solver::{Report, Termination};
+use crate::solver::{solve_with, Iteration, Iterative, Progress, Report, Stopping, Termination};
 
 use super::refit::{refit_support, refit_support_to, REFIT_MAX_ITER, REFIT_ROUNDS};
 
@@ -90,7 +91,8 @@ pub(super) struct Pursuit<T> {
     pub end: PursuitEnd,
 }
 
-/// ‖y − Ax‖ / ‖y‖ in f64, with the sparse forward when `x` is sparse; counts one application.
+/// ‖y − Ax‖ / ‖y‖ in f64, with the sparse forward when `x` is sparse; adds the application to
+/// `report`.
 pub(super) fn relative_residual<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
@@ -101,15 +103,15 @@ pub(super) fn relative_residual<T: Real>(
     if ynorm == 0.0 {
         return 0.0;
     }
+    let op = Counted::new(op);
     let mut ax = vec![T::zero(); y.len()];
     let nnz = x.iter().filter(|v| **v != T::zero()).count();
     if 3 * nnz < y.len() {
         op.apply_sparse(x, &mut ax);
-        report.support_applies += 1;
     } else {
         op.apply(x, &mut ax);
-        report.forward_applies += 1;
     }
+    report.add_counts(&op);
     crate::linalg::dist2_sq(y, &ax).sqrt() / ynorm
 }
 
@@ -129,48 +131,98 @@ pub(super) fn support_pursuit<T: Real>(
     y: &[T],
     max_rounds: usize,
 ) -> Result<Pursuit<T>> {
-    let start = Instant::now();
-    let g = op.geometry();
-    let (k, n, ks) = (y.len(), g.voxels(), g.ks);
-    let tol = explained_tolerance::<T>();
-    let cap = ((PURSUIT_MAX_FRACTION * k as f64) as usize).max(1);
-    let mut report = Report {
-        solver: "support-ls",
-        iterations: 0,
-        termination: Termination::MaxIterations,
-        residual_history: Vec::new(),
-        objective_history: Vec::new(),
-        forward_applies: 0,
-        adjoint_applies: 0,
-        support_applies: 0,
-        elapsed: Default::default(),
+    let mut x = vec![T::zero(); op.ncols()];
+    let (report, run) = solve_with::<T, _, (), PursuitIteration<T>>(
+        &op,
+        y,
+        &mut x,
+        &Stopping::iterations(max_rounds.max(1)),
+        &mut (),
+    )?;
+    let (relative_residual, end) = match run {
+        Some(run) => (run.rel, run.end),
+        None => (0.0, PursuitEnd::Explained),
     };
-    let mut x = vec![T::zero(); n];
-    let ynorm = dot(y, y).sqrt();
-    if ynorm == 0.0 {
-        report.termination = Termination::ZeroResidual;
-        report.elapsed = start.elapsed();
-        return Ok(Pursuit {
-            x,
-            report,
-            relative_residual: 0.0,
-            end: PursuitEnd::Explained,
-        });
+    Ok(Pursuit {
+        x,
+        report,
+        relative_residual,
+        end,
+    })
+}
+
+/// The state of [`support_pursuit`] between rounds (the protocol of
+/// [`Iteration`](crate::solver::Iteration)).
+pub(super) struct PursuitIteration<T> {
+    ynorm: f64,
+    /// The relative residual at which the data are explained.
+    tol: f64,
+    /// The largest support.
+    cap: usize,
+    /// y − Ax, its relative norm, and the correlations of the residual.
+    r: Vec<T>,
+    rel: f64,
+    u: Vec<T>,
+    /// The voxels that join in the next round, strongest first.
+    candidates: Vec<(usize, f64)>,
+    prev: Vec<T>,
+    end: PursuitEnd,
+}
+
+impl<T: Real> Iterative<T> for PursuitIteration<T> {
+    const NAME: &'static str = "support-ls";
+    /// The round limit (and a time limit, if any).
+    type Params = Stopping;
+
+    fn stopping(stopping: &Stopping) -> Stopping {
+        *stopping
     }
-    let mut r = y.to_vec();
-    let mut rel = 1.0;
-    let mut u = vec![T::zero(); n];
-    let mut end = PursuitEnd::Rounds;
-    for round in 1..=max_rounds {
-        report.iterations = round;
-        op.correlate(&r, &mut u);
-        report.adjoint_applies += 1;
-        let mut all: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
+
+    fn check_params(stopping: &Stopping) -> Result<()> {
+        stopping.validate()
+    }
+}
+
+impl<T: Real, A: LidarOperator<T>> Iteration<T, A> for PursuitIteration<T> {
+    fn start(
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        _stopping: &Stopping,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        let ynorm = dot(y, y).sqrt();
+        x.fill(T::zero());
+        if ynorm == 0.0 {
+            return Ok(ControlFlow::Break(Termination::ZeroResidual));
+        }
+        let cap = ((PURSUIT_MAX_FRACTION * y.len() as f64) as usize).max(1);
+        Ok(ControlFlow::Continue(PursuitIteration {
+            ynorm,
+            tol: explained_tolerance::<T>(),
+            cap,
+            r: y.to_vec(),
+            rel: 1.0,
+            u: vec![T::zero(); op.ncols()],
+            candidates: Vec::new(),
+            prev: x.to_vec(),
+            end: PursuitEnd::Rounds,
+        }))
+    }
+
+    /// Correlates the residual with every voxel (one adjoint with the zero-mean pulse) and
+    /// keeps each pixel's best voxel outside the support that stands out of the cross-talk;
+    /// ends the run when none does ([`Termination::Converged`]) or the support is full
+    /// ([`Termination::Stagnation`]).
+    fn prepare(&mut self, op: &A) -> Option<Termination> {
+        let ks = op.geometry().ks;
+        op.correlate(&self.r, &mut self.u);
+        let mut all: Vec<f64> = self.u.iter().map(|v| v.as_f64()).collect();
         let med = median(&mut all);
         let level = med + CANDIDATE_Z * robust_sigma(&mut all, med);
-        // Each pixel's best voxel outside the support, when it stands out.
         // Each pixel's best positive voxel outside the support, strongest first.
-        let mut candidates: Vec<(usize, f64)> = u
+        let x = &self.prev;
+        let mut candidates: Vec<(usize, f64)> = self
+            .u
             .chunks(ks)
             .enumerate()
             .filter_map(|(p, col)| {
@@ -188,78 +240,83 @@ pub(super) fn support_pursuit<T: Real>(
         // round while their cross-talk still hides true returns.
         let standing = candidates.iter().filter(|c| c.1 >= level).count();
         if standing == 0 {
-            end = PursuitEnd::NoCandidate;
-            break;
+            self.end = PursuitEnd::NoCandidate;
+            return Some(Termination::Converged);
         }
         let held = x.iter().filter(|v| **v != T::zero()).count();
-        if held >= cap {
-            end = PursuitEnd::TooLarge;
-            break;
+        if held >= self.cap {
+            self.end = PursuitEnd::TooLarge;
+            return Some(Termination::Stagnation);
         }
-        let joining = if unexplained_returns(op, &x, &r) * HIDDEN_RATIO > k as f64 {
+        let k = self.r.len();
+        let joining = if unexplained_returns(op, x, &self.r) * HIDDEN_RATIO > k as f64 {
             standing.max(held)
         } else {
             standing
         };
-        candidates.truncate(joining.min(cap - held));
+        candidates.truncate(joining.min(self.cap - held));
+        self.candidates = candidates;
+        None
+    }
+
+    fn step(&mut self, op: &A, y: &[T], x: &mut [T], _it: usize) -> Result<Progress> {
+        let (ynorm, tol) = (self.ynorm, self.tol);
         // Start each newcomer at its correlation over its column's squared norm.
-        let newcomers: Vec<usize> = candidates.iter().map(|c| c.0).collect();
+        let newcomers: Vec<usize> = self.candidates.iter().map(|c| c.0).collect();
         let norms = op.column_norms(&newcomers);
-        for ((v, c), a) in candidates.iter().zip(&norms) {
+        for ((v, c), a) in self.candidates.iter().zip(&norms) {
             let start = if *a > 0.0 { c / (a * a) } else { 0.0 };
-            // The correlation uses the zero-mean pulse, which underestimates; any positive start
-            // keeps the voxel in the support for the least squares.
+            // The correlation uses the zero-mean pulse, which underestimates; any positive
+            // start keeps the voxel in the support for the least squares.
             x[*v] = T::of_f64(start.max(f64::MIN_POSITIVE.sqrt()));
         }
         // A short warm-started least squares; the amplitude test; a full refit only when the
         // support may be final.
-        if let Some(rep) = refit_support(op, y, &mut x, ROUND_LS_ITER, 1)? {
-            report.absorb_applies(&rep);
-        }
-        r = residual(op, y, &x, &mut report);
-        prune(op, &mut x, &r, ynorm);
-        r = residual(op, y, &x, &mut report);
+        refit_support(op, y, x, ROUND_LS_ITER, 1)?;
+        let mut r = residual(op, y, x);
+        prune(op, x, &r, ynorm);
+        r = residual(op, y, x);
         let mut new_rel = dot(&r, &r).sqrt() / ynorm;
-        if new_rel <= POLISH_BELOW || new_rel > (1.0 - MIN_PROGRESS) * rel {
+        if new_rel <= POLISH_BELOW || new_rel > (1.0 - MIN_PROGRESS) * self.rel {
             // The polish: least squares to the explained tolerance, the amplitude test, then
             // least squares on what is left as far as round-off allows. Testing before the
             // last fit spares it the voxels that the test drops.
-            if let Some(rep) = refit_support_to(op, y, &mut x, REFIT_MAX_ITER, 1, tol)? {
-                report.absorb_applies(&rep);
-            }
-            r = residual(op, y, &x, &mut report);
-            prune(op, &mut x, &r, ynorm);
-            if let Some(rep) = refit_support(op, y, &mut x, REFIT_MAX_ITER, REFIT_ROUNDS)? {
-                report.absorb_applies(&rep);
-            }
-            r = residual(op, y, &x, &mut report);
+            refit_support_to(op, y, x, REFIT_MAX_ITER, 1, tol)?;
+            r = residual(op, y, x);
+            prune(op, x, &r, ynorm);
+            refit_support(op, y, x, REFIT_MAX_ITER, REFIT_ROUNDS)?;
+            r = residual(op, y, x);
             new_rel = dot(&r, &r).sqrt() / ynorm;
         }
-        report.residual_history.push(new_rel);
-        report.objective_history.push(0.5 * dot(&r, &r));
-        if new_rel <= tol {
-            rel = new_rel;
-            end = PursuitEnd::Explained;
-            report.termination = Termination::Residual;
-            break;
-        }
-        if new_rel > (1.0 - MIN_PROGRESS) * rel {
-            rel = new_rel;
-            end = PursuitEnd::Stalled;
-            report.termination = Termination::Stagnation;
-            break;
-        }
-        rel = new_rel;
+        let ending = if new_rel <= tol {
+            self.end = PursuitEnd::Explained;
+            Some(Termination::Residual)
+        } else if new_rel > (1.0 - MIN_PROGRESS) * self.rel {
+            self.end = PursuitEnd::Stalled;
+            Some(Termination::Stagnation)
+        } else {
+            None
+        };
+        self.rel = new_rel;
+        let rr = dot(&r, &r);
+        self.r = r;
+        let change = crate::solver::relative_change(x, &self.prev);
+        self.prev.copy_from_slice(x);
+        Ok(Progress {
+            ending,
+            ..Progress::least_squares(rr, ynorm, change, false)
+        })
     }
-    // The last fit may leave round-off amplitudes on voxels the data do not need.
-    prune(op, &mut x, &r, ynorm);
-    report.elapsed = start.elapsed();
-    Ok(Pursuit {
-        x,
-        report,
-        relative_residual: rel,
-        end,
-    })
+
+    fn objective(&self) -> f64 {
+        0.5 * dot(&self.r, &self.r)
+    }
+
+    /// The last fit may leave round-off amplitudes on voxels the data do not need.
+    fn finish(&mut self, op: &A, _y: &[T], x: &mut [T], _termination: Termination) -> Result<()> {
+        prune(op, x, &self.r, self.ynorm);
+        Ok(())
+    }
 }
 
 /// The residual's energy in returns of the held voxels' mean energy (amplitude² times column
@@ -296,10 +353,9 @@ fn prune<T: Real>(op: &dyn LidarOperator<T>, x: &mut [T], r: &[T], ynorm: f64) {
     }
 }
 
-/// y − Ax with the sparse forward, counted as a support apply.
-fn residual<T: Real>(op: &dyn LidarOperator<T>, y: &[T], x: &[T], report: &mut Report) -> Vec<T> {
+/// y − Ax with the sparse forward.
+fn residual<T: Real>(op: &dyn LidarOperator<T>, y: &[T], x: &[T]) -> Vec<T> {
     let mut ax = vec![T::zero(); y.len()];
     op.apply_sparse(x, &mut ax);
-    report.support_applies += 1;
     ax.iter().zip(y).map(|(&a, &b)| b - a).collect()
 }

@@ -3,6 +3,7 @@
 
 use crate::error::Result;
 use crate::lidar::LidarOperator;
+use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 use crate::solver::{cgls, CglsParams, Report, Stopping};
 
@@ -61,14 +62,13 @@ pub(super) fn refit_support_to<T: Real>(
             ..Stopping::default()
         },
     };
+    // The restrictions' applications count as support applications.
+    let counted = Counted::new(op);
     let mut total: Option<Report> = None;
     for _ in 0..rounds.max(1) {
-        let restricted = op.restrict_columns(support.clone())?;
+        let restricted = counted.restrict_columns(support.clone())?;
         let mut b: Vec<T> = support.iter().map(|&v| x[v]).collect();
-        let mut rep = cgls(restricted.as_ref(), y, &mut b, &params, &mut ())?;
-        rep.support_applies = rep.forward_applies + rep.adjoint_applies;
-        rep.forward_applies = 0;
-        rep.adjoint_applies = 0;
+        let rep = cgls(restricted.as_ref(), y, &mut b, &params, &mut ())?;
         match &mut total {
             Some(t) => t.absorb(rep),
             None => total = Some(rep),
@@ -81,6 +81,9 @@ pub(super) fn refit_support_to<T: Real>(
         if support.len() == before || support.is_empty() {
             break;
         }
+    }
+    if let Some(t) = &mut total {
+        t.count_from(&counted);
     }
     Ok(total)
 }

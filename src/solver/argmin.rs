@@ -3,7 +3,6 @@
 //! `next_iter` steps the native solver's iteration (the same code, so the iterates agree to the
 //! last bit).
 
-use std::collections::VecDeque;
 use std::ops::ControlFlow;
 
 use argmin::core::{IterState, Problem, Solver, State, TerminationReason, TerminationStatus, KV};
@@ -14,8 +13,9 @@ use crate::linalg::norm2_sq;
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 
-use super::iteration::{Iteration, Progress, StoppingRecord};
-use super::{CglsIteration, CosampIteration, FistaIteration, IhtIteration, Stopping};
+use super::iteration::{ending, Iteration, Iterative, Progress};
+use super::stopping::StopRules;
+use super::{CglsIteration, CosampIteration, FistaIteration, IhtIteration, Stopping, Termination};
 
 /// The least-squares data term ½‖Ax − y‖² of a problem, as an argmin problem. Each solver adds
 /// its own terms through its parameters (CGLS its damping λ‖x‖², FISTA its ℓ1 penalty, IHT and
@@ -43,77 +43,46 @@ fn operands<'a, T, A: ?Sized>(
     Ok((lls.op, lls.y))
 }
 
-/// Adds `forward` and `adjoint` applications of the operator to argmin's per-problem counters
-/// (`operator_forward`, `operator_adjoint`).
-fn count_applies<O>(problem: &mut Problem<O>, forward: usize, adjoint: usize) {
-    for (name, applies) in [("operator_forward", forward), ("operator_adjoint", adjoint)] {
+/// Adds the applications counted by `op` to argmin's per-problem counters (`operator_forward`,
+/// `operator_adjoint`, `operator_support`).
+fn count_applies<O, A>(problem: &mut Problem<O>, op: &Counted<A>) {
+    for (name, applies) in [
+        ("operator_forward", op.forward_count()),
+        ("operator_adjoint", op.adjoint_count()),
+        ("operator_support", op.support_count()),
+    ] {
         *problem.counts.entry(name).or_insert(0) += applies as u64;
-    }
-}
-
-/// The native solver's convergence rules, apart from its limits (`max_iter` and `time_limit`
-/// are left to the executor).
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct Rules {
-    stopping: StoppingRecord,
-    /// The last `window + 1` objectives, for the stagnation rule.
-    objectives: VecDeque<f64>,
-}
-
-impl Rules {
-    /// Records an iteration; `true` when the solver's own test or one of the residual, change and
-    /// stagnation rules holds.
-    fn met(&mut self, p: &Progress) -> bool {
-        let mut stagnated = false;
-        if let Some((rel, window)) = self.stopping.stagnation {
-            self.objectives.push_back(p.objective);
-            if self.objectives.len() > window + 1 {
-                self.objectives.pop_front();
-            }
-            if let (true, Some(&old), Some(&new)) = (
-                self.objectives.len() == window + 1,
-                self.objectives.front(),
-                self.objectives.back(),
-            ) {
-                stagnated = (old - new) <= rel * old.abs().max(f64::MIN_POSITIVE);
-            }
-        }
-        p.converged
-            || stagnated
-            || self.stopping.rel_residual.is_some_and(|t| p.residual <= t)
-            || self.stopping.rel_change.is_some_and(|t| p.change <= t)
     }
 }
 
 /// The part of an argmin solver that steps a native iteration.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct Driver<I> {
-    rules: Rules,
+    /// The convergence rules (the limits, `max_iter` and `time_limit`, are the executor's).
+    rules: StopRules,
     /// `None` before `init`, and after an `init` that found nothing to iterate.
     iteration: Option<I>,
     /// Whether [`Iteration::prepare`] has run for the next update.
     prepared: bool,
-    /// Whether the run has converged.
-    converged: bool,
+    /// Why the run ends, once the solver or its rules have ended it.
+    ended: Option<Termination>,
 }
 
 impl<I> Driver<I> {
     fn new(stopping: Stopping) -> Self {
         Driver {
-            rules: Rules {
-                stopping: stopping.into(),
-                objectives: VecDeque::new(),
-            },
+            rules: StopRules::new(stopping),
             iteration: None,
             prepared: false,
-            converged: false,
+            ended: None,
         }
     }
 
     /// Iteration `iter + 1` (the executor has completed `iter`), updating `x`. `None` when the
     /// work before the update shows that x is a solution already, which can only happen when a
     /// run continues past the iteration limit it was prepared for (the work is then done here,
-    /// and the executor counts one iteration more than the native solver would).
+    /// and the executor counts one iteration more than the native solver would). The solver's
+    /// finishing step runs when the run ends here or reaches `max_iters`.
     fn advance<T, A>(
         &mut self,
         op: &A,
@@ -124,32 +93,43 @@ impl<I> Driver<I> {
     ) -> Result<Option<Progress>, Error>
     where
         T: Real,
-        A: LinearOperator<T> + ?Sized,
-        I: Iteration<T>,
+        A: ?Sized,
+        I: Iteration<T, A>,
     {
         let iteration = self
             .iteration
             .as_mut()
             .ok_or_else(|| Error::param("state", "no iteration to continue"))?;
-        if !self.prepared && iteration.prepare(op) {
-            self.converged = true;
-            return Ok(None);
+        if !self.prepared {
+            if let Some(t) = iteration.prepare(op) {
+                self.ended = Some(t);
+                iteration.finish(op, y, x, t)?;
+                return Ok(None);
+            }
         }
         let p = iteration.step(op, y, x, (iter + 1) as usize)?;
-        self.converged = self.rules.met(&p);
+        let last = iter + 1 >= max_iters;
+        self.ended = ending(
+            self.rules
+                .converged(p.residual, p.objective, p.change)
+                .or(last.then_some(Termination::MaxIterations)),
+            &p,
+        );
         // Like the native solver, prepare the next update only when there is one.
-        self.prepared = !self.converged && iter + 1 < max_iters;
+        self.prepared = self.ended.is_none();
         if self.prepared {
-            self.converged = iteration.prepare(op);
+            self.ended = iteration.prepare(op);
+        }
+        if let Some(t) = self.ended {
+            iteration.finish(op, y, x, t)?;
         }
         Ok(Some(p))
     }
 
     fn terminate(&self) -> TerminationStatus {
-        if self.converged {
-            TerminationStatus::Terminated(TerminationReason::SolverConverged)
-        } else {
-            TerminationStatus::NotTerminated
+        match self.ended {
+            Some(Termination::MaxIterations) | None => TerminationStatus::NotTerminated,
+            Some(_) => TerminationStatus::Terminated(TerminationReason::SolverConverged),
         }
     }
 }
@@ -193,7 +173,7 @@ impl<I> Driver<I> {
 /// ```
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(bound(serialize = "I: Serialize", deserialize = "I: Deserialize<'de>"))]
-pub struct ArgminSolver<T, I: Iteration<T>>
+pub struct ArgminSolver<T, I: Iterative<T>>
 where
     T: Real,
 {
@@ -204,7 +184,7 @@ where
     _t: std::marker::PhantomData<T>,
 }
 
-impl<T: Real, I: Iteration<T>> ArgminSolver<T, I> {
+impl<T: Real, I: Iterative<T>> ArgminSolver<T, I> {
     /// A solver with these parameters.
     ///
     /// # Errors
@@ -224,7 +204,7 @@ impl<'a, T, A, I> Solver<LinearLeastSquares<'a, T, A>, ArgminState<T>> for Argmi
 where
     T: Real,
     A: LinearOperator<T> + ?Sized,
-    I: Iteration<T>,
+    I: Iteration<T, Counted<&'a A>>,
 {
     fn name(&self) -> &str {
         I::NAME
@@ -254,20 +234,26 @@ where
             Ok(ControlFlow::Continue(mut iteration)) => {
                 // The work before the first update, unless the executor allows no iteration.
                 self.driver.prepared = state.get_iter() < state.get_max_iters();
-                self.driver.converged = self.driver.prepared && iteration.prepare(&op);
+                if self.driver.prepared {
+                    self.driver.ended = iteration.prepare(&op);
+                }
                 let cost = iteration.objective();
+                let finished = match self.driver.ended {
+                    Some(t) => iteration.finish(&op, y, &mut x, t),
+                    None => Ok(()),
+                };
                 self.driver.iteration = Some(iteration);
-                Ok(cost)
+                finished.map(|()| cost)
             }
             // Zero measurements or a zero operator: x is a solution and Ax = 0, so the objective
             // is ½‖y‖².
-            Ok(ControlFlow::Break(_)) => {
-                self.driver.converged = true;
+            Ok(ControlFlow::Break(t)) => {
+                self.driver.ended = Some(t);
                 Ok(0.5 * norm2_sq(y))
             }
             Err(e) => Err(e),
         };
-        count_applies(problem, op.forward_count(), op.adjoint_count());
+        count_applies(problem, &op);
         Ok((state.param(x).cost(cost?), None))
     }
 
@@ -284,7 +270,7 @@ where
         let advanced = self
             .driver
             .advance(&op, y, &mut x, state.get_iter(), state.get_max_iters());
-        count_applies(problem, op.forward_count(), op.adjoint_count());
+        count_applies(problem, &op);
         match advanced? {
             Some(p) => {
                 let kv = argmin::kv!("residual" => p.residual; "change" => p.change;);

@@ -9,7 +9,7 @@ use crate::linalg::{axpy, dot};
 use crate::operator::LinearOperator;
 use crate::real::Real;
 
-use super::iteration::{fit_scratch, solve, Iteration, Progress};
+use super::iteration::{fit_scratch, solve, Iteration, Iterative, Progress};
 use super::{check_problem, Observer, Report, Stopping, Termination};
 
 /// Parameters of [`cgls`].
@@ -66,7 +66,7 @@ pub struct CglsIteration<T> {
     scratch: Vec<T>,
 }
 
-impl<T: Real> Iteration<T> for CglsIteration<T> {
+impl<T: Real> Iterative<T> for CglsIteration<T> {
     const NAME: &'static str = "cgls";
     type Params = CglsParams;
 
@@ -77,8 +77,10 @@ impl<T: Real> Iteration<T> for CglsIteration<T> {
     fn check_params(params: &CglsParams) -> Result<()> {
         params.validate()
     }
+}
 
-    fn start<A: LinearOperator<T> + ?Sized>(
+impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T> {
+    fn start(
         op: &A,
         y: &[T],
         x: &mut [T],
@@ -113,13 +115,7 @@ impl<T: Real> Iteration<T> for CglsIteration<T> {
         }))
     }
 
-    fn step<A: LinearOperator<T> + ?Sized>(
-        &mut self,
-        op: &A,
-        _y: &[T],
-        x: &mut [T],
-        it: usize,
-    ) -> Result<Progress> {
+    fn step(&mut self, op: &A, _y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
         fit_scratch(&mut self.scratch, op);
         let lambda = self.damp;
         op.apply_with_scratch(&self.p, &mut self.q, &mut self.scratch);
@@ -162,7 +158,7 @@ impl<T: Real> Iteration<T> for CglsIteration<T> {
             residual: (gamma_new / self.gamma0).sqrt(),
             objective: self.objective,
             change,
-            converged: gamma_new == 0.0,
+            ending: (gamma_new == 0.0).then_some(Termination::Converged),
         })
     }
 

@@ -9,7 +9,7 @@ use crate::linalg::{dot, norm2};
 use crate::operator::LinearOperator;
 use crate::real::Real;
 
-use super::iteration::{fit_scratch, refresh_residual, solve, Iteration, Progress, StoppingRecord};
+use super::iteration::{fit_scratch, refresh_residual, solve, Iteration, Iterative, Progress};
 use super::{
     cgls, check_problem, check_sparsity, check_tolerance, hard_threshold, largest_indices,
     relative_change, support, CglsParams, Observer, Report, Stopping, Termination,
@@ -94,7 +94,7 @@ pub struct CosampIteration<T> {
     fixed_point_tol: f64,
     /// The damping and the stopping rules of the inner [`CglsParams`].
     inner_damp: f64,
-    inner_stopping: StoppingRecord,
+    inner_stopping: Stopping,
     /// ‖y‖.
     ynorm: f64,
     ax: Vec<T>,
@@ -108,7 +108,7 @@ pub struct CosampIteration<T> {
     scratch: Vec<T>,
 }
 
-impl<T: Real> Iteration<T> for CosampIteration<T> {
+impl<T: Real> Iterative<T> for CosampIteration<T> {
     const NAME: &'static str = "cosamp";
     type Params = CosampParams;
 
@@ -120,8 +120,10 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
         params.validate()?;
         super::check_nonzero_sparsity(params.sparsity)
     }
+}
 
-    fn start<A: LinearOperator<T> + ?Sized>(
+impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CosampIteration<T> {
+    fn start(
         op: &A,
         y: &[T],
         x: &mut [T],
@@ -144,7 +146,7 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
             sparsity: params.sparsity,
             fixed_point_tol: params.fixed_point_tol,
             inner_damp: params.inner.damp,
-            inner_stopping: params.inner.stopping.into(),
+            inner_stopping: params.inner.stopping,
             ynorm,
             ax,
             r,
@@ -156,19 +158,16 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
     }
 
     /// The proxy u = Aᵀ(y − Ax); x solves the problem when it is exactly zero.
-    fn prepare<A: LinearOperator<T> + ?Sized>(&mut self, op: &A) -> bool {
+    fn prepare(&mut self, op: &A) -> Option<Termination> {
         fit_scratch(&mut self.scratch, op);
         op.apply_adjoint_with_scratch(&self.r, &mut self.u, &mut self.scratch);
-        self.u.iter().all(|&v| v == T::zero())
+        self.u
+            .iter()
+            .all(|&v| v == T::zero())
+            .then_some(Termination::Converged)
     }
 
-    fn step<A: LinearOperator<T> + ?Sized>(
-        &mut self,
-        op: &A,
-        y: &[T],
-        x: &mut [T],
-        it: usize,
-    ) -> Result<Progress> {
+    fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
         fit_scratch(&mut self.scratch, op);
         let s = self.sparsity;
         let merged = union(&largest_indices(&self.u, 2 * s), &self.supp);
@@ -176,7 +175,7 @@ impl<T: Real> Iteration<T> for CosampIteration<T> {
         let restricted = op.restrict_columns(merged.clone())?;
         let inner = CglsParams {
             damp: self.inner_damp,
-            stopping: self.inner_stopping.into(),
+            stopping: self.inner_stopping,
         };
         cgls(&restricted, y, &mut b, &inner, &mut ()).map_err(|e| match e {
             Error::Breakdown { reason, .. } => Error::Breakdown {

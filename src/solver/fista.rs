@@ -10,7 +10,7 @@ use crate::linalg::{dist2_sq, norm2, norm_inf};
 use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 
-use super::iteration::{fit_scratch, solve, Iteration, Progress};
+use super::iteration::{fit_scratch, solve, Iteration, Iterative, Progress};
 use super::{
     check_problem, lipschitz_estimate, relative_change, validate_power_step, Observer, Report,
     Stopping, Termination,
@@ -292,7 +292,7 @@ pub struct FistaIteration<T> {
     momentum: bool,
 }
 
-impl<T: Real> Iteration<T> for FistaIteration<T> {
+impl<T: Real> Iterative<T> for FistaIteration<T> {
     const NAME: &'static str = "fista";
     type Params = FistaParams;
 
@@ -303,8 +303,10 @@ impl<T: Real> Iteration<T> for FistaIteration<T> {
     fn check_params(params: &FistaParams) -> Result<()> {
         params.validate()
     }
+}
 
-    fn start<A: LinearOperator<T> + ?Sized>(
+impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<T> {
+    fn start(
         op: &A,
         y: &[T],
         x: &mut [T],
@@ -380,13 +382,7 @@ impl<T: Real> Iteration<T> for FistaIteration<T> {
         }))
     }
 
-    fn step<A: LinearOperator<T> + ?Sized>(
-        &mut self,
-        op: &A,
-        y: &[T],
-        x: &mut [T],
-        it: usize,
-    ) -> Result<Progress> {
+    fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
         let lasso = &mut self.lasso;
         lasso.step(op, y, &self.z, &self.az, &mut self.p, &mut self.ap)?;
         let mut f_p = lasso.objective(y, &self.p, &self.ap);
@@ -437,7 +433,7 @@ impl<T: Real> Iteration<T> for FistaIteration<T> {
             residual,
             objective: self.f_x,
             change,
-            converged: false,
+            ending: None,
         })
     }
 

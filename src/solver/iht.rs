@@ -9,7 +9,7 @@ use crate::linalg::{dist2_sq, dot, norm2};
 use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
 
-use super::iteration::{fit_scratch, refresh_residual, solve, Iteration, Progress};
+use super::iteration::{fit_scratch, refresh_residual, solve, Iteration, Iterative, Progress};
 use super::{
     check_problem, check_sparsity, check_tolerance, hard_threshold, largest_indices,
     lipschitz_estimate, relative_change, support, validate_power_step, Observer, Report, Stopping,
@@ -152,7 +152,7 @@ pub struct IhtIteration<T> {
     scratch: Vec<T>,
 }
 
-impl<T: Real> Iteration<T> for IhtIteration<T> {
+impl<T: Real> Iterative<T> for IhtIteration<T> {
     const NAME: &'static str = "iht";
     type Params = IhtParams;
 
@@ -164,8 +164,10 @@ impl<T: Real> Iteration<T> for IhtIteration<T> {
         params.validate()?;
         super::check_nonzero_sparsity(params.sparsity)
     }
+}
 
-    fn start<A: LinearOperator<T> + ?Sized>(
+impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for IhtIteration<T> {
+    fn start(
         op: &A,
         y: &[T],
         x: &mut [T],
@@ -213,19 +215,16 @@ impl<T: Real> Iteration<T> for IhtIteration<T> {
     }
 
     /// The gradient g = Aᵀ(y − Ax); x solves the problem when it is exactly zero.
-    fn prepare<A: LinearOperator<T> + ?Sized>(&mut self, op: &A) -> bool {
+    fn prepare(&mut self, op: &A) -> Option<Termination> {
         fit_scratch(&mut self.scratch, op);
         op.apply_adjoint_with_scratch(&self.r, &mut self.g, &mut self.scratch);
-        self.g.iter().all(|&v| v == T::zero())
+        self.g
+            .iter()
+            .all(|&v| v == T::zero())
+            .then_some(Termination::Converged)
     }
 
-    fn step<A: LinearOperator<T> + ?Sized>(
-        &mut self,
-        op: &A,
-        y: &[T],
-        x: &mut [T],
-        it: usize,
-    ) -> Result<Progress> {
+    fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
         fit_scratch(&mut self.scratch, op);
         let s = self.sparsity;
         // Γ: the current support, or the s largest gradient entries when x = 0.

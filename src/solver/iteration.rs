@@ -1,19 +1,21 @@
 //! The iteration protocol: an iterative solver's state as a value, set up once from the warm
-//! start, then stepped. [`solve`] is the one loop that owns the stopping rules, the observer and
-//! the report of every native solver ([`cgls`](super::cgls), [`fista`](super::fista),
-//! [`iht`](super::iht), [`cosamp`](super::cosamp)); [`ArgminSolver`](super::ArgminSolver) steps
-//! the same value from argmin's `next_iter`, so both drivers perform the same arithmetic.
+//! start, stepped, then finished. [`solve`] is the one loop that owns the stopping rules, the
+//! observer, the apply counts and the report of every iterative solver;
+//! [`ArgminSolver`](super::ArgminSolver) steps the same value from argmin's `next_iter`, so both
+//! drivers perform the same arithmetic.
+//!
+//! The protocol is generic over the operator: a solver states what it needs of it (any
+//! [`LinearOperator`], or the per-pixel [`VoxelOperator`](crate::operator::VoxelOperator)), and
+//! the loop hands it the operator wrapped in [`Counted`], which has every capability of the
+//! operator it wraps.
 
 use std::ops::ControlFlow;
-use std::time::Duration;
-
-use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 
-use super::{Monitor, Observer, Report, Stagnation, Stopping, Termination};
+use super::{Monitor, Observer, Report, Stopping, Termination};
 
 /// What one iteration reports.
 #[derive(Debug, Clone, Copy)]
@@ -24,8 +26,10 @@ pub struct Progress {
     pub objective: f64,
     /// ‖x_k − x_{k−1}‖ / ‖x_k‖.
     pub change: f64,
-    /// The solver's own convergence test held (e.g. an unchanged support and a small change).
-    pub converged: bool,
+    /// The solver's own reason to end the run, if any: [`Termination::Converged`] when its
+    /// convergence test held (e.g. an unchanged support and a small change), or another
+    /// (e.g. [`Termination::Stagnation`] for a solver that counts iterations without progress).
+    pub ending: Option<Termination>,
 }
 
 impl Progress {
@@ -36,7 +40,7 @@ impl Progress {
             residual: rr.sqrt() / ynorm,
             objective: 0.5 * rr,
             change,
-            converged,
+            ending: converged.then_some(Termination::Converged),
         }
     }
 }
@@ -66,9 +70,9 @@ pub(super) fn refresh_residual<T: Real>(
     Ok(rr)
 }
 
-/// A solver's state between iterations: the protocol every iterative solver of this module
-/// implements.
-pub trait Iteration<T: Real>: Sized {
+/// What an iterative solver is apart from the operator it runs on: its name, parameters and
+/// stopping rules.
+pub trait Iterative<T: Real> {
     /// The solver's name in reports and errors.
     const NAME: &'static str;
     /// The solver's parameters.
@@ -82,42 +86,60 @@ pub trait Iteration<T: Real>: Sized {
     /// # Errors
     /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the field.
     fn check_params(params: &Self::Params) -> Result<()>;
+}
 
+/// A solver's state between iterations: the protocol every iterative solver implements, on
+/// operators of type `A` (the solver implements it for every `A` with the capability it needs).
+pub trait Iteration<T: Real, A: ?Sized>: Iterative<T> + Sized {
     /// Validates the inputs and prepares the first iteration from the warm start `x` (which it
     /// may modify). Ends the run at once (`Break`) when there is nothing to iterate.
-    fn start<A: LinearOperator<T> + ?Sized>(
+    fn start(
         op: &A,
         y: &[T],
         x: &mut [T],
         params: &Self::Params,
     ) -> Result<ControlFlow<Termination, Self>>;
 
-    /// The work an iteration needs before its update (a gradient or proxy); `true` when that
-    /// work shows the current x to be a solution, so that no iteration follows.
-    fn prepare<A: LinearOperator<T> + ?Sized>(&mut self, _op: &A) -> bool {
-        false
+    /// The work an iteration needs before its update (a gradient or proxy); a termination when
+    /// that work shows the current x to be a solution, so that no iteration follows.
+    fn prepare(&mut self, _op: &A) -> Option<Termination> {
+        None
     }
 
     /// Iteration `it` (1-based): updates `x` in place.
-    fn step<A: LinearOperator<T> + ?Sized>(
-        &mut self,
-        op: &A,
-        y: &[T],
-        x: &mut [T],
-        it: usize,
-    ) -> Result<Progress>;
+    fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress>;
 
     /// The objective at the current x.
     fn objective(&self) -> f64;
+
+    /// The solver's last word once the run has ended for `termination`, after `iterations`
+    /// iterations: e.g. the best iterate instead of the last, or a final test of the
+    /// amplitudes. Nothing by default.
+    ///
+    /// # Errors
+    /// Those of the work it does.
+    fn finish(&mut self, _op: &A, _y: &[T], _x: &mut [T], _termination: Termination) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// The termination of an iteration whose progress is `p` and for which the stopping rules
+/// decided `rules`: the solver's own ending takes precedence over the iteration limit.
+pub(super) fn ending(rules: Option<Termination>, p: &Progress) -> Option<Termination> {
+    match rules {
+        Some(Termination::MaxIterations) | None if p.ending.is_some() => p.ending,
+        other => other,
+    }
 }
 
 /// The native loop: `prepare`, `step`, and the [`Stopping`] rules with the observer, until one
-/// of them ends the run. The solver's own convergence takes precedence over the iteration limit.
+/// of them ends the run; then `finish`. The solver's own ending takes precedence over the
+/// iteration limit.
 ///
 /// # Errors
-/// Those of the iteration's `start` and `step`.
-pub fn solve<T, A, O, I>(
-    op: &A,
+/// Those of the iteration's `start`, `step` and `finish`.
+pub fn solve<'a, T, A, O, I>(
+    op: &'a A,
     y: &[T],
     x: &mut [T],
     params: &I::Params,
@@ -127,29 +149,48 @@ where
     T: Real,
     A: LinearOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
-    I: Iteration<T>,
+    I: Iteration<T, Counted<&'a A>>,
+{
+    solve_with::<T, A, O, I>(op, y, x, params, observer).map(|(report, _)| report)
+}
+
+/// [`solve`], also returning the solver's final state (`None` when it ended before its first
+/// iteration), for solvers whose state holds more than x (e.g. posteriors).
+///
+/// # Errors
+/// Those of [`solve`].
+pub fn solve_with<'a, T, A, O, I>(
+    op: &'a A,
+    y: &[T],
+    x: &mut [T],
+    params: &I::Params,
+    observer: &mut O,
+) -> Result<(Report, Option<I>)>
+where
+    T: Real,
+    A: LinearOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+    I: Iteration<T, Counted<&'a A>>,
 {
     let op = Counted::new(op);
     let mut monitor = Monitor::new(I::NAME, I::stopping(params), observer);
     let mut run = match I::start(&op, y, x, params)? {
         ControlFlow::Continue(run) => run,
-        ControlFlow::Break(termination) => return Ok(monitor.finish(0, termination, &op)),
+        ControlFlow::Break(termination) => return Ok((monitor.finish(0, termination, &op), None)),
     };
     let mut it = 0;
-    loop {
-        if run.prepare(&op) {
-            return Ok(monitor.finish(it, Termination::Converged, &op));
+    let termination = loop {
+        if let Some(t) = run.prepare(&op) {
+            break t;
         }
         it += 1;
         let p = run.step(&op, y, x, it)?;
-        match monitor.step(it, p.residual, p.objective, p.change, x) {
-            Some(Termination::MaxIterations) | None if p.converged => {
-                return Ok(monitor.finish(it, Termination::Converged, &op));
-            }
-            Some(termination) => return Ok(monitor.finish(it, termination, &op)),
-            None => {}
+        if let Some(t) = ending(monitor.step(it, p.residual, p.objective, p.change, x), &p) {
+            break t;
         }
-    }
+    };
+    run.finish(&op, y, x, termination)?;
+    Ok((monitor.finish(it, termination, &op), Some(run)))
 }
 
 /// Makes `scratch` the length `op` asks for (scratch is not serialized, so a deserialized
@@ -158,40 +199,5 @@ pub(super) fn fit_scratch<T: Real, A: LinearOperator<T> + ?Sized>(scratch: &mut 
     let len = op.scratch_len();
     if scratch.len() != len {
         *scratch = vec![T::zero(); len];
-    }
-}
-
-/// [`Stopping`] in a serializable form.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub(super) struct StoppingRecord {
-    pub max_iter: usize,
-    pub rel_residual: Option<f64>,
-    pub rel_change: Option<f64>,
-    /// (rel, window) of [`Stagnation`].
-    pub stagnation: Option<(f64, usize)>,
-    pub time_limit: Option<Duration>,
-}
-
-impl From<Stopping> for StoppingRecord {
-    fn from(s: Stopping) -> Self {
-        StoppingRecord {
-            max_iter: s.max_iter,
-            rel_residual: s.rel_residual,
-            rel_change: s.rel_change,
-            stagnation: s.stagnation.map(|g| (g.rel, g.window)),
-            time_limit: s.time_limit,
-        }
-    }
-}
-
-impl From<StoppingRecord> for Stopping {
-    fn from(s: StoppingRecord) -> Self {
-        Stopping {
-            max_iter: s.max_iter,
-            rel_residual: s.rel_residual,
-            rel_change: s.rel_change,
-            stagnation: s.stagnation.map(|(rel, window)| Stagnation { rel, window }),
-            time_limit: s.time_limit,
-        }
     }
 }

@@ -23,9 +23,12 @@ mod iteration;
 mod pixelwise;
 #[cfg(feature = "progress")]
 mod progress;
+mod stopping;
 mod tv;
 
 use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
 
 pub use argmin::{
     ArgminCgls, ArgminCosamp, ArgminFista, ArgminIht, ArgminSolver, ArgminState, LinearLeastSquares,
@@ -37,13 +40,16 @@ pub use cgls::{cgls, CglsIteration, CglsParams};
 pub use cosamp::{cosamp, CosampIteration, CosampParams};
 pub use fista::{fista, FistaIteration, FistaParams, Lambda, Restart, StepRule};
 pub use iht::{iht, IhtIteration, IhtParams, IhtStep};
-pub use iteration::{solve, Iteration, Progress};
+pub use iteration::{solve, solve_with, Iteration, Iterative, Progress};
 pub use pixelwise::{
     model_based, reflector_amp, tv_depth, ModelBasedParams, ReflectorAmpParams, TvDepthParams,
 };
 #[cfg(feature = "progress")]
 pub use progress::ProgressObserver;
+pub use stopping::{Stagnation, Stopping};
 pub use tv::{tv_denoise, TvNorm, TvParams, TvSteps};
+
+use stopping::StopRules;
 
 use crate::error::{Error, Result};
 use crate::linalg::{dist2_sq, dot};
@@ -51,82 +57,8 @@ use crate::operator::Counted;
 use crate::operator::{operator_norm, PowerIteration};
 use crate::real::Real;
 
-/// When an iterative solver stops. Criteria set to `None` are off.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Stopping {
-    /// Maximum number of iterations (at least 1).
-    pub max_iter: usize,
-    /// Stop when the solver's residual measure, relative to its initial value, is at most this.
-    pub rel_residual: Option<f64>,
-    /// Stop when ‖x_k − x_{k−1}‖ / ‖x_k‖ is at most this.
-    pub rel_change: Option<f64>,
-    /// Stop when the objective improved by less than `rel` (relative) over the last `window`
-    /// iterations.
-    pub stagnation: Option<Stagnation>,
-    /// Stop after this much wall-clock time (checked after each iteration).
-    pub time_limit: Option<Duration>,
-}
-
-/// Objective stagnation: relative improvement below `rel` over `window` iterations.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Stagnation {
-    /// Relative improvement threshold.
-    pub rel: f64,
-    /// Number of iterations it is measured over.
-    pub window: usize,
-}
-
-impl Default for Stopping {
-    fn default() -> Self {
-        Stopping {
-            max_iter: 100,
-            rel_residual: Some(1e-6),
-            rel_change: None,
-            stagnation: None,
-            time_limit: None,
-        }
-    }
-}
-
-impl Stopping {
-    /// Only an iteration limit.
-    pub fn iterations(max_iter: usize) -> Self {
-        Stopping {
-            max_iter,
-            rel_residual: None,
-            ..Stopping::default()
-        }
-    }
-
-    /// Checks every field.
-    ///
-    /// # Errors
-    /// [`Error::InvalidParameter`] naming the field.
-    pub fn validate(&self) -> Result<()> {
-        if self.max_iter == 0 {
-            return Err(Error::param("max_iter", "must be at least 1"));
-        }
-        let positive = |name: &'static str, v: Option<f64>| match v {
-            Some(t) if !(t.is_finite() && t >= 0.0) => Err(Error::param(
-                name,
-                format!("must be a finite number ≥ 0, got {t}"),
-            )),
-            _ => Ok(()),
-        };
-        positive("rel_residual", self.rel_residual)?;
-        positive("rel_change", self.rel_change)?;
-        if let Some(s) = self.stagnation {
-            positive("stagnation.rel", Some(s.rel))?;
-            if s.window == 0 {
-                return Err(Error::param("stagnation.window", "must be at least 1"));
-            }
-        }
-        Ok(())
-    }
-}
-
 /// Why a solver stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[non_exhaustive]
 pub enum Termination {
     /// The iteration limit was reached.
@@ -241,6 +173,22 @@ impl Report {
         self.elapsed += other.elapsed;
     }
 
+    /// The apply counts become those that `op` has counted: for a composite solver that counts
+    /// every application of its parts through one wrapper.
+    pub fn count_from<A>(&mut self, op: &Counted<A>) {
+        self.forward_applies = op.forward_count();
+        self.adjoint_applies = op.adjoint_count();
+        self.support_applies = op.support_count();
+    }
+
+    /// Adds the applications that `op` has counted (work done for this run outside its solver,
+    /// e.g. a residual measured afterwards).
+    pub fn add_counts<A>(&mut self, op: &Counted<A>) {
+        self.forward_applies += op.forward_count();
+        self.adjoint_applies += op.adjoint_count();
+        self.support_applies += op.support_count();
+    }
+
     /// Every application counted, full and support ones alike.
     pub fn total_applies(&self) -> usize {
         self.forward_applies + self.adjoint_applies + self.support_applies
@@ -250,7 +198,7 @@ impl Report {
 /// The shared bookkeeping of an iterative run: histories, stopping rules, the observer.
 pub(crate) struct Monitor<'o, T, O: Observer<T> + ?Sized> {
     solver: &'static str,
-    stop: Stopping,
+    rules: StopRules,
     observer: &'o mut O,
     start: Instant,
     residuals: Vec<f64>,
@@ -262,7 +210,7 @@ impl<'o, T: Real, O: Observer<T> + ?Sized> Monitor<'o, T, O> {
     pub(crate) fn new(solver: &'static str, stop: Stopping, observer: &'o mut O) -> Self {
         Monitor {
             solver,
-            stop,
+            rules: StopRules::new(stop),
             observer,
             start: Instant::now(),
             residuals: Vec::new(),
@@ -271,8 +219,8 @@ impl<'o, T: Real, O: Observer<T> + ?Sized> Monitor<'o, T, O> {
         }
     }
 
-    /// Records iteration `it` and decides whether to stop. Checks, in order: the observer,
-    /// residual, change, stagnation, time, iteration limit.
+    /// Records iteration `it` and decides whether to stop. Checks, in order: the observer, the
+    /// convergence rules (residual, change, stagnation), the limits (time, iterations).
     pub(crate) fn step(
         &mut self,
         it: usize,
@@ -294,28 +242,9 @@ impl<'o, T: Real, O: Observer<T> + ?Sized> Monitor<'o, T, O> {
         if self.observer.observe(&info) == Control::Stop {
             return Some(Termination::Observer);
         }
-        if self.stop.rel_residual.is_some_and(|t| residual <= t) {
-            return Some(Termination::Residual);
-        }
-        if self.stop.rel_change.is_some_and(|t| change <= t) {
-            return Some(Termination::Change);
-        }
-        if let Some(s) = self.stop.stagnation {
-            let n = self.objectives.len();
-            if n > s.window {
-                let (old, new) = (self.objectives[n - 1 - s.window], self.objectives[n - 1]);
-                if (old - new) <= s.rel * old.abs().max(f64::MIN_POSITIVE) {
-                    return Some(Termination::Stagnation);
-                }
-            }
-        }
-        if self.stop.time_limit.is_some_and(|t| info.elapsed >= t) {
-            return Some(Termination::TimeLimit);
-        }
-        if it >= self.stop.max_iter {
-            return Some(Termination::MaxIterations);
-        }
-        None
+        self.rules
+            .converged(residual, objective, change)
+            .or_else(|| self.rules.limit(it, info.elapsed))
     }
 
     /// The report of a run that ended after `iterations` for `termination`, with the apply
@@ -334,7 +263,7 @@ impl<'o, T: Real, O: Observer<T> + ?Sized> Monitor<'o, T, O> {
             objective_history: self.objectives,
             forward_applies: op.forward_count(),
             adjoint_applies: op.adjoint_count(),
-            support_applies: 0,
+            support_applies: op.support_count(),
             elapsed: self.start.elapsed(),
         }
     }

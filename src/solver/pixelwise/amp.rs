@@ -9,17 +9,20 @@
 //! gᵈ and Gₚ[d, d] alone, so the posterior over "empty or depth d" and the posterior mean are
 //! exact and cheap (O(K_s²) per pixel).
 
+use std::ops::ControlFlow;
+
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
-use crate::operator::Counted;
+use crate::operator::{check_pixels, VoxelOperator};
 use crate::real::Real;
+use crate::solver::{
+    check_problem, solve_with, Iteration, Iterative, Observer, Progress, Report, Stopping,
+    Termination,
+};
 
 use super::PixelConstraints;
-
-use crate::operator::{check_pixels, VoxelOperator};
-use crate::solver::{check_problem, Monitor, Observer, Report, Stopping, Termination};
 
 /// Parameters of [`reflector_amp`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -141,6 +144,7 @@ struct PixelPosterior {
 /// Per-pixel priors that replace the global one: the probability of a return, a depth
 /// distribution (K_s weights per pixel, renormalized over the admissible depths) and optionally
 /// the amplitude's mean and variance.
+#[derive(Debug)]
 pub(crate) struct PixelPriors {
     pub(crate) lit: Vec<f64>,
     pub(crate) depth: Vec<f64>,
@@ -164,7 +168,7 @@ pub(crate) struct Posteriors {
 /// Where a run stopped, to resume from: AMP's state is its Onsager-corrected residual, the
 /// posterior mean and the learned prior. A run resumed under other pixel priors continues from
 /// it instead of from z = y, x̂ = 0, so that it only has to move the posteriors on.
-#[derive(Clone)]
+#[derive(Debug, Clone)]
 pub(crate) struct AmpState {
     z: Vec<f64>,
     mean: Vec<f64>,
@@ -361,136 +365,190 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    let PixelConstraints {
-        windows,
-        priors,
-        resume,
-    } = constraints;
-    const NAME: &str = "reflector-amp";
-    params.validate()?;
-    let (m, n) = (op.nrows(), op.ncols());
-    check_problem(NAME, m, n, y, x)?;
-    let ks = op.column_len();
-    let pixels = check_pixels(NAME, n, ks, windows)?;
-    if let Some(state) = resume {
-        if state.z.len() != m || state.mean.len() != n {
-            return Err(Error::shape(
-                "reflector-amp: resumed state vs operator columns",
-                n,
-                state.mean.len(),
-            ));
+    let setup = AmpSetup {
+        params: *params,
+        constraints,
+    };
+    let (report, run) = solve_with::<T, A, O, AmpIteration<'_, T>>(op, y, x, &setup, observer)?;
+    Ok(match run {
+        Some(run) => {
+            let (posteriors, state) = run.outcome();
+            (report, posteriors, state)
         }
-    }
-    if let Some(pr) = priors {
-        if pr.lit.len() != pixels
-            || pr.depth.len() != n
-            || pr.amplitude.as_ref().is_some_and(|a| a.len() != pixels)
-        {
-            return Err(Error::shape(
-                "reflector-amp: priors vs pixels",
-                pixels,
-                pr.lit.len(),
-            ));
-        }
-    }
-    let counted = Counted::new(op);
-    let mut monitor = Monitor::new(NAME, params.stopping, observer);
-    let mut posteriors = Posteriors::zeros(pixels, ks);
-    let mut best_post = Posteriors::zeros(pixels, ks);
-    let y64: Vec<f64> = y.iter().map(|v| v.as_f64()).collect();
-    let yy = dot(y, y);
-    x.fill(T::zero());
-    if yy == 0.0 {
-        return Ok((
-            monitor.finish(0, Termination::ZeroResidual, &counted),
-            best_post,
-            AmpState {
-                z: y64,
-                mean: vec![0.0; n],
+        // y = 0: the empty scene, nothing learned.
+        None => {
+            let (pixels, ks) = (op.ncols() / op.column_len(), op.column_len());
+            let state = AmpState {
+                z: y.iter().map(|v| v.as_f64()).collect(),
+                mean: vec![0.0; op.ncols()],
                 prior: Prior {
                     lit: params.lit_probability,
                     mean: 0.0,
                     var: 0.0,
                 },
-            },
-        ));
-    }
-    let grams = Grams::of(op, pixels);
-    let observable: Vec<bool> = (0..pixels)
-        .map(|p| {
-            let g = grams.block(p, ks);
-            (0..ks).any(|d| g[d * ks + d] > 0.0)
-        })
-        .collect();
-    let seen = observable.iter().filter(|o| **o).count().max(1);
-    let diag_mean = (0..pixels)
-        .filter(|&p| observable[p])
-        .map(|p| {
-            let g = grams.block(p, ks);
-            (0..ks).map(|d| g[d * ks + d]).sum::<f64>() / ks as f64
-        })
-        .sum::<f64>()
-        / seen as f64;
-    // E‖y‖² ≈ Σₚ aₚ² ‖a‖²: the mean squared amplitude of a lit pixel under λ.
-    let a2 = yy / (params.lit_probability * seen as f64 * diag_mean);
-    let mut prior = Prior {
-        lit: params.lit_probability,
-        mean: 0.8 * a2.sqrt(),
-        var: 0.3 * a2,
-    };
+            };
+            (report, Posteriors::zeros(pixels, ks), state)
+        }
+    })
+}
 
-    let mut mean = vec![0.0f64; n];
-    let mut z = y64.clone();
-    if let Some(state) = resume {
-        mean.copy_from_slice(&state.mean);
-        z.copy_from_slice(&state.z);
-        prior = state.prior;
+/// What a message-passing run is given: its parameters and the per-pixel constraints.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AmpSetup<'c> {
+    params: ReflectorAmpParams,
+    constraints: PixelConstraints<'c>,
+}
+
+/// The state of message passing between iterations (the protocol of
+/// [`Iteration`](crate::solver::Iteration)).
+pub(crate) struct AmpIteration<'c, T> {
+    params: ReflectorAmpParams,
+    windows: Option<&'c [(usize, usize)]>,
+    priors: Option<&'c PixelPriors>,
+    ks: usize,
+    grams: Grams,
+    /// Pixels with an admissible depth.
+    seen: usize,
+    y64: Vec<f64>,
+    yy: f64,
+    prior: Prior,
+    /// The posterior mean x̂ and the Onsager-corrected residual z.
+    mean: Vec<f64>,
+    z: Vec<f64>,
+    /// τ² = ‖z‖²/K, from `prepare`.
+    tau2: f64,
+    posteriors: Posteriors,
+    /// The iterate with the smallest residual: its scene, posteriors and state.
+    best_x: Vec<T>,
+    best_res: f64,
+    best_post: Posteriors,
+    best_state: AmpState,
+    since_best: usize,
+    /// The previous scene and for how many iterations its support has not changed.
+    prev: Vec<T>,
+    stable: usize,
+    objective: f64,
+    /// Whether the run ended on the best iterate (every ending but a zero residual).
+    on_best: bool,
+    xt: Vec<T>,
+    u: Vec<T>,
+    ax: Vec<T>,
+    zt: Vec<T>,
+}
+
+impl<'c, T: Real> Iterative<T> for AmpIteration<'c, T> {
+    const NAME: &'static str = "reflector-amp";
+    type Params = AmpSetup<'c>;
+
+    fn stopping(setup: &AmpSetup<'c>) -> Stopping {
+        setup.params.stopping
     }
-    let mut best_state = AmpState {
-        z: z.clone(),
-        mean: mean.clone(),
-        prior,
-    };
-    let mut xt = vec![T::zero(); n];
-    let mut u = vec![T::zero(); n];
-    let mut ax = vec![T::zero(); m];
-    let mut zt = vec![T::zero(); m];
-    let mut best_x = vec![T::zero(); n];
-    let mut best_res = f64::INFINITY;
-    let mut since_best = 0;
-    let mut prev = vec![T::zero(); n];
-    let mut stable = 0;
-    let mut it = 0;
-    // Applications: one adjoint and one forward per iteration (counted by hand, as `op` may be
-    // unsized).
-    let mut applies = 0;
-    let finish = |monitor: Monitor<'_, T, O>, it: usize, t: Termination, applies: usize| {
-        let mut report = monitor.finish(it, t, &counted);
-        report.adjoint_applies += applies;
-        report.forward_applies += it;
-        report
-    };
-    loop {
-        it += 1;
-        let tau2 = z.iter().map(|v| v * v).sum::<f64>() / m as f64;
-        if !(tau2 > 0.0 && tau2.is_finite()) {
-            // z = 0 exactly: the last posterior mean explains y, and x holds its scene.
-            let state = AmpState { z, mean, prior };
-            return Ok((
-                finish(monitor, it - 1, Termination::ZeroResidual, applies),
-                posteriors,
-                state,
-            ));
+
+    fn check_params(setup: &AmpSetup<'c>) -> Result<()> {
+        setup.params.validate()
+    }
+}
+
+impl<'c, T: Real> AmpIteration<'c, T> {
+    /// The inputs checked: returns the number of pixels.
+    fn check<A: VoxelOperator<T> + ?Sized>(
+        op: &A,
+        y: &[T],
+        x: &[T],
+        setup: &AmpSetup<'c>,
+    ) -> Result<usize> {
+        let name = <Self as Iterative<T>>::NAME;
+        setup.params.validate()?;
+        let (m, n) = (op.nrows(), op.ncols());
+        check_problem(name, m, n, y, x)?;
+        let PixelConstraints {
+            windows,
+            priors,
+            resume,
+        } = setup.constraints;
+        let pixels = check_pixels(name, n, op.column_len(), windows)?;
+        if let Some(state) = resume {
+            if state.z.len() != m || state.mean.len() != n {
+                return Err(Error::shape(
+                    "reflector-amp: resumed state vs operator columns",
+                    n,
+                    state.mean.len(),
+                ));
+            }
         }
-        for (t, v) in zt.iter_mut().zip(&z) {
-            *t = T::of_f64(*v);
+        if let Some(pr) = priors {
+            if pr.lit.len() != pixels
+                || pr.depth.len() != n
+                || pr.amplitude.as_ref().is_some_and(|a| a.len() != pixels)
+            {
+                return Err(Error::shape(
+                    "reflector-amp: priors vs pixels",
+                    pixels,
+                    pr.lit.len(),
+                ));
+            }
         }
-        op.apply_adjoint(&zt, &mut u);
-        applies += 1;
-        let posts: Vec<PixelPosterior> = mean
+        Ok(pixels)
+    }
+
+    /// The starting prior: λ as given, μ and σ² from the measurements' energy (E‖y‖² ≈
+    /// Σₚ aₚ²‖a‖², the mean squared amplitude of a lit pixel under λ); and the number of pixels
+    /// with an admissible depth.
+    fn starting_prior(
+        grams: &Grams,
+        pixels: usize,
+        ks: usize,
+        yy: f64,
+        lit: f64,
+    ) -> (Prior, usize) {
+        let observable: Vec<bool> = (0..pixels)
+            .map(|p| {
+                let g = grams.block(p, ks);
+                (0..ks).any(|d| g[d * ks + d] > 0.0)
+            })
+            .collect();
+        let seen = observable.iter().filter(|o| **o).count().max(1);
+        let diag_mean = (0..pixels)
+            .filter(|&p| observable[p])
+            .map(|p| {
+                let g = grams.block(p, ks);
+                (0..ks).map(|d| g[d * ks + d]).sum::<f64>() / ks as f64
+            })
+            .sum::<f64>()
+            / seen as f64;
+        let a2 = yy / (lit * seen as f64 * diag_mean);
+        let prior = Prior {
+            lit,
+            mean: 0.8 * a2.sqrt(),
+            var: 0.3 * a2,
+        };
+        (prior, seen)
+    }
+
+    /// The posteriors and the state to resume from: those of the best iterate, or of the last
+    /// when the run ended on a zero residual.
+    fn outcome(self) -> (Posteriors, AmpState) {
+        if self.on_best {
+            (self.best_post, self.best_state)
+        } else {
+            let state = AmpState {
+                z: self.z,
+                mean: self.mean,
+                prior: self.prior,
+            };
+            (self.posteriors, state)
+        }
+    }
+
+    /// Every pixel's posterior given the correlations `u` = Aᵀz, x̂ updated to the posterior
+    /// mean.
+    fn pixel_posteriors(&mut self) -> Vec<PixelPosterior> {
+        let (ks, tau2, prior) = (self.ks, self.tau2, self.prior);
+        let (grams, windows, priors) = (&self.grams, self.windows, self.priors);
+        self.mean
             .par_chunks_mut(ks)
-            .zip(u.par_chunks(ks))
-            .zip(posteriors.depth.par_chunks_mut(ks))
+            .zip(self.u.par_chunks(ks))
+            .zip(self.posteriors.depth.par_chunks_mut(ks))
             .enumerate()
             .map(|(p, ((mp, up), wp))| {
                 let gram = grams.block(p, ks);
@@ -515,14 +573,18 @@ where
                 });
                 denoise(g, gram, window, tau2, prior, pixel_prior, mp, wp)
             })
-            .collect();
+            .collect()
+    }
 
-        // The most probable scene, the Onsager sum and the prior's statistics.
+    /// The most probable scene into `x`, the posteriors' summaries, and the prior learned from
+    /// them; returns the Onsager sum of the divergences.
+    fn decide(&mut self, posts: &[PixelPosterior], x: &mut [T]) -> f64 {
+        let ks = self.ks;
         x.fill(T::zero());
         let (mut lit, mut amp1, mut amp2, mut div) = (0.0, 0.0, 0.0, 0.0);
         for (p, post) in posts.iter().enumerate() {
-            posteriors.lit[p] = post.lit;
-            posteriors.amplitude[p] = if post.lit > 0.0 {
+            self.posteriors.lit[p] = post.lit;
+            self.posteriors.amplitude[p] = if post.lit > 0.0 {
                 (post.amp1 / post.lit, post.amp2 / post.lit)
             } else {
                 (0.0, 0.0)
@@ -532,68 +594,171 @@ where
             amp2 += post.amp2;
             div += post.divergence;
             if let Some((d, a)) = post.best {
-                if post.lit > params.decision {
+                if post.lit > self.params.decision {
                     x[p * ks + d] = T::of_f64(a);
                 }
             }
         }
-        if params.learn_prior && lit > 0.0 {
-            prior.lit = (lit / seen as f64).clamp(1e-4, 1.0 - 1e-4);
+        if self.params.learn_prior && lit > 0.0 {
+            let prior = &mut self.prior;
+            prior.lit = (lit / self.seen as f64).clamp(1e-4, 1.0 - 1e-4);
             prior.mean = amp1 / lit;
             prior.var = (amp2 / lit - prior.mean * prior.mean)
                 .max(1e-6 * prior.mean * prior.mean)
                 .max(f64::MIN_POSITIVE);
         }
+        div
+    }
 
-        for (t, v) in xt.iter_mut().zip(&mean) {
+    /// Keeps the current iterate when its residual `res` is the best so far.
+    fn keep_if_best(&mut self, res: f64, x: &[T]) {
+        if res < self.best_res {
+            self.best_res = res;
+            self.best_x.copy_from_slice(x);
+            self.best_post.depth.copy_from_slice(&self.posteriors.depth);
+            self.best_post.lit.copy_from_slice(&self.posteriors.lit);
+            self.best_post
+                .amplitude
+                .copy_from_slice(&self.posteriors.amplitude);
+            self.best_state.z.copy_from_slice(&self.z);
+            self.best_state.mean.copy_from_slice(&self.mean);
+            self.best_state.prior = self.prior;
+            self.since_best = 0;
+        } else {
+            self.since_best += 1;
+        }
+    }
+}
+
+impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration<'c, T> {
+    fn start(
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        setup: &AmpSetup<'c>,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        let pixels = Self::check(op, y, x, setup)?;
+        let (m, n, ks) = (op.nrows(), op.ncols(), op.column_len());
+        let params = setup.params;
+        x.fill(T::zero());
+        let yy = dot(y, y);
+        if yy == 0.0 {
+            return Ok(ControlFlow::Break(Termination::ZeroResidual));
+        }
+        let grams = Grams::of(op, pixels);
+        let (mut prior, seen) =
+            Self::starting_prior(&grams, pixels, ks, yy, params.lit_probability);
+        let y64: Vec<f64> = y.iter().map(|v| v.as_f64()).collect();
+        let mut mean = vec![0.0f64; n];
+        let mut z = y64.clone();
+        if let Some(state) = setup.constraints.resume {
+            mean.copy_from_slice(&state.mean);
+            z.copy_from_slice(&state.z);
+            prior = state.prior;
+        }
+        let best_state = AmpState {
+            z: z.clone(),
+            mean: mean.clone(),
+            prior,
+        };
+        Ok(ControlFlow::Continue(AmpIteration {
+            params,
+            windows: setup.constraints.windows,
+            priors: setup.constraints.priors,
+            ks,
+            grams,
+            seen,
+            y64,
+            yy,
+            prior,
+            mean,
+            z,
+            tau2: 0.0,
+            posteriors: Posteriors::zeros(pixels, ks),
+            best_x: vec![T::zero(); n],
+            best_res: f64::INFINITY,
+            best_post: Posteriors::zeros(pixels, ks),
+            best_state,
+            since_best: 0,
+            prev: vec![T::zero(); n],
+            stable: 0,
+            objective: 0.5 * yy,
+            on_best: false,
+            xt: vec![T::zero(); n],
+            u: vec![T::zero(); n],
+            ax: vec![T::zero(); m],
+            zt: vec![T::zero(); m],
+        }))
+    }
+
+    /// τ² = ‖z‖²/K; z = 0 exactly ends the run: the last posterior mean explains y, and x
+    /// holds its scene.
+    fn prepare(&mut self, _op: &A) -> Option<Termination> {
+        self.tau2 = self.z.iter().map(|v| v * v).sum::<f64>() / self.z.len() as f64;
+        (!(self.tau2 > 0.0 && self.tau2.is_finite())).then_some(Termination::ZeroResidual)
+    }
+
+    fn step(&mut self, op: &A, _y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
+        for (t, v) in self.zt.iter_mut().zip(&self.z) {
             *t = T::of_f64(*v);
         }
-        op.apply(&xt, &mut ax);
-        let onsager = div / m as f64;
+        op.apply_adjoint(&self.zt, &mut self.u);
+        let posts = self.pixel_posteriors();
+        let div = self.decide(&posts, x);
+
+        for (t, v) in self.xt.iter_mut().zip(&self.mean) {
+            *t = T::of_f64(*v);
+        }
+        op.apply(&self.xt, &mut self.ax);
+        let onsager = div / self.z.len() as f64;
         let mut rr = 0.0;
-        for ((zi, &yi), ai) in z.iter_mut().zip(&y64).zip(&ax) {
+        for ((zi, &yi), ai) in self.z.iter_mut().zip(&self.y64).zip(&self.ax) {
             let r = yi - ai.as_f64();
             rr += r * r;
             *zi = r + onsager * *zi;
         }
-        let res = (rr / yy).sqrt();
+        let res = (rr / self.yy).sqrt();
         if !res.is_finite() || x.iter().any(|v| !v.is_finite()) {
             return Err(Error::Breakdown {
-                solver: NAME,
+                solver: <Self as Iterative<T>>::NAME,
                 reason: format!("non-finite values at iteration {it}"),
             });
         }
-        if res < best_res {
-            best_res = res;
-            best_x.copy_from_slice(x);
-            best_post.depth.copy_from_slice(&posteriors.depth);
-            best_post.lit.copy_from_slice(&posteriors.lit);
-            best_post.amplitude.copy_from_slice(&posteriors.amplitude);
-            best_state.z.copy_from_slice(&z);
-            best_state.mean.copy_from_slice(&mean);
-            best_state.prior = prior;
-            since_best = 0;
-        } else {
-            since_best += 1;
-        }
+        self.keep_if_best(res, x);
         let same_support = it > 1
             && x.iter()
-                .zip(&prev)
+                .zip(&self.prev)
                 .all(|(a, b)| (*a == T::zero()) == (*b == T::zero()));
-        stable = if same_support { stable + 1 } else { 0 };
-        let change = crate::solver::relative_change(x, &prev);
-        prev.copy_from_slice(x);
-        let stop = monitor.step(it, res, 0.5 * rr, change, x);
-        let term = match stop {
-            None if params.stable_support.is_some_and(|s| stable >= s) && since_best == 0 => {
-                Some(Termination::Converged)
-            }
-            None if since_best >= params.patience => Some(Termination::Stagnation),
-            other => other,
+        self.stable = if same_support { self.stable + 1 } else { 0 };
+        let change = crate::solver::relative_change(x, &self.prev);
+        self.prev.copy_from_slice(x);
+        self.objective = 0.5 * rr;
+        let stable = self.params.stable_support.is_some_and(|s| self.stable >= s);
+        let ending = if stable && self.since_best == 0 {
+            Some(Termination::Converged)
+        } else if self.since_best >= self.params.patience {
+            Some(Termination::Stagnation)
+        } else {
+            None
         };
-        if let Some(t) = term {
-            x.copy_from_slice(&best_x);
-            return Ok((finish(monitor, it, t, applies), best_post, best_state));
+        Ok(Progress {
+            residual: res,
+            objective: self.objective,
+            change,
+            ending,
+        })
+    }
+
+    fn objective(&self) -> f64 {
+        self.objective
+    }
+
+    /// The best iterate's scene into `x`, unless the run ended on a zero residual.
+    fn finish(&mut self, _op: &A, _y: &[T], x: &mut [T], termination: Termination) -> Result<()> {
+        self.on_best = termination != Termination::ZeroResidual;
+        if self.on_best {
+            x.copy_from_slice(&self.best_x);
         }
+        Ok(())
     }
 }

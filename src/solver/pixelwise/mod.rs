@@ -13,7 +13,7 @@ pub use model_based::{model_based, ModelBasedParams};
 pub use tv_depth::{tv_depth, TvDepthParams};
 
 /// What restricts (or resumes) a pixelwise solve beyond its parameters.
-#[derive(Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct PixelConstraints<'a> {
     /// Each pixel's depth within a window `lo..=hi` (`windows[p] = (lo, hi)`).
     pub windows: Option<&'a [(usize, usize)]>,

@@ -1,18 +1,21 @@
 //! Model-based recovery with at most k reflectors per pixel, one by default (model-based CoSaMP
 //! with an adaptive support size).
 
+use std::ops::ControlFlow;
+
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
-use crate::operator::{Counted, LinearOperator};
+use crate::operator::{check_pixels, LinearOperator, VoxelOperator};
 use crate::real::Real;
+use crate::solver::{
+    cgls, check_problem, check_tolerance, solve, CglsParams, Iteration, Iterative, Observer,
+    Progress, Report, Stopping, Termination,
+};
 
 use super::amp::{reflector_amp_constrained, ReflectorAmpParams};
 use super::PixelConstraints;
-use crate::operator::{check_pixels, VoxelOperator};
-use crate::solver::{cgls, check_problem, check_tolerance, CglsParams, Monitor, Observer, Report};
-use crate::solver::{Stopping, Termination};
 
 /// Parameters of [`model_based`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -136,15 +139,6 @@ fn robust_sigma<T: Real>(u: &[T]) -> f64 {
     crate::linalg::robust_sigma(&mut a, 0.0)
 }
 
-/// Counts applications: of the full operator (message passing, correlations) and of operators
-/// restricted to the support (least-squares steps).
-#[derive(Default)]
-struct Applies {
-    forward: usize,
-    adjoint: usize,
-    support: usize,
-}
-
 /// y − A_S b for the restriction `restricted` of the operator to a support.
 fn support_residual<T: Real>(restricted: &dyn LinearOperator<T>, y: &[T], b: &[T]) -> Vec<T> {
     let mut r = vec![T::zero(); y.len()];
@@ -164,7 +158,6 @@ fn fit<T, A>(
     y: &[T],
     b: &mut [T],
     inner: &CglsParams,
-    applies: &mut Applies,
     it: usize,
 ) -> Result<Vec<T>>
 where
@@ -174,31 +167,23 @@ where
     const NAME: &str = "model-based";
     let restricted = op.restrict_columns(voxels.to_vec())?;
     if !voxels.is_empty() {
-        let rep = cgls(&restricted, y, b, inner, &mut ()).map_err(|e| match e {
+        cgls(&restricted, y, b, inner, &mut ()).map_err(|e| match e {
             Error::Breakdown { reason, .. } => Error::Breakdown {
                 solver: NAME,
                 reason: format!("least squares at iteration {it}: {reason}"),
             },
             other => other,
         })?;
-        applies.support += rep.forward_applies + 1 + rep.adjoint_applies;
     }
     Ok(support_residual(restricted.as_ref(), y, b))
 }
 
 /// y − A_S b.
-fn residual<T, A>(
-    op: &A,
-    voxels: &[usize],
-    y: &[T],
-    b: &[T],
-    applies: &mut Applies,
-) -> Result<Vec<T>>
+fn residual<T, A>(op: &A, voxels: &[usize], y: &[T], b: &[T]) -> Result<Vec<T>>
 where
     T: Real,
     A: VoxelOperator<T> + ?Sized,
 {
-    applies.support += usize::from(!voxels.is_empty());
     Ok(support_residual(
         op.restrict_columns(voxels.to_vec())?.as_ref(),
         y,
@@ -295,154 +280,285 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    const NAME: &str = "model-based";
-    params.validate()?;
-    let (m, n) = (op.nrows(), op.ncols());
-    check_problem(NAME, m, n, y, x)?;
-    let ks = op.column_len();
-    check_pixels(NAME, n, ks, windows)?;
-    let counted = Counted::new(op);
-    let mut applies = Applies::default();
-    let mut monitor = Monitor::new(NAME, params.stopping, observer);
-    let ynorm = dot(y, y).sqrt();
-    if ynorm == 0.0 {
-        x.fill(T::zero());
-        return Ok(monitor.finish(0, Termination::ZeroResidual, &counted));
+    let setup = ModelBasedSetup {
+        params: *params,
+        windows,
+    };
+    solve::<T, A, O, ModelBasedIteration<'_, T>>(op, y, x, &setup, observer)
+}
+
+/// What a model-based run is given: its parameters and the depth windows.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ModelBasedSetup<'w> {
+    params: ModelBasedParams,
+    windows: Option<&'w [(usize, usize)]>,
+}
+
+/// The state of model-based recovery between iterations: the support (voxels, amplitudes and
+/// their self-correlations) and its residual.
+pub(crate) struct ModelBasedIteration<'w, T> {
+    params: ModelBasedParams,
+    windows: Option<&'w [(usize, usize)]>,
+    ks: usize,
+    ynorm: f64,
+    /// The largest support.
+    budget: usize,
+    /// Iterations of exploration (none after a start from message passing).
+    explore_iterations: usize,
+    /// The supported voxels, increasing; their amplitudes; and each one's row of
+    /// self-correlations (its own reflector's correlations with its pixel's columns).
+    voxels: Vec<usize>,
+    amp: Vec<T>,
+    own: Vec<f64>,
+    /// y − Ax.
+    r: Vec<T>,
+    /// The correlations of the residual.
+    u: Vec<T>,
+    prev: Vec<T>,
+    /// With several returns per pixel, the rows that take a picked return out of its pixel's
+    /// correlations, when every pixel has the same ones.
+    shared_rows: Option<Vec<f64>>,
+    /// The last iteration (for messages).
+    it: usize,
+}
+
+impl<'w, T: Real> Iterative<T> for ModelBasedIteration<'w, T> {
+    const NAME: &'static str = "model-based";
+    type Params = ModelBasedSetup<'w>;
+
+    fn stopping(setup: &ModelBasedSetup<'w>) -> Stopping {
+        setup.params.stopping
     }
-    let budget = ((params.max_support_fraction * m as f64) as usize).max(1);
-    let score = |v: f64| if params.nonnegative { v } else { v.abs() };
-    // The amplitude test: which voxels of a support have a least-squares amplitude of at least
-    // `z` standard errors, inflated for least squares on |S| of K measurements.
-    let significant = |voxels: &[usize], amp: &[T], r: &[T], z: f64| {
+
+    fn check_params(setup: &ModelBasedSetup<'w>) -> Result<()> {
+        setup.params.validate()
+    }
+}
+
+impl<'w, T: Real> ModelBasedIteration<'w, T> {
+    /// A pixel's score: its signed correlation for nonnegative scenes, its magnitude otherwise.
+    fn score(&self, v: f64) -> f64 {
+        if self.params.nonnegative {
+            v
+        } else {
+            v.abs()
+        }
+    }
+
+    /// The amplitude test: which voxels of a support have a least-squares amplitude of at least
+    /// `z` standard errors, inflated for least squares on |S| of K measurements.
+    fn significant<A: VoxelOperator<T> + ?Sized>(
+        &self,
+        op: &A,
+        voxels: &[usize],
+        amp: &[T],
+        z: f64,
+    ) -> Vec<bool> {
+        let m = self.r.len();
         let dof = m.saturating_sub(voxels.len()).max(1);
-        let sigma_r = (dot(r, r) / dof as f64)
+        let sigma_r = (dot(&self.r, &self.r) / dof as f64)
             .sqrt()
-            .max(params.noise_floor * ynorm / (m as f64).sqrt());
+            .max(self.params.noise_floor * self.ynorm / (m as f64).sqrt());
         let inflation = 1.0 / (1.0 - voxels.len() as f64 / m as f64).max(0.05).sqrt();
         let norms = op.column_norms(voxels);
         amp.iter()
             .zip(&norms)
-            .map(|(a, c)| score(a.as_f64()) * c >= z * inflation * sigma_r)
-            .collect::<Vec<bool>>()
-    };
-
-    // Without a warm start, message passing proposes the first support.
-    let mut explore_iterations = params.explore_iterations;
-    if let Some(amp_params) = &params.amp {
-        if x.iter().all(|v| *v == T::zero()) {
-            let constraints = PixelConstraints {
-                windows,
-                ..PixelConstraints::default()
-            };
-            let (rep, ..) = reflector_amp_constrained(op, y, x, amp_params, constraints, &mut ())?;
-            applies.forward += rep.forward_applies;
-            applies.adjoint += rep.adjoint_applies;
-            explore_iterations = 0;
-        }
+            .map(|(a, c)| self.score(a.as_f64()) * c >= z * inflation * sigma_r)
+            .collect()
     }
 
-    // The warm start, pruned to the model (per pixel its largest entries) and re-fitted.
-    let mut voxels: Vec<usize> = x
-        .par_chunks(ks)
-        .enumerate()
-        .flat_map_iter(|(p, col)| {
-            let mut held: Vec<(usize, f64)> = col
-                .iter()
-                .enumerate()
-                .map(|(j, v)| (j, score(v.as_f64())))
-                .filter(|c| c.1 > 0.0)
-                .collect();
-            held.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-            held.truncate(params.max_returns);
-            let mut kept: Vec<usize> = held.iter().map(|h| p * ks + h.0).collect();
-            kept.sort_unstable();
-            kept
-        })
-        .collect();
-    let mut amp: Vec<T> = voxels.iter().map(|&v| x[v]).collect();
-    // Each supported pixel's Gram row (its own reflector's correlations), kept with the support.
-    let mut own = op.self_correlations(&voxels);
-    let mut r = fit(op, &voxels, y, &mut amp, &params.inner, &mut applies, 0)?;
-    let mut u = vec![T::zero(); n];
-    let mut prev = x.to_vec();
-    // With several returns per pixel, the Gram rows that take a picked return out of its pixel's
-    // correlations: computed once when every pixel has the same ones.
-    let shared_rows = (params.max_returns > 1 && op.uniform_pixel_gram())
-        .then(|| op.self_correlations(&(0..ks).collect::<Vec<_>>()));
-    let mut it = 0;
-    loop {
-        it += 1;
-        op.correlate(&r, &mut u);
-        applies.adjoint += 1;
-        let sigma = robust_sigma(&u);
-        let explore = it <= explore_iterations;
-        // Each supported pixel's own reflectors are added back to its correlations.
-        let mut first = vec![usize::MAX; n / ks];
-        for (i, &v) in voxels.iter().enumerate().rev() {
-            first[v / ks] = i;
-        }
-        let own_of = |i: usize| &own[i * ks..(i + 1) * ks];
-        let mut picks: Vec<(usize, f64, f64)> = u
-            .par_chunks(ks)
+    /// The warm start `x` pruned to the model: per pixel its largest entries.
+    fn pruned(&self, x: &[T]) -> Vec<usize> {
+        let (ks, max_returns) = (self.ks, self.params.max_returns);
+        x.par_chunks(ks)
             .enumerate()
             .flat_map_iter(|(p, col)| {
-                let (lo, hi) = windows.map_or((0, ks - 1), |w| w[p]);
-                let mut v: Vec<f64> = col.iter().map(|c| c.as_f64()).collect();
-                let supported = (first[p]..voxels.len())
-                    .take_while(|&i| first[p] != usize::MAX && voxels[i] / ks == p);
-                for i in supported.clone() {
-                    for (vj, o) in v.iter_mut().zip(own_of(i)) {
-                        *vj += amp[i].as_f64() * o;
-                    }
-                }
-                let mut found = Vec::new();
-                for rank in 0..params.max_returns {
-                    let best = (lo..=hi)
-                        .map(|j| (j, score(v[j]), v[j]))
-                        .filter(|b| {
-                            !found
-                                .iter()
-                                .any(|f: &(usize, f64, f64)| f.0 == p * ks + b.0)
-                        })
-                        .fold(
-                            (0, f64::NEG_INFINITY, 0.0),
-                            |b, c| if c.1 > b.1 { c } else { b },
-                        );
-                    let held = supported.clone().any(|i| voxels[i] == p * ks + best.0);
-                    let lenient =
-                        explore || sigma == 0.0 || held || rank == 0 && first[p] != usize::MAX;
-                    let join = if lenient {
-                        best.1 > 0.0
-                    } else {
-                        best.1 >= params.detection_z * sigma
-                    };
-                    if !join {
-                        break;
-                    }
-                    found.push((p * ks + best.0, best.1, best.2));
-                    if rank + 1 < params.max_returns {
-                        // The next return is judged with this one's contribution taken out.
-                        let row: std::borrow::Cow<'_, [f64]> = match &shared_rows {
-                            Some(rows) => rows[best.0 * ks..(best.0 + 1) * ks].into(),
-                            None => op.self_correlations(&[p * ks + best.0]).into(),
-                        };
-                        let d = row[best.0];
-                        if d > 0.0 {
-                            for (vj, o) in v.iter_mut().zip(row.iter()) {
-                                *vj -= best.2 / d * o;
-                            }
-                        }
-                    }
-                }
-                found.sort_by_key(|f| f.0);
-                found
+                let mut held: Vec<(usize, f64)> = col
+                    .iter()
+                    .enumerate()
+                    .map(|(j, v)| (j, self.score(v.as_f64())))
+                    .filter(|c| c.1 > 0.0)
+                    .collect();
+                held.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+                held.truncate(max_returns);
+                let mut kept: Vec<usize> = held.iter().map(|h| p * ks + h.0).collect();
+                kept.sort_unstable();
+                kept
             })
+            .collect()
+    }
+
+    /// Pixel `p`'s picks (voxel, score, correlation) from its correlations `col` with its own
+    /// reflectors added back: up to `max_returns`, each judged with the ones before taken out.
+    fn pixel_picks<A: VoxelOperator<T> + ?Sized>(
+        &self,
+        op: &A,
+        p: usize,
+        col: &[T],
+        first: usize,
+        sigma: f64,
+        explore: bool,
+    ) -> Vec<(usize, f64, f64)> {
+        let ks = self.ks;
+        let (lo, hi) = self.windows.map_or((0, ks - 1), |w| w[p]);
+        let mut v: Vec<f64> = col.iter().map(|c| c.as_f64()).collect();
+        let supported = (first..self.voxels.len())
+            .take_while(|&i| first != usize::MAX && self.voxels[i] / ks == p);
+        for i in supported.clone() {
+            for (vj, o) in v.iter_mut().zip(&self.own[i * ks..(i + 1) * ks]) {
+                *vj += self.amp[i].as_f64() * o;
+            }
+        }
+        let mut found: Vec<(usize, f64, f64)> = Vec::new();
+        for rank in 0..self.params.max_returns {
+            let best = (lo..=hi)
+                .map(|j| (j, self.score(v[j]), v[j]))
+                .filter(|b| !found.iter().any(|f| f.0 == p * ks + b.0))
+                .fold(
+                    (0, f64::NEG_INFINITY, 0.0),
+                    |b, c| if c.1 > b.1 { c } else { b },
+                );
+            let held = supported.clone().any(|i| self.voxels[i] == p * ks + best.0);
+            let lenient = explore || sigma == 0.0 || held || rank == 0 && first != usize::MAX;
+            let join = if lenient {
+                best.1 > 0.0
+            } else {
+                best.1 >= self.params.detection_z * sigma
+            };
+            if !join {
+                break;
+            }
+            found.push((p * ks + best.0, best.1, best.2));
+            if rank + 1 < self.params.max_returns {
+                // The next return is judged with this one's contribution taken out.
+                let row: std::borrow::Cow<'_, [f64]> = match &self.shared_rows {
+                    Some(rows) => rows[best.0 * ks..(best.0 + 1) * ks].into(),
+                    None => op.self_correlations(&[p * ks + best.0]).into(),
+                };
+                let d = row[best.0];
+                if d > 0.0 {
+                    for (vj, o) in v.iter_mut().zip(row.iter()) {
+                        *vj -= best.2 / d * o;
+                    }
+                }
+            }
+        }
+        found.sort_by_key(|f| f.0);
+        found
+    }
+
+    /// Every pixel's picks from the correlations `self.u`, within the support budget.
+    fn picks<A: VoxelOperator<T> + ?Sized>(
+        &self,
+        op: &A,
+        sigma: f64,
+        explore: bool,
+    ) -> Vec<(usize, f64, f64)> {
+        let ks = self.ks;
+        let mut first = vec![usize::MAX; self.u.len() / ks];
+        for (i, &v) in self.voxels.iter().enumerate().rev() {
+            first[v / ks] = i;
+        }
+        let mut picks: Vec<(usize, f64, f64)> = self
+            .u
+            .par_chunks(ks)
+            .enumerate()
+            .flat_map_iter(|(p, col)| self.pixel_picks(op, p, col, first[p], sigma, explore))
             .collect();
-        if picks.len() > budget {
+        if picks.len() > self.budget {
             picks.sort_by(|a, b| b.1.total_cmp(&a.1));
-            picks.truncate(budget);
+            picks.truncate(self.budget);
             picks.sort_by_key(|p| p.0);
         }
+        picks
+    }
+
+    /// Least squares on `voxels`, warm-started from `amp`; the residual becomes its residual.
+    fn refit<A: VoxelOperator<T> + ?Sized>(
+        &mut self,
+        op: &A,
+        y: &[T],
+        voxels: &[usize],
+        amp: &mut [T],
+    ) -> Result<()> {
+        self.r = fit(op, voxels, y, amp, &self.params.inner, self.it)?;
+        Ok(())
+    }
+
+    /// x from the support.
+    fn write_scene(&self, x: &mut [T]) {
+        x.fill(T::zero());
+        for (&v, &a) in self.voxels.iter().zip(&self.amp) {
+            x[v] = a;
+        }
+    }
+}
+
+impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIteration<'w, T> {
+    fn start(
+        op: &A,
+        y: &[T],
+        x: &mut [T],
+        setup: &ModelBasedSetup<'w>,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        let name = <Self as Iterative<T>>::NAME;
+        let params = setup.params;
+        params.validate()?;
+        let (m, n) = (op.nrows(), op.ncols());
+        check_problem(name, m, n, y, x)?;
+        let ks = op.column_len();
+        check_pixels(name, n, ks, setup.windows)?;
+        let ynorm = dot(y, y).sqrt();
+        if ynorm == 0.0 {
+            x.fill(T::zero());
+            return Ok(ControlFlow::Break(Termination::ZeroResidual));
+        }
+        // Without a warm start, message passing proposes the first support.
+        let mut explore_iterations = params.explore_iterations;
+        if let Some(amp_params) = &params.amp {
+            if x.iter().all(|v| *v == T::zero()) {
+                let constraints = PixelConstraints {
+                    windows: setup.windows,
+                    ..PixelConstraints::default()
+                };
+                reflector_amp_constrained(op, y, x, amp_params, constraints, &mut ())?;
+                explore_iterations = 0;
+            }
+        }
+        let mut run = ModelBasedIteration {
+            params,
+            windows: setup.windows,
+            ks,
+            ynorm,
+            budget: ((params.max_support_fraction * m as f64) as usize).max(1),
+            explore_iterations,
+            voxels: Vec::new(),
+            amp: Vec::new(),
+            own: Vec::new(),
+            r: Vec::new(),
+            u: vec![T::zero(); n],
+            prev: x.to_vec(),
+            shared_rows: (params.max_returns > 1 && op.uniform_pixel_gram())
+                .then(|| op.self_correlations(&(0..ks).collect::<Vec<_>>())),
+            it: 0,
+        };
+        // The warm start, pruned to the model and re-fitted.
+        let voxels = run.pruned(x);
+        let mut amp: Vec<T> = voxels.iter().map(|&v| x[v]).collect();
+        run.own = op.self_correlations(&voxels);
+        run.refit(op, y, &voxels, &mut amp)?;
+        run.voxels = voxels;
+        run.amp = amp;
+        Ok(ControlFlow::Continue(run))
+    }
+
+    fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
+        let ks = self.ks;
+        self.it = it;
+        op.correlate(&self.r, &mut self.u);
+        let sigma = robust_sigma(&self.u);
+        let explore = it <= self.explore_iterations;
+        let picks = self.picks(op, sigma, explore);
         // Amplitudes to start the least squares from: kept where the depth is unchanged, the
         // correlation over the pixel's own diagonal Gram entry elsewhere.
         let mut new_voxels: Vec<usize> = picks.iter().map(|p| p.0).collect();
@@ -450,8 +566,8 @@ where
         let mut new_amp: Vec<T> = picks
             .iter()
             .enumerate()
-            .map(|(i, &(v, _, c))| match voxels.binary_search(&v) {
-                Ok(k) => amp[k],
+            .map(|(i, &(v, _, c))| match self.voxels.binary_search(&v) {
+                Ok(k) => self.amp[k],
                 Err(_) => {
                     let d = new_own[i * ks + v % ks];
                     T::of_f64(if d > 0.0 { c / d } else { 0.0 })
@@ -459,69 +575,65 @@ where
             })
             .collect();
         // Least squares on the support, warm-started from `amp`, giving the residual.
-        let refit = |voxels: &[usize], amp: &mut [T], applies: &mut Applies| {
-            fit(op, voxels, y, amp, &params.inner, applies, it)
-        };
-        r = refit(&new_voxels, &mut new_amp, &mut applies)?;
-        if params.nonnegative && new_amp.iter().any(|a| *a <= T::zero()) {
+        self.refit(op, y, &new_voxels, &mut new_amp)?;
+        if self.params.nonnegative && new_amp.iter().any(|a| *a <= T::zero()) {
             // Drop the pixels whose amplitude came out non-positive; their depth is re-judged
             // at the next iteration against the residual without them.
             let keep: Vec<bool> = new_amp.iter().map(|a| *a > T::zero()).collect();
             retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
-            r = residual(op, &new_voxels, y, &new_amp, &mut applies)?;
+            self.r = residual(op, &new_voxels, y, &new_amp)?;
         }
-        let rel = (dot(&r, &r)).sqrt() / ynorm;
-        if it >= explore_iterations || params.stopping.rel_residual.is_some_and(|t| rel <= t) {
+        let rel = dot(&self.r, &self.r).sqrt() / self.ynorm;
+        let explained = self.params.stopping.rel_residual.is_some_and(|t| rel <= t);
+        if it >= self.explore_iterations || explained {
             // The amplitude test, then least squares on what remains.
-            let keep = significant(&new_voxels, &new_amp, &r, params.amplitude_z);
+            let keep = self.significant(op, &new_voxels, &new_amp, self.params.amplitude_z);
             if keep.iter().any(|k| !k) {
                 retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
-                r = refit(&new_voxels, &mut new_amp, &mut applies)?;
+                self.refit(op, y, &new_voxels, &mut new_amp)?;
             }
         }
 
-        let same = new_voxels == voxels;
-        voxels = new_voxels;
-        amp = new_amp;
-        own = new_own;
-        x.fill(T::zero());
-        for (&v, &a) in voxels.iter().zip(&amp) {
-            x[v] = a;
-        }
-        let rr = dot(&r, &r);
-        if !rr.is_finite() || amp.iter().any(|v| !v.is_finite()) {
+        let same = new_voxels == self.voxels;
+        self.voxels = new_voxels;
+        self.amp = new_amp;
+        self.own = new_own;
+        self.write_scene(x);
+        let rr = dot(&self.r, &self.r);
+        if !rr.is_finite() || self.amp.iter().any(|v| !v.is_finite()) {
             return Err(Error::Breakdown {
-                solver: NAME,
+                solver: <Self as Iterative<T>>::NAME,
                 reason: format!("non-finite values at iteration {it}"),
             });
         }
-        let change = crate::solver::relative_change(x, &prev);
-        prev.copy_from_slice(x);
-        let stop = monitor.step(it, rr.sqrt() / ynorm, 0.5 * rr, change, x);
-        let term = match stop {
-            Some(Termination::MaxIterations) | None if same && !explore => {
-                Some(Termination::Converged)
-            }
-            other => other,
-        };
-        if let Some(t) = term {
-            // The final test, stricter and with the variance inflation; applied once, as a
-            // support refitted after it could not be re-tested without drifting (each pass
-            // raising σ_r and dropping more).
-            let keep = significant(&voxels, &amp, &r, params.final_z);
-            if keep.iter().any(|k| !k) {
-                retain_support(&keep, &mut voxels, &mut amp, &mut own, ks);
-                fit(op, &voxels, y, &mut amp, &params.inner, &mut applies, it)?;
-                x.fill(T::zero());
-                for (&v, &a) in voxels.iter().zip(&amp) {
-                    x[v] = a;
-                }
-            }
-            let mut report = monitor.finish(it, t, &counted);
-            report.forward_applies += applies.forward;
-            report.adjoint_applies += applies.adjoint;
-            report.support_applies += applies.support;
-            return Ok(report);
+        let change = crate::solver::relative_change(x, &self.prev);
+        self.prev.copy_from_slice(x);
+        Ok(Progress {
+            ending: (same && !explore).then_some(Termination::Converged),
+            ..Progress::least_squares(rr, self.ynorm, change, false)
+        })
+    }
+
+    fn objective(&self) -> f64 {
+        0.5 * dot(&self.r, &self.r)
+    }
+
+    /// The final test, stricter and with the variance inflation; applied once, as a support
+    /// refitted after it could not be re-tested without drifting (each pass raising σ_r and
+    /// dropping more).
+    fn finish(&mut self, op: &A, y: &[T], x: &mut [T], _termination: Termination) -> Result<()> {
+        let keep = self.significant(op, &self.voxels, &self.amp, self.params.final_z);
+        if keep.iter().any(|k| !k) {
+            let (mut voxels, mut amp, mut own) = (
+                std::mem::take(&mut self.voxels),
+                std::mem::take(&mut self.amp),
+                std::mem::take(&mut self.own),
+            );
+            retain_support(&keep, &mut voxels, &mut amp, &mut own, self.ks);
+            self.refit(op, y, &voxels, &mut amp)?;
+            (self.voxels, self.amp, self.own) = (voxels, amp, own);
+            self.write_scene(x);
         }
+        Ok(())
     }
 }

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use super::amp::{reflector_amp_constrained, PixelPriors, Posteriors};
 use super::model_based::model_based_windowed;
 use super::PixelConstraints;
-use crate::operator::VoxelOperator;
+use crate::operator::{Counted, VoxelOperator};
 use crate::solver::{
     residual_norm_sq, tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping,
     Termination, TvParams,
@@ -381,92 +381,145 @@ where
             m * n * ks,
         ));
     }
-    if !(params.lambda.is_finite() && params.lambda >= 0.0) {
-        return Err(Error::param(
-            "lambda",
-            format!("must be finite and ≥ 0, got {}", params.lambda),
-        ));
+    params.validate()?;
+    // Every application of every part counted once, here.
+    let counted = Counted::new(op);
+    let mut report = first_fit(&counted, grid, y, x, params, observer)?;
+    // When the fit explains the data to the solver's tolerance, there is nothing for TV to
+    // correct.
+    if report.termination != Termination::Residual {
+        tv_rounds(&counted, grid, y, x, params, &mut report, observer)?;
     }
-    let tv = TvParams {
-        lambda: params.lambda,
-        ..params.tv
-    };
-    if !(params.neighbour_floor > 0.0 && params.neighbour_floor <= 1.0) {
-        return Err(Error::param(
-            "neighbour_floor",
-            format!("must be in (0, 1], got {}", params.neighbour_floor),
-        ));
-    }
-    if params.neighbour_iterations == 0 || params.neighbour_start == 0 {
-        let name = if params.neighbour_start == 0 {
-            "neighbour_start"
-        } else {
-            "neighbour_iterations"
-        };
-        return Err(Error::param(name, "must be at least 1"));
-    }
-    for (name, v) in [
-        ("neighbour_change", params.neighbour_change),
-        ("neighbour_gate", params.neighbour_gate),
-    ] {
-        if !(0.0..1.0).contains(&v) {
-            return Err(Error::param(name, format!("must be in [0, 1), got {v}")));
+    report.solver = "tv-depth";
+    report.count_from(&counted);
+    Ok(report)
+}
+
+impl TvDepthParams {
+    /// Checks every setting that needs no operator, those of the model-based fits and of TV
+    /// included.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the setting.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.lambda.is_finite() && self.lambda >= 0.0) {
+            return Err(Error::param(
+                "lambda",
+                format!("must be finite and ≥ 0, got {}", self.lambda),
+            ));
         }
+        if !(self.neighbour_floor > 0.0 && self.neighbour_floor <= 1.0) {
+            return Err(Error::param(
+                "neighbour_floor",
+                format!("must be in (0, 1], got {}", self.neighbour_floor),
+            ));
+        }
+        if self.neighbour_iterations == 0 || self.neighbour_start == 0 {
+            let name = if self.neighbour_start == 0 {
+                "neighbour_start"
+            } else {
+                "neighbour_iterations"
+            };
+            return Err(Error::param(name, "must be at least 1"));
+        }
+        for (name, v) in [
+            ("neighbour_change", self.neighbour_change),
+            ("neighbour_gate", self.neighbour_gate),
+        ] {
+            if !(0.0..1.0).contains(&v) {
+                return Err(Error::param(name, format!("must be in [0, 1), got {v}")));
+            }
+        }
+        self.model.validate()?;
+        TvParams {
+            lambda: self.lambda,
+            ..self.tv
+        }
+        .validate()
     }
-    // The neighbourhood prior: message passing, then again with priors from the neighbours
-    // posteriors, until a run explains the data or the rounds are used up.
+}
+
+/// The first fit: with message passing and `x` = 0, the neighbourhood prior (message passing,
+/// then again with priors from the neighbours' posteriors, until a run explains the data or the
+/// rounds are used up, continued rounds and if needed restarted ones) and the model-based fit
+/// from it; otherwise the model-based fit from `x`.
+fn first_fit<T, A, O>(
+    op: &A,
+    grid: (usize, usize),
+    y: &[T],
+    x: &mut [T],
+    params: &TvDepthParams,
+    observer: &mut O,
+) -> Result<Report>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+{
     let amp = params
         .model
         .amp
         .as_ref()
         .filter(|_| params.neighbour_rounds > 0 && x.iter().all(|v| *v == T::zero()));
-    let mut report = match amp {
-        None => model_based_windowed(op, y, x, &params.model, None, observer)?,
-        Some(amp) => {
-            let mut report =
-                prior_then_fit(op, grid, y, x, amp, params, Schedule::Continued, observer)?;
-            let a = residual_norm_sq(op, y, x);
-            report.forward_applies += 1;
-            let y2 = crate::linalg::dot(y, y);
-            if a > RESTART_BELOW * RESTART_BELOW * y2 && params.neighbour_restart > 0 {
-                // Continued rounds can settle where rounds restarted from scratch still find
-                // the scene (small images near the phase transition): those run too, and the
-                // better fit is kept.
-                let mut other = vec![T::zero(); x.len()];
-                let second = prior_then_fit(
-                    op,
-                    grid,
-                    y,
-                    &mut other,
-                    amp,
-                    params,
-                    Schedule::Restarted,
-                    observer,
-                )?;
-                let b = residual_norm_sq(op, y, &other);
-                report.forward_applies += 1;
-                if b < a {
-                    x.copy_from_slice(&other);
-                    report.absorb(second);
-                } else {
-                    report.absorb_applies(&second);
-                }
-            }
-            report
-        }
+    let Some(amp) = amp else {
+        return model_based_windowed(op, y, x, &params.model, None, observer);
     };
-    if report.termination == Termination::Residual {
-        // The fit explains the data to the solver's tolerance: nothing for TV to correct.
-        report.solver = "tv-depth";
-        return Ok(report);
+    let mut report = prior_then_fit(op, grid, y, x, amp, params, Schedule::Continued, observer)?;
+    let a = residual_norm_sq(op, y, x);
+    let y2 = crate::linalg::dot(y, y);
+    if a > RESTART_BELOW * RESTART_BELOW * y2 && params.neighbour_restart > 0 {
+        // Continued rounds can settle where rounds restarted from scratch still find the scene
+        // (small images near the phase transition): those run too, and the better fit is kept.
+        let mut other = vec![T::zero(); x.len()];
+        let second = prior_then_fit(
+            op,
+            grid,
+            y,
+            &mut other,
+            amp,
+            params,
+            Schedule::Restarted,
+            observer,
+        )?;
+        let b = residual_norm_sq(op, y, &other);
+        if b < a {
+            x.copy_from_slice(&other);
+            report.absorb(second);
+        } else {
+            report.absorb_applies(&second);
+        }
     }
+    Ok(report)
+}
+
+/// The rounds of TV on the depth map of `x`, each followed by the model-based fit within the
+/// windows around the regularized depths; a round whose fit more than doubles the squared
+/// residual is undone and ends them. Adds each fit to `report`.
+fn tv_rounds<T, A, O>(
+    op: &A,
+    (m, n): (usize, usize),
+    y: &[T],
+    x: &mut [T],
+    params: &TvDepthParams,
+    report: &mut Report,
+    observer: &mut O,
+) -> Result<()>
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+    O: Observer<T> + ?Sized,
+{
+    let ks = op.column_len();
+    let tv = TvParams {
+        lambda: params.lambda,
+        ..params.tv
+    };
     let windowed = ModelBasedParams {
         explore_iterations: 0,
         ..params.model
     };
     let mut before = x.to_vec();
     let mut fit_before = residual_norm_sq(op, y, x);
-    report.forward_applies += 1;
     for _ in 0..params.rounds {
         let found = column_peaks(x, ks, PeakRule::LargestPositive);
         let amax = found.iter().flatten().map(|p| p.1).fold(0.0, f64::max);
@@ -496,18 +549,16 @@ where
             .collect();
         if params.model.amp.is_some() {
             x.fill(T::zero());
-        }
-        // Move each reflector to its regularized depth unless its own depth is in the window.
-        for (p, found) in found
-            .iter()
-            .enumerate()
-            .filter(|_| params.model.amp.is_none())
-        {
-            if let Some((d, a)) = *found {
-                let (lo, hi) = windows[p];
-                if d < lo || d > hi {
-                    x[p * ks + d] = T::zero();
-                    x[p * ks + centre[p]] = T::of_f64(a);
+        } else {
+            // Move each reflector to its regularized depth unless its own depth is in the
+            // window.
+            for (p, found) in found.iter().enumerate() {
+                if let Some((d, a)) = *found {
+                    let (lo, hi) = windows[p];
+                    if d < lo || d > hi {
+                        x[p * ks + d] = T::zero();
+                        x[p * ks + centre[p]] = T::of_f64(a);
+                    }
                 }
             }
         }
@@ -517,7 +568,6 @@ where
         // (more than doubling the squared residual) is undone. Smaller increases are expected
         // in noise, where dropping false detections leaves more of the noise unexplained.
         let fit = residual_norm_sq(op, y, x);
-        report.forward_applies += 1;
         if fit > 2.0 * fit_before {
             x.copy_from_slice(&before);
             break;
@@ -525,6 +575,5 @@ where
         before.copy_from_slice(x);
         fit_before = fit;
     }
-    report.solver = "tv-depth";
-    Ok(report)
+    Ok(())
 }

@@ -4,12 +4,14 @@
 mod kernel;
 
 use kernel::{has_avx2, Problem, Sums};
+use std::ops::ControlFlow;
+
 use ndarray::{Array2, ArrayView2};
 
 use crate::error::{Error, Result};
-use crate::operator::{Counted, Gradient2D, LinearOperator};
+use crate::operator::{Gradient2D, LinearOperator};
 
-use super::{Monitor, Observer, Report, Stopping, Termination};
+use super::{solve, Iteration, Iterative, Observer, Progress, Report, Stopping, Termination};
 
 /// Which total variation [`tv_denoise`] penalizes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -261,7 +263,6 @@ pub fn tv_denoise<O: Observer<f64> + ?Sized>(
     params: &TvParams,
     observer: &mut O,
 ) -> Result<Report> {
-    const NAME: &str = "tv_denoise";
     params.validate()?;
     let (m, n) = f.dim();
     if m == 0 || n == 0 {
@@ -277,133 +278,220 @@ pub fn tv_denoise<O: Observer<f64> + ?Sized>(
     check_values("u (warm start)", u.view(), false)?;
 
     let grad = Gradient2D::<f64>::new(m, n)?;
-    let op = Counted::new(&grad);
-    let mut monitor = Monitor::new(NAME, params.stopping, observer);
-    let lambda = params.lambda;
-    let wmax = w.iter().fold(0.0f64, |a, &b| a.max(b));
-    if lambda == 0.0 {
-        ndarray::Zip::from(&mut *u)
-            .and(&f)
-            .and(&w)
-            .for_each(|ui, &fi, &wi| {
+    let fv: Vec<f64> = f.iter().copied().collect();
+    let wv: Vec<f64> = w.iter().copied().collect();
+    let mut x: Vec<f64> = u.iter().copied().collect();
+    let setup = TvSetup {
+        params: *params,
+        w: &wv,
+    };
+    let report = solve::<f64, _, O, TvIteration<'_>>(&grad, &fv, &mut x, &setup, observer)?;
+    u.iter_mut().zip(&x).for_each(|(ui, &v)| *ui = v);
+    Ok(report)
+}
+
+/// What a TV run is given besides the map: its parameters and the weights.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct TvSetup<'w> {
+    params: TvParams,
+    /// The weights, in the map's order.
+    w: &'w [f64],
+}
+
+/// The state of [`tv_denoise`] between iterations (the protocol of
+/// [`Iteration`](super::Iteration) on the gradient operator, with y the data map and x the
+/// map in its own units): the normalized problem, the primal and dual iterates and the steps.
+pub(crate) struct TvIteration<'w> {
+    problem: Problem,
+    /// The objective's factor back to the map's units.
+    unit: f64,
+    /// The acceleration's strong convexity (0: none) and the adaptive steps' α (0: fixed).
+    gamma: f64,
+    alpha: f64,
+    tau: f64,
+    sigma: f64,
+    /// The normalized primal iterate, its gradient and the previous one, the dual iterate, its
+    /// divergence (the adjoint), and the pointwise residual.
+    x: Vec<f64>,
+    g: Vec<f64>,
+    g_prev: Vec<f64>,
+    p: Vec<f64>,
+    adj: Vec<f64>,
+    r: Vec<f64>,
+    sums: Sums,
+    objective: f64,
+    _setup: std::marker::PhantomData<TvSetup<'w>>,
+}
+
+impl<'w> Iterative<f64> for TvIteration<'w> {
+    const NAME: &'static str = "tv_denoise";
+    type Params = TvSetup<'w>;
+
+    fn stopping(setup: &TvSetup<'w>) -> Stopping {
+        setup.params.stopping
+    }
+
+    fn check_params(setup: &TvSetup<'w>) -> Result<()> {
+        setup.params.validate()
+    }
+}
+
+impl TvIteration<'_> {
+    /// The solution when it is known without iterating (λ = 0, no weight, constant data, or a
+    /// λ beyond which the weighted mean is the minimizer), written into `u`; otherwise the
+    /// normalized problem: weights divided by their maximum, values mapped affinely from
+    /// [lo, hi] (their range where w > 0) onto [−1, 1], λ scaled accordingly. Its minimizers are
+    /// those of the original problem mapped the same way.
+    fn normalized(f: &[f64], w: &[f64], u: &mut [f64], params: &TvParams) -> Option<Problem> {
+        let wmax = w.iter().fold(0.0f64, |a, &b| a.max(b));
+        if params.lambda == 0.0 {
+            for ((ui, &fi), &wi) in u.iter_mut().zip(f).zip(w) {
                 if wi > 0.0 {
                     *ui = fi;
                 }
-            });
-        return Ok(monitor.finish(0, Termination::Converged, &op));
-    }
-    if wmax == 0.0 {
-        // Summing vᵢ/len keeps the partial sums within about the range of the values;
-        // clamping to that range (where the mean lies) absorbs the rounding, including an
-        // overflow of the last steps at the extremes.
-        let len = (m * n) as f64;
-        let (lo, hi) = u
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let mean = u.iter().map(|&v| v / len).sum::<f64>();
-        u.fill(mean.clamp(lo, hi));
-        return Ok(monitor.finish(0, Termination::Converged, &op));
-    }
-
-    // The normalized problem: weights divided by their maximum, values mapped affinely from
-    // [lo, hi] (their range where w > 0) onto [−1, 1], λ scaled accordingly. Its minimizers
-    // are those of the original problem mapped the same way.
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for (&fi, &wi) in f.iter().zip(w.iter()) {
-        if wi > 0.0 {
-            lo = lo.min(fi);
-            hi = hi.max(fi);
+            }
+            return None;
         }
+        if wmax == 0.0 {
+            // Summing vᵢ/len keeps the partial sums within about the range of the values;
+            // clamping to that range (where the mean lies) absorbs the rounding, including an
+            // overflow of the last steps at the extremes.
+            let len = u.len() as f64;
+            let (lo, hi) = u
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                    (a.min(v), b.max(v))
+                });
+            let mean = u.iter().map(|&v| v / len).sum::<f64>();
+            u.fill(mean.clamp(lo, hi));
+            return None;
+        }
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (&fi, &wi) in f.iter().zip(w) {
+            if wi > 0.0 {
+                lo = lo.min(fi);
+                hi = hi.max(fi);
+            }
+        }
+        if lo == hi {
+            // Constant data: u = that constant has no cost at all.
+            u.fill(lo);
+            return None;
+        }
+        let (shift, scale) = (0.5 * lo + 0.5 * hi, 0.5 * hi - 0.5 * lo);
+        let fv: Vec<f64> = f.iter().map(|&v| (v - shift) / scale).collect();
+        let wv: Vec<f64> = w.iter().map(|&v| v / wmax).collect();
+        let lambda = params.lambda / (wmax * scale);
+        // With c the weighted mean, the constant map c is a minimizer as soon as
+        // λ ≥ Σ wᵢ|fᵢ − c|: along a spanning tree of the grid, a flow p with div p = w(c − f)
+        // (which sums to zero) carries at most ½ Σ wᵢ|fᵢ − c| on any edge, so ‖pᵢ‖₂ ≤ λ and
+        // (u = c, p) satisfies the optimality conditions for either TV. This also covers a λ
+        // too large to represent once normalized.
+        let (sw, swf) = wv
+            .iter()
+            .zip(&fv)
+            .fold((0.0, 0.0), |(a, b), (&wi, &fi)| (a + wi, b + wi * fi));
+        let mean = swf / sw;
+        let spread: f64 = wv
+            .iter()
+            .zip(&fv)
+            .map(|(&wi, &fi)| wi * (fi - mean).abs())
+            .sum();
+        if lambda >= spread {
+            u.fill(shift + scale * mean);
+            return None;
+        }
+        // The warm start, within the data's range (which holds every minimizer).
+        for v in u.iter_mut() {
+            *v = v.clamp(lo, hi);
+        }
+        Some(Problem {
+            avx2: has_avx2(),
+            f: fv,
+            w: wv,
+            lambda,
+            shift,
+            scale,
+            norm: params.norm,
+        })
     }
-    if lo == hi {
-        // Constant data: u = that constant has no cost at all.
-        u.fill(lo);
-        return Ok(monitor.finish(0, Termination::Converged, &op));
-    }
-    let (shift, scale) = (0.5 * lo + 0.5 * hi, 0.5 * hi - 0.5 * lo);
-    let fv: Vec<f64> = f.iter().map(|&v| (v - shift) / scale).collect();
-    let wv: Vec<f64> = w.iter().map(|&v| v / wmax).collect();
-    let lambda = lambda / (wmax * scale);
-    // With c the weighted mean, the constant map c is a minimizer as soon as
-    // λ ≥ Σ wᵢ|fᵢ − c|: along a spanning tree of the grid, a flow p with div p = w(c − f)
-    // (which sums to zero) carries at most ½ Σ wᵢ|fᵢ − c| on any edge, so ‖pᵢ‖₂ ≤ λ and
-    // (u = c, p) satisfies the optimality conditions for either TV. This also covers a λ too
-    // large to represent once normalized.
-    let (sw, swf) = wv
-        .iter()
-        .zip(&fv)
-        .fold((0.0, 0.0), |(a, b), (&wi, &fi)| (a + wi, b + wi * fi));
-    let mean = swf / sw;
-    let spread: f64 = wv
-        .iter()
-        .zip(&fv)
-        .map(|(&wi, &fi)| wi * (fi - mean).abs())
-        .sum();
-    if lambda >= spread {
-        u.fill(shift + scale * mean);
-        return Ok(monitor.finish(0, Termination::Converged, &op));
-    }
-    let wmin = wv.iter().fold(f64::INFINITY, |a, &b| a.min(b));
-    let problem = Problem {
-        avx2: has_avx2(),
-        f: fv,
-        w: wv,
-        lambda,
-        shift,
-        scale,
-        norm: params.norm,
-    };
-    let gamma = match params.steps {
-        TvSteps::Accelerated if wmin > 0.0 => wmin,
-        _ => 0.0,
-    };
-    let mut alpha = match params.steps {
-        TvSteps::Fixed => 0.0,
-        _ if gamma > 0.0 => 0.0,
-        _ => ADAPT_ALPHA,
-    };
+}
 
-    let mut x: Vec<f64> = u
-        .iter()
-        .map(|&v| (v.clamp(lo, hi) - shift) / scale)
-        .collect();
-    let mut g = vec![0.0; 2 * m * n];
-    op.apply(&x, &mut g);
-    let mut g_prev = vec![0.0; 2 * m * n];
-    let mut p = vec![0.0; 2 * m * n];
-    let mut adj = vec![0.0; m * n];
-    let mut r = vec![0.0; m * n];
-    let mut out = vec![0.0; m * n];
-    // τ/σ: 1 for the plain variants (the adaptive one finds its own ratio); a longer first
-    // primal step for the accelerated one, whose τ only shrinks.
-    let ratio = if gamma > 0.0 { ACCEL_RATIO } else { 1.0 };
-    let mut tau = (ratio * STEP_PRODUCT / 8.0).sqrt();
-    let mut sigma = STEP_PRODUCT / (8.0 * tau);
-    let mut sums = Sums::default();
-    let mut it = 0;
-    let termination = loop {
-        it += 1;
-        problem.primal_step(&mut x, &mut out, &adj, &mut r, tau, &mut sums);
-        std::mem::swap(&mut g, &mut g_prev);
+impl<'w, A: LinearOperator<f64> + ?Sized> Iteration<f64, A> for TvIteration<'w> {
+    fn start(
+        op: &A,
+        f: &[f64],
+        u: &mut [f64],
+        setup: &TvSetup<'w>,
+    ) -> Result<ControlFlow<Termination, Self>> {
+        let params = &setup.params;
+        let Some(problem) = Self::normalized(f, setup.w, u, params) else {
+            return Ok(ControlFlow::Break(Termination::Converged));
+        };
+        let wmax = setup.w.iter().fold(0.0f64, |a, &b| a.max(b));
+        let wmin = problem.w.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+        let gamma = match params.steps {
+            TvSteps::Accelerated if wmin > 0.0 => wmin,
+            _ => 0.0,
+        };
+        let alpha = match params.steps {
+            TvSteps::Fixed => 0.0,
+            _ if gamma > 0.0 => 0.0,
+            _ => ADAPT_ALPHA,
+        };
+        let x: Vec<f64> = u
+            .iter()
+            .map(|&v| (v - problem.shift) / problem.scale)
+            .collect();
+        let mut g = vec![0.0; op.nrows()];
         op.apply(&x, &mut g);
-        let theta = if gamma > 0.0 {
-            let theta = 1.0 / (1.0 + 2.0 * gamma * tau).sqrt();
-            tau *= theta;
-            sigma /= theta;
+        // τ/σ: 1 for the plain variants (the adaptive one finds its own ratio); a longer first
+        // primal step for the accelerated one, whose τ only shrinks.
+        let ratio = if gamma > 0.0 { ACCEL_RATIO } else { 1.0 };
+        let tau = (ratio * STEP_PRODUCT / 8.0).sqrt();
+        let unit = wmax * problem.scale * problem.scale;
+        Ok(ControlFlow::Continue(TvIteration {
+            unit,
+            gamma,
+            alpha,
+            tau,
+            sigma: STEP_PRODUCT / (8.0 * tau),
+            g_prev: vec![0.0; g.len()],
+            p: vec![0.0; g.len()],
+            g,
+            adj: vec![0.0; x.len()],
+            r: vec![0.0; x.len()],
+            x,
+            sums: Sums::default(),
+            objective: f64::NAN,
+            problem,
+            _setup: std::marker::PhantomData,
+        }))
+    }
+
+    /// One primal-dual step; `u` becomes the primal iterate in the map's units.
+    fn step(&mut self, op: &A, _f: &[f64], u: &mut [f64], it: usize) -> Result<Progress> {
+        let problem = &self.problem;
+        let sums = &mut self.sums;
+        problem.primal_step(&mut self.x, u, &self.adj, &mut self.r, self.tau, sums);
+        std::mem::swap(&mut self.g, &mut self.g_prev);
+        op.apply(&self.x, &mut self.g);
+        let theta = if self.gamma > 0.0 {
+            let theta = 1.0 / (1.0 + 2.0 * self.gamma * self.tau).sqrt();
+            self.tau *= theta;
+            self.sigma /= theta;
             theta
         } else {
             1.0
         };
-        problem.dual_step(&mut p, &g, &g_prev, sigma, theta, &mut sums);
-        op.apply_adjoint(&p, &mut adj);
-        problem.conjugate(&adj, &r, &mut sums);
+        problem.dual_step(&mut self.p, &self.g, &self.g_prev, self.sigma, theta, sums);
+        op.apply_adjoint(&self.p, &mut self.adj);
+        problem.conjugate(&self.adj, &self.r, sums);
 
         let primal = sums.data + problem.lambda * sums.tv;
         if !(primal.is_finite() && sums.conj.is_finite()) {
             return Err(Error::Breakdown {
-                solver: NAME,
+                solver: <Self as Iterative<f64>>::NAME,
                 reason: format!("non-finite objective at iteration {it}"),
             });
         }
@@ -422,23 +510,29 @@ pub fn tv_denoise<O: Observer<f64> + ?Sized>(
         } else {
             (sums.change / sums.norm).sqrt()
         };
-        if alpha > 0.0 {
+        if self.alpha > 0.0 {
             // Residual balancing: a larger primal residual asks for a longer primal step.
             let (rp, rd) = (sums.primal_res.sqrt(), sums.dual_res.sqrt());
             if rp > ADAPT_RATIO * rd {
-                tau /= 1.0 - alpha;
-                sigma *= 1.0 - alpha;
-                alpha *= ADAPT_ETA;
+                self.tau /= 1.0 - self.alpha;
+                self.sigma *= 1.0 - self.alpha;
+                self.alpha *= ADAPT_ETA;
             } else if rd > ADAPT_RATIO * rp {
-                tau *= 1.0 - alpha;
-                sigma /= 1.0 - alpha;
-                alpha *= ADAPT_ETA;
+                self.tau *= 1.0 - self.alpha;
+                self.sigma /= 1.0 - self.alpha;
+                self.alpha *= ADAPT_ETA;
             }
         }
-        if let Some(t) = monitor.step(it, residual, wmax * scale * scale * primal, change, &out) {
-            break t;
-        }
-    };
-    u.iter_mut().zip(&out).for_each(|(ui, &v)| *ui = v);
-    Ok(monitor.finish(it, termination, &op))
+        self.objective = self.unit * primal;
+        Ok(Progress {
+            residual,
+            objective: self.objective,
+            change,
+            ending: None,
+        })
+    }
+
+    fn objective(&self) -> f64 {
+        self.objective
+    }
 }
