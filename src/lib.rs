@@ -66,6 +66,7 @@ pub mod recon;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod solver;
+pub mod space;
 pub mod units;
 
 pub use error::{Error, Result};

@@ -49,6 +49,7 @@ mod scenes;
 mod seeded_codes;
 mod solvers;
 mod sparse_solvers;
+mod split;
 mod streamed;
 mod stress;
 mod tight_frame;

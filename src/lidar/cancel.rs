@@ -97,6 +97,10 @@ where
             flag: self.flag,
         }))
     }
+
+    fn space(&self) -> &dyn crate::space::Space {
+        self.inner.space()
+    }
 }
 
 impl<'f, T, P> VoxelOperator<T> for Cancellable<'f, P>

@@ -203,6 +203,10 @@ impl<'a, A: LinearOperator<T> + ?Sized, T: Real> ColumnRestriction<'a, A, T> {
 }
 
 impl<A: LinearOperator<T> + ?Sized, T: Real> LinearOperator<T> for ColumnRestriction<'_, A, T> {
+    /// The restricted unknowns are split as the operator's are.
+    fn space(&self) -> &dyn crate::space::Space {
+        self.op.space()
+    }
     fn nrows(&self) -> usize {
         self.op.nrows()
     }

@@ -4,6 +4,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use crate::error::Result;
 use crate::real::Real;
+use crate::space::Space;
 
 use super::pixel::{column_norms_by_applies, pixel_gram_by_applies, self_correlations_by_applies};
 use super::{LinearOperator, VoxelOperator};
@@ -114,6 +115,9 @@ impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for Counted<A> {
     fn describe(&self) -> String {
         format!("Counted({})", self.inner.describe())
     }
+    fn space(&self) -> &dyn Space {
+        self.inner.space()
+    }
     /// The inner operator's restriction, whose applications count as support applications of
     /// this one.
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
@@ -198,6 +202,9 @@ impl<T: Real> LinearOperator<T> for CountedPart<'_, T> {
     }
     fn describe(&self) -> String {
         format!("Counted({})", self.inner.describe())
+    }
+    fn space(&self) -> &dyn Space {
+        self.inner.space()
     }
     /// A restriction of the part, whose applications count as support applications.
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {

@@ -67,6 +67,7 @@ pub use testing::{catalogue, dot_test, dot_test_sweep, DotTest, DotTestReport, S
 
 use crate::error::Result;
 use crate::real::Real;
+use crate::space::{Space, WHOLE};
 
 /// A boxed operator, for expressions assembled at run time.
 pub type BoxedOperator<T> = Box<dyn LinearOperator<T>>;
@@ -126,6 +127,15 @@ pub trait LinearOperator<T: Real>: Send + Sync {
     /// [`ncols`](Self::ncols).
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
         Ok(Box::new(basic::ColumnRestriction::new(self, columns)?))
+    }
+
+    /// The space of the operator's input, the unknowns: [`Whole`](crate::space::Whole) by
+    /// default. An operator whose input is this process's part of unknowns split across
+    /// processes returns the space that combines the parts; the solvers compute every inner
+    /// product, norm and global selection over the unknowns through it
+    /// ([`crate::space`]). Its restrictions keep the space.
+    fn space(&self) -> &dyn Space {
+        &WHOLE
     }
 
     /// y = A·x, overwriting `y`. Allocates the scratch buffer when one is needed.
@@ -273,6 +283,9 @@ macro_rules! forward_impl {
                 columns: Vec<usize>,
             ) -> Result<Box<dyn LinearOperator<T> + '_>> {
                 (**self).restrict_columns(columns)
+            }
+            fn space(&self) -> &dyn Space {
+                (**self).space()
             }
         }
     )*};

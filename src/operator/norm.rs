@@ -3,6 +3,7 @@
 use crate::error::{Error, Result};
 use crate::linalg::norm2;
 use crate::real::Real;
+use crate::space;
 
 use super::testing::{check_rng, gaussian_vector, NORM_STREAM};
 use super::LinearOperator;
@@ -73,17 +74,23 @@ pub fn operator_norm<T: Real, A: LinearOperator<T> + ?Sized>(
         ));
     }
     let (m, n) = (op.nrows(), op.ncols());
+    // Over unknowns split into parts: the whole vector's count and this part's first index.
+    let space = op.space();
+    let (total, offset) = (space::count(space, n), space.offset(n));
     let zero = NormEstimate {
         value: 0.0,
         iterations: 0,
         stop: NormStop::ZeroOperator,
     };
-    if m == 0 || n == 0 {
+    if m == 0 || total == 0 {
         return Ok(zero);
     }
+    // The start vector of the whole, so that every split starts from the same one.
     let mut rng = check_rng(params.seed, NORM_STREAM);
-    let mut v: Vec<T> = gaussian_vector(n, &mut rng);
-    let nv = norm2(&v);
+    let mut v: Vec<T> = gaussian_vector(total, &mut rng);
+    v.drain(..offset);
+    v.truncate(n);
+    let nv = space::norm2(space, &v);
     v.iter_mut().for_each(|e| *e = T::of_f64(e.as_f64() / nv));
     let mut av = vec![T::zero(); m];
     let mut scratch = vec![T::zero(); op.scratch_len()];
@@ -103,7 +110,7 @@ pub fn operator_norm<T: Real, A: LinearOperator<T> + ?Sized>(
             });
         }
         op.apply_adjoint_with_scratch(&av, &mut v, &mut scratch);
-        let nu = norm2(&v);
+        let nu = space::norm2(space, &v);
         if !nu.is_finite() || nu == 0.0 {
             return Err(Error::NonFinite {
                 what: format!("adjoint output during power iteration {it}"),

@@ -205,6 +205,9 @@ impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for PixelColumns<A> {
     fn describe(&self) -> String {
         format!("PixelColumns({}, {})", self.op.describe(), self.column_len)
     }
+    fn space(&self) -> &dyn crate::space::Space {
+        self.op.space()
+    }
 }
 
 impl<T: Real, A: LinearOperator<T>> VoxelOperator<T> for PixelColumns<A> {

@@ -10,6 +10,7 @@ use crate::linalg::{dot, median, robust_sigma};
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 use crate::solver::{solve_with, Iteration, Iterative, Progress, Report, Stopping, Termination};
+use crate::space;
 
 use super::refit::{refit_support, refit_support_to, REFIT_MAX_ITER, REFIT_ROUNDS};
 
@@ -215,13 +216,14 @@ impl<T: Real, A: LidarOperator<T>> Iteration<T, A> for PursuitIteration<T> {
     /// ([`Termination::Stagnation`]).
     fn prepare(&mut self, op: &A) -> Option<Termination> {
         let ks = op.geometry().ks;
+        let space = op.space();
         op.correlate(&self.r, &mut self.u);
-        let mut all: Vec<f64> = self.u.iter().map(|v| v.as_f64()).collect();
+        let mut all = space::whole_values(space, self.u.iter().map(|v| v.as_f64()).collect());
         let med = median(&mut all);
         let level = med + CANDIDATE_Z * robust_sigma(&mut all, med);
-        // Each pixel's best positive voxel outside the support, strongest first.
+        // Each pixel's best positive voxel outside the support.
         let x = &self.prev;
-        let mut candidates: Vec<(usize, f64)> = self
+        let candidates: Vec<(usize, f64)> = self
             .u
             .chunks(ks)
             .enumerate()
@@ -234,16 +236,15 @@ impl<T: Real, A: LidarOperator<T>> Iteration<T, A> for PursuitIteration<T> {
                     .max_by(|a, b| a.1.total_cmp(&b.1))
             })
             .collect();
-        candidates.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
         // Those that stand out of the cross-talk join; while the unexplained returns are many
         // and the support already holds more, as many as it holds, so that it can double each
         // round while their cross-talk still hides true returns.
-        let standing = candidates.iter().filter(|c| c.1 >= level).count();
+        let standing = space::count(space, candidates.iter().filter(|c| c.1 >= level).count());
         if standing == 0 {
             self.end = PursuitEnd::NoCandidate;
             return Some(Termination::Converged);
         }
-        let held = x.iter().filter(|v| **v != T::zero()).count();
+        let held = space::count(space, x.iter().filter(|v| **v != T::zero()).count());
         if held >= self.cap {
             self.end = PursuitEnd::TooLarge;
             return Some(Termination::Stagnation);
@@ -254,8 +255,10 @@ impl<T: Real, A: LidarOperator<T>> Iteration<T, A> for PursuitIteration<T> {
         } else {
             standing
         };
-        candidates.truncate(joining.min(self.cap - held));
-        self.candidates = candidates;
+        // The strongest, the lower voxel first among equals.
+        let scores: Vec<f64> = candidates.iter().map(|c| c.1).collect();
+        let joining = space::largest_by(space, &scores, joining.min(self.cap - held));
+        self.candidates = joining.into_iter().map(|i| candidates[i]).collect();
         None
     }
 
@@ -300,7 +303,7 @@ impl<T: Real, A: LidarOperator<T>> Iteration<T, A> for PursuitIteration<T> {
         self.rel = new_rel;
         let rr = dot(&r, &r);
         self.r = r;
-        let change = crate::solver::relative_change(x, &self.prev);
+        let change = space::relative_change(op.space(), x, &self.prev);
         self.prev.copy_from_slice(x);
         Ok(Progress {
             ending,
@@ -329,10 +332,11 @@ fn unexplained_returns<T: Real>(op: &dyn LidarOperator<T>, x: &[T], r: &[T]) -> 
         .zip(&norms)
         .map(|(&v, a)| (x[v].as_f64() * a).powi(2))
         .sum();
+    let [held, count] = space::sums(op.space(), [held, support.len() as f64]);
     if held <= 0.0 {
         return f64::INFINITY;
     }
-    dot(r, r) * support.len() as f64 / held
+    dot(r, r) * count / held
 }
 
 /// The amplitude test: zeroes the voxels whose amplitude times column norm is below
@@ -341,7 +345,9 @@ fn unexplained_returns<T: Real>(op: &dyn LidarOperator<T>, x: &[T], r: &[T]) -> 
 fn prune<T: Real>(op: &dyn LidarOperator<T>, x: &mut [T], r: &[T], ynorm: f64) {
     let k = r.len();
     let support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
-    let dof = k.saturating_sub(support.len()).max(1);
+    let dof = k
+        .saturating_sub(space::count(op.space(), support.len()))
+        .max(1);
     let sigma_r = (dot(r, r) / dof as f64)
         .sqrt()
         .max(100.0 * T::EPS * ynorm / (k as f64).sqrt());

@@ -6,6 +6,7 @@ use crate::lidar::LidarOperator;
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 use crate::solver::{cgls, CglsParams, Report, Stopping};
+use crate::space;
 
 /// CGLS iterations of one least-squares refit on a support.
 pub(super) const REFIT_MAX_ITER: usize = 50;
@@ -50,8 +51,10 @@ pub(super) fn refit_support_to<T: Real>(
     rounds: usize,
     target: f64,
 ) -> Result<Option<Report>> {
+    let space = op.space();
     let mut support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
-    if support.is_empty() || 2 * support.len() > y.len() {
+    let held = space::count(space, support.len());
+    if held == 0 || 2 * held > y.len() {
         return Ok(None);
     }
     let params = CglsParams {
@@ -78,7 +81,11 @@ pub(super) fn refit_support_to<T: Real>(
         }
         let before = support.len();
         support.retain(|&v| x[v] > T::zero());
-        if support.len() == before || support.is_empty() {
+        let [dropped, left] = space::sums(
+            space,
+            [(before - support.len()) as f64, support.len() as f64],
+        );
+        if dropped == 0.0 || left == 0.0 {
             break;
         }
     }

@@ -142,13 +142,16 @@ impl<I> Driver<I> {
 /// one iteration with the same arithmetic, so the iterates are those of the native solver. The
 /// work an iteration starts from (a gradient or proxy) is done at the end of the previous one
 /// only when the executor allows another iteration, so the apply counts added to argmin's
-/// counters `operator_forward` and `operator_adjoint` equal the native solver's. The cost is the
-/// solver's objective; the key-value log has the relative residual (`residual`) and the relative
-/// change of x (`change`).
+/// counters `operator_forward`, `operator_adjoint` and `operator_support` (applications of the
+/// operator restricted to a support) equal the native solver's. The cost is the solver's
+/// objective; the key-value log has the relative residual (`residual`) and the relative change
+/// of x (`change`).
 ///
-/// The run ends with `SolverConverged` when the solver's own convergence test or a residual,
-/// change or stagnation rule of its [`Stopping`] holds, or after `init` when the native solver
-/// would not iterate (y = 0, a zero operator). `stopping.max_iter` and `stopping.time_limit` are
+/// The run ends with `SolverConverged` when the solver's own ending or a residual, change or
+/// stagnation rule of its [`Stopping`] holds (tested as the native loop tests them), or
+/// after `init` when the native solver would not iterate (y = 0, a zero operator). The
+/// iteration's `finish` runs when the run ends, at `max_iters` included, as it does in the
+/// native loop. `stopping.max_iter` and `stopping.time_limit` are
 /// not used: the executor's `max_iters` and `timeout` limit the run. The solver is serializable
 /// for argmin's checkpoints; its parameters are only needed by `init` and are not serialized, so
 /// a deserialized solver resumes a run but cannot start one.

@@ -8,6 +8,7 @@ use crate::error::{Error, Result};
 use crate::linalg::{axpy, dot};
 use crate::operator::LinearOperator;
 use crate::real::Real;
+use crate::space;
 
 use super::iteration::{fit_scratch, solve, Iteration, Iterative, Progress};
 use super::{check_problem, Observer, Report, Stopping, Termination};
@@ -88,7 +89,8 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
     ) -> Result<ControlFlow<Termination, Self>> {
         params.validate()?;
         let (m, n) = (op.nrows(), op.ncols());
-        check_problem(Self::NAME, m, n, y, x)?;
+        let space = op.space();
+        check_problem(Self::NAME, space, m, n, y, x)?;
         let mut scratch = vec![T::zero(); op.scratch_len()];
         // r = y − Ax, s = Aᵀr − λx, p = s.
         let mut r = vec![T::zero(); m];
@@ -97,11 +99,11 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
         let mut s = vec![T::zero(); n];
         op.apply_adjoint_with_scratch(&r, &mut s, &mut scratch);
         axpy(T::of_f64(-params.damp), x, &mut s);
-        let gamma = dot(&s, &s);
+        let [gamma, xx] = space::sums(space, [dot(&s, &s), dot(x, x)]);
         if gamma == 0.0 {
             return Ok(ControlFlow::Break(Termination::ZeroResidual));
         }
-        let objective = 0.5 * (dot(&r, &r) + params.damp * dot(x, x));
+        let objective = 0.5 * (dot(&r, &r) + params.damp * xx);
         Ok(ControlFlow::Continue(CglsIteration {
             damp: params.damp,
             p: s.clone(),
@@ -118,8 +120,9 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
     fn step(&mut self, op: &A, _y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
         fit_scratch(&mut self.scratch, op);
         let lambda = self.damp;
+        let space = op.space();
         op.apply_with_scratch(&self.p, &mut self.q, &mut self.scratch);
-        let pp = dot(&self.p, &self.p);
+        let pp = space::norm2_sq(space, &self.p);
         let delta = dot(&self.q, &self.q) + lambda * pp;
         if !(delta.is_finite() && delta > 0.0) {
             return Err(Error::Breakdown {
@@ -132,14 +135,13 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
         axpy(T::of_f64(-alpha), &self.q, &mut self.r);
         op.apply_adjoint_with_scratch(&self.r, &mut self.s, &mut self.scratch);
         axpy(T::of_f64(-lambda), x, &mut self.s);
-        let gamma_new = dot(&self.s, &self.s);
+        let [gamma_new, xx] = space::sums(space, [dot(&self.s, &self.s), dot(x, x)]);
         if !gamma_new.is_finite() {
             return Err(Error::Breakdown {
                 solver: Self::NAME,
                 reason: format!("non-finite residual at iteration {it}"),
             });
         }
-        let xx = dot(x, x);
         let change = if xx > 0.0 {
             alpha * (pp / xx).sqrt()
         } else {

@@ -8,11 +8,12 @@ use crate::error::{Error, Result};
 use crate::linalg::{dot, norm2};
 use crate::operator::LinearOperator;
 use crate::real::Real;
+use crate::space;
 
 use super::iteration::{fit_scratch, refresh_residual, solve, Iteration, Iterative, Progress};
 use super::{
-    cgls, check_problem, check_sparsity, check_tolerance, hard_threshold, largest_indices,
-    relative_change, support, CglsParams, Observer, Report, Stopping, Termination,
+    cgls, check_problem, check_sparsity, check_tolerance, support, CglsParams, Observer, Report,
+    Stopping, Termination,
 };
 
 /// Parameters of [`cosamp`].
@@ -130,14 +131,15 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CosampIteration
         params: &CosampParams,
     ) -> Result<ControlFlow<Termination, Self>> {
         let (m, n) = (op.nrows(), op.ncols());
-        params.validate_for(n)?;
-        check_problem(Self::NAME, m, n, y, x)?;
+        let space = op.space();
+        params.validate_for(space::count(space, n))?;
+        check_problem(Self::NAME, space, m, n, y, x)?;
         let ynorm = norm2(y);
         if ynorm == 0.0 {
             x.fill(T::zero());
             return Ok(ControlFlow::Break(Termination::ZeroResidual));
         }
-        hard_threshold(x, params.sparsity);
+        space::hard_threshold(space, x, params.sparsity);
         let mut scratch = vec![T::zero(); op.scratch_len()];
         let mut ax = vec![T::zero(); m];
         op.apply_with_scratch(x, &mut ax, &mut scratch);
@@ -161,16 +163,15 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CosampIteration
     fn prepare(&mut self, op: &A) -> Option<Termination> {
         fit_scratch(&mut self.scratch, op);
         op.apply_adjoint_with_scratch(&self.r, &mut self.u, &mut self.scratch);
-        self.u
-            .iter()
-            .all(|&v| v == T::zero())
+        space::all(op.space(), self.u.iter().all(|&v| v == T::zero()))
             .then_some(Termination::Converged)
     }
 
     fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
         fit_scratch(&mut self.scratch, op);
+        let space = op.space();
         let s = self.sparsity;
-        let merged = union(&largest_indices(&self.u, 2 * s), &self.supp);
+        let merged = union(&space::largest_indices(space, &self.u, 2 * s), &self.supp);
         let mut b: Vec<T> = merged.iter().map(|&i| x[i]).collect();
         let restricted = op.restrict_columns(merged.clone())?;
         let inner = CglsParams {
@@ -184,15 +185,15 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CosampIteration
             },
             other => other,
         })?;
-        hard_threshold(&mut b, s);
+        space::hard_threshold(restricted.space(), &mut b, s);
         self.xn.fill(T::zero());
         for (&i, &v) in merged.iter().zip(&b) {
             self.xn[i] = v;
         }
         op.apply_with_scratch(&self.xn, &mut self.ax, &mut self.scratch);
-        let change = relative_change(&self.xn, x);
+        let change = space::relative_change(space, &self.xn, x);
         let new_supp = support(&self.xn);
-        let same_support = new_supp == self.supp;
+        let same_support = space::all(space, new_supp == self.supp);
         x.copy_from_slice(&self.xn);
         self.supp = new_supp;
         let rr = refresh_residual(Self::NAME, it, y, &self.ax, &mut self.r)?;

@@ -6,14 +6,14 @@ use std::ops::ControlFlow;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::linalg::{dist2_sq, norm2, norm_inf};
+use crate::linalg::{dist2_sq, norm2};
 use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
+use crate::space::{self, Space};
 
 use super::iteration::{fit_scratch, solve, Iteration, Iterative, Progress};
 use super::{
-    check_problem, lipschitz_estimate, relative_change, validate_power_step, Observer, Report,
-    Stopping, Termination,
+    check_problem, lipschitz_estimate, validate_power_step, Observer, Report, Stopping, Termination,
 };
 
 /// Largest number of backtracking trials in one step before [`fista`] gives up.
@@ -195,10 +195,10 @@ struct Lasso<T> {
 impl<T: Real> Lasso<T> {
     const NAME: &'static str = "fista";
 
-    /// ½‖Ax − y‖² + λ‖x‖₁, from x and Ax.
-    fn objective(&self, y: &[T], x: &[T], ax: &[T]) -> f64 {
+    /// ½‖Ax − y‖² + λ‖x‖₁, from x and Ax, over the unknowns of `space`.
+    fn objective(&self, space: &dyn Space, y: &[T], x: &[T], ax: &[T]) -> f64 {
         let fit: f64 = dist2_sq(ax, y);
-        let l1: f64 = x.iter().map(|v| v.as_f64().abs()).sum();
+        let l1: f64 = space::sum(space, x.iter().map(|v| v.as_f64().abs()).sum());
         0.5 * fit + self.lambda * l1
     }
 
@@ -219,7 +219,7 @@ impl<T: Real> Lasso<T> {
         op.apply_adjoint_with_scratch(&self.res, &mut self.grad, &mut self.scratch);
         if self.l == 0.0 {
             // First backtracking step: start from the Rayleigh quotient of the gradient.
-            let gg = norm2(&self.grad);
+            let gg = space::norm2(op.space(), &self.grad);
             if gg > 0.0 {
                 op.apply_with_scratch(&self.grad, ap, &mut self.scratch);
                 let ratio = norm2(ap) / gg;
@@ -241,7 +241,7 @@ impl<T: Real> Lasso<T> {
             };
             // ‖A(p − z)‖ ≤ √L ‖p − z‖, with a slack for the rounding of Ap and Az.
             let ad = dist2_sq(ap, az).sqrt();
-            let d = dist2_sq(p, z).sqrt();
+            let d = space::dist2_sq(op.space(), p, z).sqrt();
             let slack = 4.0 * T::EPS * (norm2(ap) + norm2(az));
             if ad <= self.l.sqrt() * d + slack {
                 return Ok(());
@@ -314,7 +314,8 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
     ) -> Result<ControlFlow<Termination, Self>> {
         params.validate()?;
         let (m, n) = (op.nrows(), op.ncols());
-        check_problem(Self::NAME, m, n, y, x)?;
+        let space = op.space();
+        check_problem(Self::NAME, space, m, n, y, x)?;
         let ynorm = norm2(y);
         if ynorm == 0.0 {
             x.fill(T::zero());
@@ -330,7 +331,7 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
             Lambda::Fraction(f) => {
                 let mut aty = vec![T::zero(); n];
                 op.apply_adjoint_with_scratch(y, &mut aty, &mut scratch);
-                let top = norm_inf(&aty);
+                let top = space::norm_inf(space, &aty);
                 if !top.is_finite() {
                     return Err(Error::NonFinite {
                         what: format!("{}: ‖Aᵀy‖∞ = {top}", Self::NAME),
@@ -364,7 +365,7 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
         };
         let mut ax = vec![T::zero(); m];
         op.apply_with_scratch(x, &mut ax, &mut lasso.scratch);
-        let f_x = lasso.objective(y, x, &ax);
+        let f_x = lasso.objective(space, y, x, &ax);
         Ok(ControlFlow::Continue(FistaIteration {
             lasso,
             restart: params.restart,
@@ -383,14 +384,15 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
     }
 
     fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
+        let space = op.space();
         let lasso = &mut self.lasso;
         lasso.step(op, y, &self.z, &self.az, &mut self.p, &mut self.ap)?;
-        let mut f_p = lasso.objective(y, &self.p, &self.ap);
+        let mut f_p = lasso.objective(space, y, &self.p, &self.ap);
         let mut restarted = false;
         match self.restart {
             Restart::Function if self.momentum && f_p > self.f_x => {
                 lasso.step(op, y, x, &self.ax, &mut self.p, &mut self.ap)?;
-                f_p = lasso.objective(y, &self.p, &self.ap);
+                f_p = lasso.objective(space, y, &self.p, &self.ap);
                 restarted = true;
             }
             Restart::Gradient => {
@@ -403,7 +405,7 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
                         (zi.as_f64() - pi.as_f64()) * (pi.as_f64() - xi.as_f64())
                     })
                     .sum();
-                restarted = along > 0.0;
+                restarted = space::sum(space, along) > 0.0;
             }
             _ => {}
         }
@@ -413,7 +415,7 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
                 reason: format!("non-finite objective at iteration {it}"),
             });
         }
-        let change = relative_change(&self.p, x);
+        let change = space::relative_change(space, &self.p, x);
         self.x_prev.copy_from_slice(x);
         x.copy_from_slice(&self.p);
         std::mem::swap(&mut self.ax_prev, &mut self.ax);

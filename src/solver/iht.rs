@@ -8,12 +8,12 @@ use crate::error::{Error, Result};
 use crate::linalg::{dist2_sq, dot, norm2};
 use crate::operator::{LinearOperator, PowerIteration};
 use crate::real::Real;
+use crate::space;
 
 use super::iteration::{fit_scratch, refresh_residual, solve, Iteration, Iterative, Progress};
 use super::{
-    check_problem, check_sparsity, check_tolerance, hard_threshold, largest_indices,
-    lipschitz_estimate, relative_change, support, validate_power_step, Observer, Report, Stopping,
-    Termination,
+    check_problem, check_sparsity, check_tolerance, lipschitz_estimate, support,
+    validate_power_step, Observer, Report, Stopping, Termination,
 };
 
 /// The constant c of the normalized step's acceptance test (ω = (1 − c)‖Δx‖² / ‖AΔx‖²).
@@ -104,11 +104,12 @@ fn normalized_step<T: Real, A: LinearOperator<T> + ?Sized>(
     ag: &mut [T],
     scratch: &mut [T],
 ) -> Result<f64> {
+    let space = op.space();
     gs.fill(T::zero());
     for &i in gamma {
         gs[i] = g[i];
     }
-    let gg = dot(gs, gs);
+    let gg = space::norm2_sq(space, gs);
     if gg > 0.0 {
         op.apply_with_scratch(gs, ag, scratch);
         let mu = gg / dot(ag, ag);
@@ -117,7 +118,7 @@ fn normalized_step<T: Real, A: LinearOperator<T> + ?Sized>(
         }
     }
     op.apply_with_scratch(g, ag, scratch);
-    let mu = dot(g, g) / dot(ag, ag);
+    let mu = space::norm2_sq(space, g) / dot(ag, ag);
     if mu.is_finite() && mu > 0.0 {
         Ok(mu)
     } else {
@@ -174,15 +175,16 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for IhtIteration<T>
         params: &IhtParams,
     ) -> Result<ControlFlow<Termination, Self>> {
         let (m, n) = (op.nrows(), op.ncols());
-        params.validate_for(n)?;
-        check_problem(Self::NAME, m, n, y, x)?;
+        let space = op.space();
+        params.validate_for(space::count(space, n))?;
+        check_problem(Self::NAME, space, m, n, y, x)?;
         let s = params.sparsity;
         let ynorm = norm2(y);
         if ynorm == 0.0 {
             x.fill(T::zero());
             return Ok(ControlFlow::Break(Termination::ZeroResidual));
         }
-        hard_threshold(x, s);
+        space::hard_threshold(space, x, s);
         let fixed_mu = match params.step {
             IhtStep::Normalized => None,
             IhtStep::PowerIteration { settings, margin } => {
@@ -218,21 +220,20 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for IhtIteration<T>
     fn prepare(&mut self, op: &A) -> Option<Termination> {
         fit_scratch(&mut self.scratch, op);
         op.apply_adjoint_with_scratch(&self.r, &mut self.g, &mut self.scratch);
-        self.g
-            .iter()
-            .all(|&v| v == T::zero())
+        space::all(op.space(), self.g.iter().all(|&v| v == T::zero()))
             .then_some(Termination::Converged)
     }
 
     fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
         fit_scratch(&mut self.scratch, op);
+        let space = op.space();
         let s = self.sparsity;
         // Γ: the current support, or the s largest gradient entries when x = 0.
         let (mut mu, gamma) = match self.fixed_mu {
             Some(mu) => (mu, None),
             None => {
-                let gamma = if self.supp.is_empty() {
-                    largest_indices(&self.g, s)
+                let gamma = if space::count(space, self.supp.len()) == 0 {
+                    space::largest_indices(space, &self.g, s)
                 } else {
                     self.supp.clone()
                 };
@@ -252,16 +253,16 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for IhtIteration<T>
             for ((v, &xi), &gi) in self.xn.iter_mut().zip(x.iter()).zip(&self.g) {
                 *v = T::of_f64(xi.as_f64() + mu * gi.as_f64());
             }
-            hard_threshold(&mut self.xn, s);
+            space::hard_threshold(space, &mut self.xn, s);
             op.apply_with_scratch(&self.xn, &mut self.axn, &mut self.scratch);
             let new_supp = support(&self.xn);
             let Some(gamma) = &gamma else {
                 break new_supp;
             };
-            if new_supp == *gamma {
+            if space::all(space, new_supp == *gamma) {
                 break new_supp;
             }
-            let dx: f64 = dist2_sq(&self.xn, x);
+            let dx: f64 = space::dist2_sq(space, &self.xn, x);
             let adx: f64 = dist2_sq(&self.axn, &self.ax);
             let omega = if adx > 0.0 {
                 (1.0 - C) * dx / adx
@@ -280,8 +281,8 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for IhtIteration<T>
                 });
             }
         };
-        let change = relative_change(&self.xn, x);
-        let same_support = new_supp == self.supp;
+        let change = space::relative_change(space, &self.xn, x);
+        let same_support = space::all(space, new_supp == self.supp);
         x.copy_from_slice(&self.xn);
         std::mem::swap(&mut self.ax, &mut self.axn);
         self.supp = new_supp;

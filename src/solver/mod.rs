@@ -52,7 +52,7 @@ pub use tv::{tv_denoise, TvNorm, TvParams, TvSteps};
 use stopping::StopRules;
 
 use crate::error::{Error, Result};
-use crate::linalg::{dist2_sq, dot};
+use crate::linalg::dist2_sq;
 use crate::operator::Counted;
 use crate::operator::{operator_norm, PowerIteration};
 use crate::real::Real;
@@ -290,8 +290,29 @@ pub(crate) fn check_measurements<T: Real>(
     Ok(())
 }
 
-/// Checks that a solver's inputs fit the operator and are finite.
+/// Checks that a solver's inputs fit the operator and are finite. The check is collective: when
+/// the unknowns are split, a part whose own inputs pass learns that another part's did not.
 pub(crate) fn check_problem<T: Real>(
+    solver: &'static str,
+    space: &dyn crate::space::Space,
+    nrows: usize,
+    ncols: usize,
+    y: &[T],
+    x: &[T],
+) -> Result<()> {
+    let local = check_part(solver, nrows, ncols, y, x);
+    if crate::space::max(space, f64::from(u8::from(local.is_err()))) > 0.0 {
+        local?;
+        return Err(Error::param(
+            "x",
+            format!("{solver}: the inputs of another part of the unknowns are invalid"),
+        ));
+    }
+    Ok(())
+}
+
+/// [`check_problem`] on this part.
+fn check_part<T: Real>(
     solver: &'static str,
     nrows: usize,
     ncols: usize,
@@ -325,37 +346,6 @@ pub(crate) fn residual_norm_sq<T: Real, A: crate::operator::LinearOperator<T> + 
     dist2_sq(y, &ax)
 }
 
-/// ‖x − prev‖ / ‖x‖ accumulated in `f64`: 0 when the two are equal, +∞ when only `x` is zero.
-pub(crate) fn relative_change<T: Real>(x: &[T], prev: &[T]) -> f64 {
-    let d: f64 = dist2_sq(x, prev);
-    let xx = dot(x, x);
-    if d == 0.0 {
-        0.0
-    } else if xx == 0.0 {
-        f64::INFINITY
-    } else {
-        (d / xx).sqrt()
-    }
-}
-
-/// Indices of the `k` entries of largest magnitude, in increasing order (all indices when
-/// `k ≥ v.len()`); among equal magnitudes the lower index wins.
-pub(crate) fn largest_indices<T: Real>(v: &[T], k: usize) -> Vec<usize> {
-    let mut idx: Vec<usize> = (0..v.len()).collect();
-    if k < v.len() {
-        let by_magnitude = |&a: &usize, &b: &usize| {
-            let (ma, mb) = (v[a].as_f64().abs(), v[b].as_f64().abs());
-            mb.total_cmp(&ma).then(a.cmp(&b))
-        };
-        if k > 0 {
-            idx.select_nth_unstable_by(k - 1, by_magnitude);
-        }
-        idx.truncate(k);
-    }
-    idx.sort_unstable();
-    idx
-}
-
 /// Indices of the nonzero entries, in increasing order.
 pub(crate) fn support<T: Real>(v: &[T]) -> Vec<usize> {
     v.iter()
@@ -363,22 +353,6 @@ pub(crate) fn support<T: Real>(v: &[T]) -> Vec<usize> {
         .filter(|(_, x)| **x != T::zero())
         .map(|(i, _)| i)
         .collect()
-}
-
-/// H_k: keeps the `k` entries of largest magnitude (see [`largest_indices`]) and zeroes the rest.
-pub(crate) fn hard_threshold<T: Real>(x: &mut [T], k: usize) {
-    if k >= x.len() {
-        return;
-    }
-    let keep = largest_indices(x, k);
-    let mut next = keep.iter().copied().peekable();
-    for (i, v) in x.iter_mut().enumerate() {
-        if next.peek() == Some(&i) {
-            next.next();
-        } else {
-            *v = T::zero();
-        }
-    }
 }
 
 /// Checks the settings of a step derived from a power-iteration estimate of ‖A‖.

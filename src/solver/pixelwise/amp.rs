@@ -21,6 +21,7 @@ use crate::solver::{
     check_problem, solve_with, Iteration, Iterative, Observer, Progress, Report, Stopping,
     Termination,
 };
+use crate::space::{self, Space};
 
 use super::PixelConstraints;
 
@@ -460,7 +461,7 @@ impl<'c, T: Real> AmpIteration<'c, T> {
         let name = <Self as Iterative<T>>::NAME;
         setup.params.validate()?;
         let (m, n) = (op.nrows(), op.ncols());
-        check_problem(name, m, n, y, x)?;
+        check_problem(name, op.space(), m, n, y, x)?;
         let PixelConstraints {
             windows,
             priors,
@@ -493,8 +494,9 @@ impl<'c, T: Real> AmpIteration<'c, T> {
 
     /// The starting prior: λ as given, μ and σ² from the measurements' energy (E‖y‖² ≈
     /// Σₚ aₚ²‖a‖², the mean squared amplitude of a lit pixel under λ); and the number of pixels
-    /// with an admissible depth.
+    /// with an admissible depth (over the whole of the unknowns of `space`).
     fn starting_prior(
+        space: &dyn Space,
         grams: &Grams,
         pixels: usize,
         ks: usize,
@@ -507,15 +509,17 @@ impl<'c, T: Real> AmpIteration<'c, T> {
                 (0..ks).any(|d| g[d * ks + d] > 0.0)
             })
             .collect();
-        let seen = observable.iter().filter(|o| **o).count().max(1);
-        let diag_mean = (0..pixels)
+        let seen = observable.iter().filter(|o| **o).count();
+        let diag_sum = (0..pixels)
             .filter(|&p| observable[p])
             .map(|p| {
                 let g = grams.block(p, ks);
                 (0..ks).map(|d| g[d * ks + d]).sum::<f64>() / ks as f64
             })
-            .sum::<f64>()
-            / seen as f64;
+            .sum::<f64>();
+        let [seen, diag_sum] = space::sums(space, [seen as f64, diag_sum]);
+        let seen = (seen as usize).max(1);
+        let diag_mean = diag_sum / seen as f64;
         let a2 = yy / (lit * seen as f64 * diag_mean);
         let prior = Prior {
             lit,
@@ -578,7 +582,7 @@ impl<'c, T: Real> AmpIteration<'c, T> {
 
     /// The most probable scene into `x`, the posteriors' summaries, and the prior learned from
     /// them; returns the Onsager sum of the divergences.
-    fn decide(&mut self, posts: &[PixelPosterior], x: &mut [T]) -> f64 {
+    fn decide(&mut self, space: &dyn Space, posts: &[PixelPosterior], x: &mut [T]) -> f64 {
         let ks = self.ks;
         x.fill(T::zero());
         let (mut lit, mut amp1, mut amp2, mut div) = (0.0, 0.0, 0.0, 0.0);
@@ -599,6 +603,7 @@ impl<'c, T: Real> AmpIteration<'c, T> {
                 }
             }
         }
+        let [lit, amp1, amp2, div] = space::sums(space, [lit, amp1, amp2, div]);
         if self.params.learn_prior && lit > 0.0 {
             let prior = &mut self.prior;
             prior.lit = (lit / self.seen as f64).clamp(1e-4, 1.0 - 1e-4);
@@ -647,7 +652,7 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
         }
         let grams = Grams::of(op, pixels);
         let (mut prior, seen) =
-            Self::starting_prior(&grams, pixels, ks, yy, params.lit_probability);
+            Self::starting_prior(op.space(), &grams, pixels, ks, yy, params.lit_probability);
         let y64: Vec<f64> = y.iter().map(|v| v.as_f64()).collect();
         let mut mean = vec![0.0f64; n];
         let mut z = y64.clone();
@@ -704,7 +709,8 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
         }
         op.apply_adjoint(&self.zt, &mut self.u);
         let posts = self.pixel_posteriors();
-        let div = self.decide(&posts, x);
+        let space = op.space();
+        let div = self.decide(space, &posts, x);
 
         for (t, v) in self.xt.iter_mut().zip(&self.mean) {
             *t = T::of_f64(*v);
@@ -718,7 +724,7 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
             *zi = r + onsager * *zi;
         }
         let res = (rr / self.yy).sqrt();
-        if !res.is_finite() || x.iter().any(|v| !v.is_finite()) {
+        if !res.is_finite() || !space::all(space, x.iter().all(|v| v.is_finite())) {
             return Err(Error::Breakdown {
                 solver: <Self as Iterative<T>>::NAME,
                 reason: format!("non-finite values at iteration {it}"),
@@ -726,11 +732,14 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
         }
         self.keep_if_best(res, x);
         let same_support = it > 1
-            && x.iter()
-                .zip(&self.prev)
-                .all(|(a, b)| (*a == T::zero()) == (*b == T::zero()));
+            && space::all(
+                space,
+                x.iter()
+                    .zip(&self.prev)
+                    .all(|(a, b)| (*a == T::zero()) == (*b == T::zero())),
+            );
         self.stable = if same_support { self.stable + 1 } else { 0 };
-        let change = crate::solver::relative_change(x, &self.prev);
+        let change = space::relative_change(space, x, &self.prev);
         self.prev.copy_from_slice(x);
         self.objective = 0.5 * rr;
         let stable = self.params.stable_support.is_some_and(|s| self.stable >= s);

@@ -13,6 +13,7 @@ use crate::solver::{
     cgls, check_problem, check_tolerance, solve, CglsParams, Iteration, Iterative, Observer,
     Progress, Report, Stopping, Termination,
 };
+use crate::space::{self, Space};
 
 use super::amp::{reflector_amp_constrained, ReflectorAmpParams};
 use super::PixelConstraints;
@@ -132,17 +133,17 @@ impl ModelBasedParams {
     }
 }
 
-/// 1.4826 · median |u|: a robust standard deviation of the correlations, dominated by the empty
-/// voxels.
-fn robust_sigma<T: Real>(u: &[T]) -> f64 {
-    let mut a: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
+/// 1.4826 · median |u| over the whole of the unknowns: a robust standard deviation of the
+/// correlations, dominated by the empty voxels.
+fn robust_sigma<T: Real>(space: &dyn Space, u: &[T]) -> f64 {
+    let mut a = space::whole_values(space, u.iter().map(|v| v.as_f64()).collect());
     crate::linalg::robust_sigma(&mut a, 0.0)
 }
 
 /// y − A_S b for the restriction `restricted` of the operator to a support.
 fn support_residual<T: Real>(restricted: &dyn LinearOperator<T>, y: &[T], b: &[T]) -> Vec<T> {
     let mut r = vec![T::zero(); y.len()];
-    if !b.is_empty() {
+    if space::count(restricted.space(), b.len()) > 0 {
         restricted.apply(b, &mut r);
     }
     for (ri, &yi) in r.iter_mut().zip(y) {
@@ -166,7 +167,7 @@ where
 {
     const NAME: &str = "model-based";
     let restricted = op.restrict_columns(voxels.to_vec())?;
-    if !voxels.is_empty() {
+    if space::count(op.space(), voxels.len()) > 0 {
         cgls(&restricted, y, b, inner, &mut ()).map_err(|e| match e {
             Error::Breakdown { reason, .. } => Error::Breakdown {
                 solver: NAME,
@@ -355,11 +356,12 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         z: f64,
     ) -> Vec<bool> {
         let m = self.r.len();
-        let dof = m.saturating_sub(voxels.len()).max(1);
+        let held = space::count(op.space(), voxels.len());
+        let dof = m.saturating_sub(held).max(1);
         let sigma_r = (dot(&self.r, &self.r) / dof as f64)
             .sqrt()
             .max(self.params.noise_floor * self.ynorm / (m as f64).sqrt());
-        let inflation = 1.0 / (1.0 - voxels.len() as f64 / m as f64).max(0.05).sqrt();
+        let inflation = 1.0 / (1.0 - held as f64 / m as f64).max(0.05).sqrt();
         let norms = op.column_norms(voxels);
         amp.iter()
             .zip(&norms)
@@ -465,10 +467,12 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
             .enumerate()
             .flat_map_iter(|(p, col)| self.pixel_picks(op, p, col, first[p], sigma, explore))
             .collect();
-        if picks.len() > self.budget {
-            picks.sort_by(|a, b| b.1.total_cmp(&a.1));
-            picks.truncate(self.budget);
-            picks.sort_by_key(|p| p.0);
+        let space = op.space();
+        if space::count(space, picks.len()) > self.budget {
+            // The strongest within the budget, the lower voxel first among equals.
+            let scores: Vec<f64> = picks.iter().map(|p| p.1).collect();
+            let keep = space::largest_by(space, &scores, self.budget);
+            picks = keep.into_iter().map(|i| picks[i]).collect();
         }
         picks
     }
@@ -505,7 +509,8 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
         let params = setup.params;
         params.validate()?;
         let (m, n) = (op.nrows(), op.ncols());
-        check_problem(name, m, n, y, x)?;
+        let space = op.space();
+        check_problem(name, space, m, n, y, x)?;
         let ks = op.column_len();
         check_pixels(name, n, ks, setup.windows)?;
         let ynorm = dot(y, y).sqrt();
@@ -516,7 +521,7 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
         // Without a warm start, message passing proposes the first support.
         let mut explore_iterations = params.explore_iterations;
         if let Some(amp_params) = &params.amp {
-            if x.iter().all(|v| *v == T::zero()) {
+            if space::all(space, x.iter().all(|v| *v == T::zero())) {
                 let constraints = PixelConstraints {
                     windows: setup.windows,
                     ..PixelConstraints::default()
@@ -556,7 +561,8 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
         let ks = self.ks;
         self.it = it;
         op.correlate(&self.r, &mut self.u);
-        let sigma = robust_sigma(&self.u);
+        let space = op.space();
+        let sigma = robust_sigma(space, &self.u);
         let explore = it <= self.explore_iterations;
         let picks = self.picks(op, sigma, explore);
         // Amplitudes to start the least squares from: kept where the depth is unchanged, the
@@ -576,7 +582,8 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
             .collect();
         // Least squares on the support, warm-started from `amp`, giving the residual.
         self.refit(op, y, &new_voxels, &mut new_amp)?;
-        if self.params.nonnegative && new_amp.iter().any(|a| *a <= T::zero()) {
+        let positive = space::all(space, new_amp.iter().all(|a| *a > T::zero()));
+        if self.params.nonnegative && !positive {
             // Drop the pixels whose amplitude came out non-positive; their depth is re-judged
             // at the next iteration against the residual without them.
             let keep: Vec<bool> = new_amp.iter().map(|a| *a > T::zero()).collect();
@@ -588,25 +595,25 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
         if it >= self.explore_iterations || explained {
             // The amplitude test, then least squares on what remains.
             let keep = self.significant(op, &new_voxels, &new_amp, self.params.amplitude_z);
-            if keep.iter().any(|k| !k) {
+            if !space::all(space, keep.iter().all(|k| *k)) {
                 retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
                 self.refit(op, y, &new_voxels, &mut new_amp)?;
             }
         }
 
-        let same = new_voxels == self.voxels;
+        let same = space::all(space, new_voxels == self.voxels);
         self.voxels = new_voxels;
         self.amp = new_amp;
         self.own = new_own;
         self.write_scene(x);
         let rr = dot(&self.r, &self.r);
-        if !rr.is_finite() || self.amp.iter().any(|v| !v.is_finite()) {
+        if !rr.is_finite() || !space::all(space, self.amp.iter().all(|v| v.is_finite())) {
             return Err(Error::Breakdown {
                 solver: <Self as Iterative<T>>::NAME,
                 reason: format!("non-finite values at iteration {it}"),
             });
         }
-        let change = crate::solver::relative_change(x, &self.prev);
+        let change = space::relative_change(space, x, &self.prev);
         self.prev.copy_from_slice(x);
         Ok(Progress {
             ending: (same && !explore).then_some(Termination::Converged),
@@ -623,7 +630,7 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
     /// dropping more).
     fn finish(&mut self, op: &A, y: &[T], x: &mut [T], _termination: Termination) -> Result<()> {
         let keep = self.significant(op, &self.voxels, &self.amp, self.params.final_z);
-        if keep.iter().any(|k| !k) {
+        if !space::all(op.space(), keep.iter().all(|k| *k)) {
             let (mut voxels, mut amp, mut own) = (
                 std::mem::take(&mut self.voxels),
                 std::mem::take(&mut self.amp),

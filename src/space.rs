@@ -1,0 +1,202 @@
+//! The space of the unknowns: where the inner products, norms and global selections over vectors
+//! of the unknowns are computed.
+//!
+//! A solver holds the unknowns x (and every vector of their length: gradients, proxies, previous
+//! iterates) as its part of a vector that may be split into parts, one per process, as PETSc's
+//! `Vec` or pylops-mpi's `DistributedArray` split it. Elementwise work needs no communication;
+//! what combines entries of different parts does: an inner product, a norm, the largest entries,
+//! a median. Those go through the operator's [`Space`]
+//! ([`LinearOperator::space`](crate::LinearOperator::space)), so that a solver is written once
+//! and runs on whole vectors ([`Whole`], the default) and on split ones alike.
+//!
+//! The measurements y (and every vector of their length) are whole in every part.
+//!
+//! A [`Space`] has four collective primitives; the functions of this module build the solvers'
+//! reductions on them. Every part must call the same collectives in the same order, so a solver
+//! decides only on reduced values (never, e.g., on whether its own part of a support is empty).
+
+use crate::real::Real;
+
+/// How the parts of a vector of unknowns combine. The methods are collective: every part calls
+/// them, in the same order.
+pub trait Space: Send + Sync + std::fmt::Debug {
+    /// How many parts the unknowns are split into (1: whole).
+    fn parts(&self) -> usize;
+
+    /// Replaces each entry of `values` by its sum over the parts, added in part order.
+    fn sum(&self, values: &mut [f64]);
+
+    /// Replaces each entry of `values` by its maximum over the parts.
+    fn max(&self, values: &mut [f64]);
+
+    /// Every part's `local` values, concatenated in part order.
+    fn gather(&self, local: &[f64]) -> Vec<f64>;
+
+    /// The number of unknowns in the parts before this one, given this part's `local_len`
+    /// (the global index of this part's first unknown).
+    fn offset(&self, local_len: usize) -> usize;
+}
+
+/// The unknowns in one piece: every reduction is local.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Whole;
+
+impl Space for Whole {
+    fn parts(&self) -> usize {
+        1
+    }
+    fn sum(&self, _values: &mut [f64]) {}
+    fn max(&self, _values: &mut [f64]) {}
+    fn gather(&self, local: &[f64]) -> Vec<f64> {
+        local.to_vec()
+    }
+    fn offset(&self, _local_len: usize) -> usize {
+        0
+    }
+}
+
+/// The one [`Whole`] space, for operators to return.
+pub static WHOLE: Whole = Whole;
+
+/// The sum over the parts of a local value.
+pub fn sum(space: &dyn Space, local: f64) -> f64 {
+    let mut v = [local];
+    space.sum(&mut v);
+    v[0]
+}
+
+/// The sums over the parts of several local values, in one collective.
+pub fn sums<const N: usize>(space: &dyn Space, mut local: [f64; N]) -> [f64; N] {
+    space.sum(&mut local);
+    local
+}
+
+/// The maximum over the parts of a local value.
+pub fn max(space: &dyn Space, local: f64) -> f64 {
+    let mut v = [local];
+    space.max(&mut v);
+    v[0]
+}
+
+/// Whether `local` holds in every part.
+pub fn all(space: &dyn Space, local: bool) -> bool {
+    max(space, f64::from(u8::from(!local))) == 0.0
+}
+
+/// The number of unknowns over every part, or of any count of local items.
+pub fn count(space: &dyn Space, local: usize) -> usize {
+    sum(space, local as f64) as usize
+}
+
+/// Σ aᵢbᵢ over the whole vectors, accumulated in `f64`.
+pub fn dot<T: Real>(space: &dyn Space, a: &[T], b: &[T]) -> f64 {
+    sum(space, crate::linalg::dot(a, b))
+}
+
+/// ‖a‖² over the whole vector.
+pub fn norm2_sq<T: Real>(space: &dyn Space, a: &[T]) -> f64 {
+    sum(space, crate::linalg::norm2_sq(a))
+}
+
+/// ‖a‖ over the whole vector.
+pub fn norm2<T: Real>(space: &dyn Space, a: &[T]) -> f64 {
+    norm2_sq(space, a).sqrt()
+}
+
+/// ‖a − b‖² over the whole vectors.
+pub fn dist2_sq<T: Real>(space: &dyn Space, a: &[T], b: &[T]) -> f64 {
+    sum(space, crate::linalg::dist2_sq(a, b))
+}
+
+/// max |aᵢ| over the whole vector (0 for an empty one).
+pub fn norm_inf<T: Real>(space: &dyn Space, a: &[T]) -> f64 {
+    max(space, crate::linalg::norm_inf(a))
+}
+
+/// ‖x − prev‖ / ‖x‖ over the whole vectors, accumulated in `f64`: 0 when the two are equal, +∞
+/// when only `x` is zero.
+pub fn relative_change<T: Real>(space: &dyn Space, x: &[T], prev: &[T]) -> f64 {
+    let [d, xx] = sums(
+        space,
+        [crate::linalg::dist2_sq(x, prev), crate::linalg::dot(x, x)],
+    );
+    if d == 0.0 {
+        0.0
+    } else if xx == 0.0 {
+        f64::INFINITY
+    } else {
+        (d / xx).sqrt()
+    }
+}
+
+/// The local indices, increasing, of this part's share of the `k` entries of largest `score`
+/// over the whole vector; among equal scores the lower global index wins. All indices when `k`
+/// is at least the whole length.
+pub fn largest_by(space: &dyn Space, score: &[f64], k: usize) -> Vec<usize> {
+    let order = |a: &(f64, usize), b: &(f64, usize)| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1));
+    // This part's own top k, with their global indices.
+    let base = space.offset(score.len());
+    let mut local: Vec<(f64, usize)> = score.iter().copied().zip(base..).collect();
+    if k < local.len() {
+        if k > 0 {
+            local.select_nth_unstable_by(k - 1, order);
+        }
+        local.truncate(k);
+    }
+    if space.parts() > 1 {
+        // The k-th best of every part's candidates is the threshold of the whole.
+        let flat: Vec<f64> = local.iter().flat_map(|&(s, i)| [s, i as f64]).collect();
+        let mut all: Vec<(f64, usize)> = space
+            .gather(&flat)
+            .chunks_exact(2)
+            .map(|c| (c[0], c[1] as usize))
+            .collect();
+        if k < all.len() {
+            if k > 0 {
+                all.select_nth_unstable_by(k - 1, order);
+            }
+            all.truncate(k);
+        }
+        let end = base + score.len();
+        local = all
+            .into_iter()
+            .filter(|c| (base..end).contains(&c.1))
+            .collect();
+    }
+    let mut idx: Vec<usize> = local.into_iter().map(|c| c.1 - base).collect();
+    idx.sort_unstable();
+    idx
+}
+
+/// [`largest_by`] magnitude.
+pub fn largest_indices<T: Real>(space: &dyn Space, v: &[T], k: usize) -> Vec<usize> {
+    let score: Vec<f64> = v.iter().map(|e| e.as_f64().abs()).collect();
+    largest_by(space, &score, k)
+}
+
+/// H_k over the whole vector: keeps the `k` entries of largest magnitude (see
+/// [`largest_indices`]) and zeroes the rest.
+pub fn hard_threshold<T: Real>(space: &dyn Space, x: &mut [T], k: usize) {
+    if k >= count(space, x.len()) {
+        return;
+    }
+    let keep = largest_indices(space, x, k);
+    let mut next = keep.iter().copied().peekable();
+    for (i, v) in x.iter_mut().enumerate() {
+        if next.peek() == Some(&i) {
+            next.next();
+        } else {
+            *v = T::zero();
+        }
+    }
+}
+
+/// Every part's values, for a statistic of the whole (a median, a robust spread): the local
+/// values themselves when the space is whole.
+pub fn whole_values(space: &dyn Space, local: Vec<f64>) -> Vec<f64> {
+    if space.parts() > 1 {
+        space.gather(&local)
+    } else {
+        local
+    }
+}
