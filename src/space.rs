@@ -200,3 +200,48 @@ pub fn whole_values(space: &dyn Space, local: Vec<f64>) -> Vec<f64> {
         local
     }
 }
+
+/// The rows of an image within `radius` rows of this part's rows: (those above, those below),
+/// each of `row_len` values, in image order, fewer at the image's edges. The image's rows are
+/// split into parts of whole consecutive rows, in part order; `local` holds this part's rows.
+/// Both empty when the space is whole.
+///
+/// Every part sends its first and last `radius` rows (not the rows between), since a row within
+/// `radius` rows of another part's rows is among them.
+pub fn neighbour_rows(
+    space: &dyn Space,
+    local: &[f64],
+    row_len: usize,
+    radius: usize,
+) -> (Vec<f64>, Vec<f64>) {
+    if space.parts() == 1 || row_len == 0 || radius == 0 {
+        return (Vec::new(), Vec::new());
+    }
+    let rows = local.len() / row_len;
+    let first = space.offset(local.len()) / row_len;
+    let end = first + rows;
+    // [first row, rows, rows sent from the start, rows sent from the end, the rows sent]
+    let head = radius.min(rows);
+    let tail = radius.min(rows - head);
+    let mut sent = vec![first as f64, rows as f64, head as f64, tail as f64];
+    sent.extend_from_slice(&local[..head * row_len]);
+    sent.extend_from_slice(&local[(rows - tail) * row_len..]);
+    let all = space.gather(&sent);
+    let (mut above, mut below) = (Vec::new(), Vec::new());
+    let mut at = 0;
+    while at < all.len() {
+        let [start, count, head, tail] = [0, 1, 2, 3].map(|k| all[at + k] as usize);
+        let body = &all[at + 4..at + 4 + (head + tail) * row_len];
+        let image_rows = (start..start + head).chain(start + count - tail..start + count);
+        for (row, values) in image_rows.zip(body.chunks_exact(row_len)) {
+            // Parts come in image order, so the rows arrive in image order.
+            if row < first && row + radius >= first {
+                above.extend_from_slice(values);
+            } else if row >= end && row < end + radius {
+                below.extend_from_slice(values);
+            }
+        }
+        at += 4 + (head + tail) * row_len;
+    }
+    (above, below)
+}

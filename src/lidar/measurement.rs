@@ -17,8 +17,16 @@ use super::rdop::RdOperator;
 
 /// A lidar measurement operator over an M×N×K_s grid of voxels (pixel-major, depth fastest):
 /// what reconstruction needs beyond a [`VoxelOperator`].
+///
+/// # Split unknowns
+/// An operator whose unknowns are one part of a scene split across processes
+/// ([`space`](LinearOperator::space)) holds whole consecutive rows of the image: its
+/// [`geometry`](Self::geometry) is that of its rows (M_part × N × K_s), the parts' rows in part
+/// order make the image, and it answers the column queries of [`VoxelOperator`] for its own
+/// columns without applying the operator of the whole. The reconstructions then run on it
+/// unchanged, and give every part its rows of the whole scene's reconstruction.
 pub trait LidarOperator<T: Real>: VoxelOperator<T> {
-    /// The scene grid.
+    /// The scene grid (this part's rows when the unknowns are split).
     fn geometry(&self) -> Geometry;
 
     /// The transmitted pulse p (K_p samples).
@@ -49,9 +57,11 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
         None
     }
 
-    /// The regime of the measurements against the unknowns (eq. 8–9, with every ADC's rows).
+    /// The regime of the measurements against the unknowns (eq. 8–9, with every ADC's rows),
+    /// those of every part when the unknowns are split ([`space`](LinearOperator::space)).
     fn regime(&self) -> Regime {
-        Regime::of(self.nrows(), self.geometry().voxels())
+        let voxels = crate::space::count(self.space(), self.geometry().voxels());
+        Regime::of(self.nrows(), voxels)
     }
 }
 

@@ -6,8 +6,9 @@ use crate::lidar::LidarOperator;
 use crate::operator::{Counted, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{Observer, Report, Termination};
+use crate::space::{self, Space};
 
-use super::method::{estimate_returns, run, Method, ReconstructOptions};
+use super::method::{estimate_returns_in, run, Method, ReconstructOptions};
 use super::peaks::returns;
 use super::pursuit::{
     explained_tolerance, relative_residual, support_pursuit, PursuitEnd, PURSUIT_ROUNDS,
@@ -110,8 +111,9 @@ impl<T> Tried<T> {
     }
 }
 
-fn nonzeros<T: Real>(x: &[T]) -> usize {
-    x.iter().filter(|v| **v != T::zero()).count()
+/// The nonzero voxels of `x` over every part of the unknowns.
+fn nonzeros<T: Real>(space: &dyn Space, x: &[T]) -> usize {
+    space::count(space, x.iter().filter(|v| **v != T::zero()).count())
 }
 
 /// Runs a method and extracts its returns, measuring the residual of what it reports.
@@ -123,14 +125,14 @@ fn attempt<T: Real>(
     observer: &mut dyn Observer<T>,
 ) -> Result<Tried<T>> {
     let (x, report) = run(op, y, method, options, observer)?;
-    let x = returns(&x, op.geometry());
+    let x = returns(op.space(), &x, op.geometry());
     let mut report = report.expect("iterative methods report");
     let rel = relative_residual(op, y, &x, &mut report);
     Ok(Tried {
         stage: Stage {
             method,
             relative_residual: rel,
-            returns: nonzeros(&x),
+            returns: nonzeros(op.space(), &x),
             report: Some(report),
             kept: false,
             verdict: String::new(),
@@ -153,12 +155,12 @@ pub(super) fn auto<T: Real>(
     // 1. Support pursuit: cheap, and exact wherever the returns are few for the measurements.
     let rounds = options.max_iter.unwrap_or(PURSUIT_ROUNDS);
     let mut p = support_pursuit(op, y, rounds)?;
-    p.x = returns(&p.x, op.geometry());
+    p.x = returns(op.space(), &p.x, op.geometry());
     let mut best = Tried {
         stage: Stage {
             method: Method::SupportLs,
             relative_residual: p.relative_residual,
-            returns: nonzeros(&p.x),
+            returns: nonzeros(op.space(), &p.x),
             report: Some(p.report),
             kept: false,
             verdict: String::new(),
@@ -172,7 +174,7 @@ pub(super) fn auto<T: Real>(
     best.stage.verdict = format!("not explained ({})", p.end.describe());
 
     let g = op.geometry();
-    if op.nrows() >= g.voxels() {
+    if op.nrows() >= space::count(op.space(), g.voxels()) {
         // 2a. A has full column rank (critical or redundant regime). The one-reflector fit is
         // cheap and well posed here; least squares on every voxel is exact without noise but
         // slow near the critical length, so it runs only when the two cheap fits disagree.
@@ -191,7 +193,7 @@ pub(super) fn auto<T: Real>(
             if let (Some(r), Some(rep)) = (refit, ls.stage.report.as_mut()) {
                 rep.absorb_applies(&r);
                 ls.stage.relative_residual = relative_residual(op, y, &ls.x, rep);
-                ls.stage.returns = nonzeros(&ls.x);
+                ls.stage.returns = nonzeros(op.space(), &ls.x);
             }
             if explained(ls.stage.relative_residual) {
                 ls.stage.verdict = "least squares on every voxel explains the data".into();
@@ -221,7 +223,7 @@ pub(super) fn auto<T: Real>(
 
     // 2b. Compressive. A pursuit that finds several returns in many of its pixels has seen a
     // scene one reflector per pixel cannot explain: the one-reflector fits are skipped.
-    let share = several_returns_share(&best.x, g.ks);
+    let share = several_returns_share(op.space(), &best.x, g.ks);
     if share >= SEVERAL_RETURNS_SHARE {
         best.stage.verdict = format!(
             "{}; {:.0}% of its lit pixels hold several returns",
@@ -295,17 +297,18 @@ pub(super) fn auto<T: Real>(
 pub const SEVERAL_RETURNS_SHARE: f64 = 0.25;
 
 /// The share of the lit pixels of `x` (K_s voxels per pixel) that hold more than one return.
-fn several_returns_share<T: Real>(x: &[T], ks: usize) -> f64 {
-    let (mut lit, mut several) = (0usize, 0usize);
+fn several_returns_share<T: Real>(space: &dyn Space, x: &[T], ks: usize) -> f64 {
+    let (mut lit, mut several) = (0.0, 0.0);
     for col in x.chunks(ks.max(1)) {
-        let n = nonzeros(col);
-        lit += usize::from(n > 0);
-        several += usize::from(n > 1);
+        let n = col.iter().filter(|v| **v != T::zero()).count();
+        lit += f64::from(u8::from(n > 0));
+        several += f64::from(u8::from(n > 1));
     }
-    if lit == 0 {
+    let [lit, several] = space::sums(space, [lit, several]);
+    if lit == 0.0 {
         0.0
     } else {
-        several as f64 / lit as f64
+        several / lit
     }
 }
 
@@ -325,7 +328,7 @@ fn several_returns<T: Real>(
     mut stages: Vec<Stage>,
 ) -> Result<Auto<T>> {
     let tol = explained_tolerance::<T>();
-    let k = estimate_returns(&pursuit.x, op.geometry().ks).max(2);
+    let k = estimate_returns_in(op.space(), &pursuit.x, op.geometry().ks).max(2);
     let several = ReconstructOptions {
         max_returns: Some(k),
         ..*options
@@ -412,7 +415,8 @@ fn hidden_returns<T: Real>(
     if let Some(rep) = report {
         rep.add_counts(&op);
     }
-    let mut all: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
+    let space = crate::LinearOperator::space(&op);
+    let mut all = space::whole_values(space, u.iter().map(|v| v.as_f64()).collect());
     let med = crate::linalg::median(&mut all);
     let level = med + HIDDEN_Z * crate::linalg::robust_sigma(&mut all, med);
     let (mut hidden, mut lit) = (0, 0);
@@ -427,7 +431,7 @@ fn hidden_returns<T: Real>(
             .any(|(v, c)| *v == T::zero() && c.as_f64() > 0.0 && c.as_f64() >= level);
         hidden += usize::from(stands);
     }
-    (hidden, lit)
+    (space::count(space, hidden), space::count(space, lit))
 }
 
 /// The stages in the order they ran, the kept one marked; the reports are summed.

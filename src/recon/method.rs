@@ -13,6 +13,7 @@ use crate::solver::{
     CosampParams, FistaParams, IhtParams, IterationInfo, Lambda, ModelBasedParams, Observer,
     ReflectorAmpParams, Report, Restart, StepRule, Stopping, TvDepthParams,
 };
+use crate::space::{self, Space};
 
 use super::names::{by_name, name_of, names, values};
 use super::peaks::{backproject, PeakThreshold};
@@ -333,7 +334,11 @@ pub(super) fn run<T: Real>(
             let mut params = model_params(options);
             params.max_returns = match options.max_returns {
                 Some(k) => k,
-                None => estimate_returns(&support_pursuit(op, y, PURSUIT_ROUNDS)?.x, g.ks),
+                None => estimate_returns_in(
+                    op.space(),
+                    &support_pursuit(op, y, PURSUIT_ROUNDS)?.x,
+                    g.ks,
+                ),
             };
             with_progress(params.stopping.max_iter, options, observer, |obs| {
                 model_based(op, y, &mut x, &params, obs)
@@ -418,17 +423,24 @@ pub const MAX_RETURNS_ESTIMATE: usize = 8;
 /// [1, [`MAX_RETURNS_ESTIMATE`]]. From the support pursuit's estimate, which has no per-pixel
 /// model, it gives [`Method::ModelBased`] its k when none is given.
 pub fn estimate_returns<T: Real>(x: &[T], ks: usize) -> usize {
-    let mut counts: Vec<usize> = x
+    estimate_returns_in(&space::WHOLE, x, ks)
+}
+
+/// [`estimate_returns`] of the whole scene, of which `x` is the operator's part (`space`).
+pub(super) fn estimate_returns_in<T: Real>(space: &dyn Space, x: &[T], ks: usize) -> usize {
+    let counts: Vec<f64> = x
         .chunks(ks.max(1))
         .map(|c| c.iter().filter(|v| **v != T::zero()).count())
         .filter(|&c| c > 0)
+        .map(|c| c as f64)
         .collect();
+    let mut counts = space::whole_values(space, counts);
     if counts.is_empty() {
         return 1;
     }
-    counts.sort_unstable();
+    counts.sort_unstable_by(f64::total_cmp);
     let at = ((0.99 * counts.len() as f64).ceil() as usize).clamp(1, counts.len());
-    counts[at - 1].clamp(1, MAX_RETURNS_ESTIMATE)
+    (counts[at - 1] as usize).clamp(1, MAX_RETURNS_ESTIMATE)
 }
 
 /// The sparsity for IHT and CoSaMP: the larger of twice the number of pixels the debiased
@@ -439,9 +451,12 @@ pub fn estimate_returns<T: Real>(x: &[T], ks: usize) -> usize {
 /// columns overdetermined.
 fn estimate_sparsity<T: Real>(op: &dyn LidarOperator<T>, y: &[T]) -> Result<usize> {
     let bp = backproject(op, y, true, PeakThreshold::Robust)?;
-    let found = bp.peaks.iter().filter(|&&p| p != NO_RETURN).count();
+    let space = op.space();
+    let found = space::count(space, bp.peaks.iter().filter(|&&p| p != NO_RETURN).count());
     let pursuit = support_pursuit(op, y, PURSUIT_ROUNDS)?;
-    let settled = pursuit.x.iter().filter(|v| **v != T::zero()).count();
-    let cap = (op.nrows() / 3).min(op.geometry().voxels()).max(1);
+    let settled = space::count(space, pursuit.x.iter().filter(|v| **v != T::zero()).count());
+    let cap = (op.nrows() / 3)
+        .min(space::count(space, op.geometry().voxels()))
+        .max(1);
     Ok((2 * found).max(settled + settled.div_ceil(4)).clamp(1, cap))
 }

@@ -5,6 +5,7 @@ use crate::error::{Error, Result};
 use crate::lidar::{Geometry, LidarOperator};
 use crate::real::Real;
 use crate::solver::{backprojection, Backprojection, Threshold};
+use crate::space::{self, Space};
 
 use std::str::FromStr;
 
@@ -127,12 +128,14 @@ pub(super) fn backproject<T: Real>(
 /// median + [`AUTO_K`]·σ of all entries and at least [`RELATIVE_FLOOR`] of the strongest one;
 /// the others are zeroed. A pixel may keep several returns (semi-transparent scenes); an estimate
 /// with one nonzero per pixel keeps at most one.
-pub(super) fn returns<T: Real>(x: &[T], g: Geometry) -> Vec<T> {
+///
+/// `x` is the operator's part of the unknowns (`space`): the threshold is that of the whole.
+pub(super) fn returns<T: Real>(space: &dyn Space, x: &[T], g: Geometry) -> Vec<T> {
     debug_assert_eq!(x.len(), g.voxels());
-    let mut all: Vec<f64> = x.iter().map(|v| v.as_f64()).collect();
+    let mut all = space::whole_values(space, x.iter().map(|v| v.as_f64()).collect());
     let med = crate::linalg::median(&mut all);
     let robust = med + AUTO_K * crate::linalg::robust_sigma(&mut all, med);
-    let strongest = x.iter().map(|v| v.as_f64()).fold(0.0, f64::max);
+    let strongest = space::max(space, x.iter().map(|v| v.as_f64()).fold(0.0, f64::max));
     let floor = robust.max(RELATIVE_FLOOR * strongest);
     x.iter()
         .map(|&v| {

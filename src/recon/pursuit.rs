@@ -106,7 +106,7 @@ pub(super) fn relative_residual<T: Real>(
     }
     let op = Counted::new(op);
     let mut ax = vec![T::zero(); y.len()];
-    let nnz = x.iter().filter(|v| **v != T::zero()).count();
+    let nnz = space::count(op.space(), x.iter().filter(|v| **v != T::zero()).count());
     if 3 * nnz < y.len() {
         op.apply_sparse(x, &mut ax);
     } else {

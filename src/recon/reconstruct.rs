@@ -140,7 +140,11 @@ pub fn reconstruct_observed<T: Real>(
     } else {
         let (x, report) = run(op, y, method, options, observer)?;
         // The backprojections already keep one thresholded peak per pixel.
-        let x = if report.is_some() { returns(&x, g) } else { x };
+        let x = if report.is_some() {
+            returns(op.space(), &x, g)
+        } else {
+            x
+        };
         (x, method, report, Vec::new())
     };
     let scene = Scene::from_vec(g, x)?;

@@ -4,6 +4,7 @@ use crate::error::{Error, Result};
 use crate::linalg::{column_peaks, median, robust_sigma, PeakRule};
 use crate::operator::LinearOperator;
 use crate::real::Real;
+use crate::space::{self, Space};
 
 use super::check_measurements;
 
@@ -124,7 +125,7 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
     op.apply_adjoint(y, &mut bp);
     let inv = T::of_f64(1.0 / params.normalization);
     bp.iter_mut().for_each(|v| *v = *v * inv);
-    let selection = select_peaks(&bp, cl, params.threshold);
+    let selection = select_peaks_in(op.space(), &bp, cl, params.threshold);
     Ok(BackprojectionResult {
         x: selection.x,
         peaks: selection.peaks,
@@ -164,23 +165,36 @@ pub fn select_peaks<T: Real>(
     column_len: usize,
     threshold: Threshold,
 ) -> PeakSelection<T> {
+    select_peaks_in(&space::WHOLE, values, column_len, threshold)
+}
+
+/// [`select_peaks`] on `values` that are one part of a vector split into parts of whole columns:
+/// the threshold is that of the whole vector.
+pub(crate) fn select_peaks_in<T: Real>(
+    space: &dyn Space,
+    values: &[T],
+    column_len: usize,
+    threshold: Threshold,
+) -> PeakSelection<T> {
     let found = column_peaks(values, column_len, PeakRule::Largest);
     let threshold = match threshold {
         Threshold::None => f64::NEG_INFINITY,
         Threshold::Absolute(v) => v,
         Threshold::RelativeToMax(f) => {
-            f * found
+            let local = found
                 .iter()
                 .flatten()
                 .map(|p| p.1)
-                .fold(f64::NEG_INFINITY, f64::max)
+                .fold(f64::NEG_INFINITY, f64::max);
+            f * space::max(space, local)
         }
         Threshold::PeakQuantile { quantile, fraction } => {
-            let mut peaks: Vec<f64> = found.iter().flatten().map(|p| p.1).collect();
-            fraction * quantile_of(&mut peaks, quantile)
+            let peaks: Vec<f64> = found.iter().flatten().map(|p| p.1).collect();
+            fraction * quantile_of(&mut space::whole_values(space, peaks), quantile)
         }
         Threshold::Auto { k } => {
-            let mut all: Vec<f64> = values.iter().map(|v| v.as_f64()).collect();
+            let all: Vec<f64> = values.iter().map(|v| v.as_f64()).collect();
+            let mut all = space::whole_values(space, all);
             let med = median(&mut all);
             med + k * robust_sigma(&mut all, med)
         }

@@ -187,14 +187,15 @@ impl Posteriors {
 
     /// The amplitude's mean and variance over the pixels, each weighted by its probability of a
     /// return (the global prior's EM estimate at this posterior).
-    pub(crate) fn amplitude_moments(&self) -> (f64, f64) {
-        let (w, m1, m2) = self
+    pub(crate) fn amplitude_moments(&self, space: &dyn Space) -> (f64, f64) {
+        let local = self
             .lit
             .iter()
             .zip(&self.amplitude)
-            .fold((0.0, 0.0, 0.0), |s, (l, a)| {
-                (s.0 + l, s.1 + l * a.0, s.2 + l * a.1)
+            .fold([0.0, 0.0, 0.0], |s, (l, a)| {
+                [s[0] + l, s[1] + l * a.0, s[2] + l * a.1]
             });
+        let [w, m1, m2] = space::sums(space, local);
         if w <= 0.0 {
             return (0.0, 0.0);
         }

@@ -6,6 +6,7 @@ use ndarray::Array2;
 use crate::error::{Error, Result};
 use crate::linalg::{column_peaks, PeakRule};
 use crate::real::Real;
+use crate::space::{self, Space};
 
 use rayon::prelude::*;
 
@@ -109,26 +110,36 @@ struct Neighbourhood {
 ///   where no neighbour has a return).
 ///
 /// The pixel's own posterior is left out, and neighbours below the amplitude gate count as empty.
+///
+/// The pixels are this part's rows (`grid` = (its rows, N)) of an image split by rows
+/// (`space`); the neighbours in the rows of the parts above and below are fetched.
 fn neighbour_priors(
+    space: &dyn Space,
     post: &Posteriors,
     (m, n): (usize, usize),
     ks: usize,
     hood: &Neighbourhood,
 ) -> PixelPriors {
-    let global = post.lit.iter().sum::<f64>() / post.lit.len().max(1) as f64;
+    let [sum, pixels] = space::sums(space, [post.lit.iter().sum::<f64>(), post.lit.len() as f64]);
+    let global = sum / pixels.max(1.0);
+    let radius = hood.radius;
+    // This part's posteriors with the rows of its neighbours above and below.
+    let near = Nearby::new(space, post, n, ks, radius);
     let cut = hood.gate * hood.reference.0;
     let weight = |q: usize| {
-        if post.amplitude[q].0 >= cut {
-            post.lit[q]
+        if near.amplitude[q].0 >= cut {
+            near.lit[q]
         } else {
             0.0
         }
     };
-    let radius = hood.radius;
+    let rows_all = near.rows;
     type Row = (Vec<f64>, Vec<f64>, Vec<(f64, f64)>);
     let rows: Vec<Row> = (0..m)
         .into_par_iter()
-        .map(|i| {
+        .map(|i_local| {
+            // The row in the rows held, the neighbours' included.
+            let i = i_local + near.above;
             let mut lit = Vec::with_capacity(n);
             let mut depth = Vec::with_capacity(n * ks);
             let mut amplitude = Vec::with_capacity(n);
@@ -137,7 +148,7 @@ fn neighbour_priors(
                 h.fill(0.0);
                 let (mut sum_lit, mut count) = (0.0, 0usize);
                 let (mut a1, mut a2) = (0.0, 0.0);
-                for a in i.saturating_sub(radius)..(i + radius + 1).min(m) {
+                for a in i.saturating_sub(radius)..(i + radius + 1).min(rows_all) {
                     for b in j.saturating_sub(radius)..(j + radius + 1).min(n) {
                         if (a, b) == (i, j) {
                             continue;
@@ -146,9 +157,9 @@ fn neighbour_priors(
                         let w = weight(q);
                         sum_lit += w;
                         count += 1;
-                        a1 += w * post.amplitude[q].0;
-                        a2 += w * post.amplitude[q].1;
-                        for (d, &w) in post.depth[q * ks..(q + 1) * ks].iter().enumerate() {
+                        a1 += w * near.amplitude[q].0;
+                        a2 += w * near.amplitude[q].1;
+                        for (d, &w) in near.depth[q * ks..(q + 1) * ks].iter().enumerate() {
                             h[d] += w;
                             if d > 0 {
                                 h[d - 1] += w;
@@ -200,17 +211,70 @@ fn neighbour_priors(
     }
 }
 
+/// Posteriors of a part's pixels and of the pixels in the `radius` rows above and below it.
+struct Nearby {
+    lit: Vec<f64>,
+    amplitude: Vec<(f64, f64)>,
+    depth: Vec<f64>,
+    /// Rows held, and how many of them are the rows above the part's own.
+    rows: usize,
+    above: usize,
+}
+
+impl Nearby {
+    fn new(space: &dyn Space, post: &Posteriors, n: usize, ks: usize, radius: usize) -> Self {
+        let own_rows = post.lit.len() / n.max(1);
+        if space.parts() == 1 {
+            return Self {
+                lit: post.lit.clone(),
+                amplitude: post.amplitude.clone(),
+                depth: post.depth.clone(),
+                rows: own_rows,
+                above: 0,
+            };
+        }
+        // Each pixel as one record: its probability of a return, amplitude and depths.
+        let record = 3 + ks;
+        let records = |lit: &[f64], amplitude: &[(f64, f64)], depth: &[f64]| -> Vec<f64> {
+            let mut out = Vec::with_capacity(lit.len() * record);
+            for (q, (&l, a)) in lit.iter().zip(amplitude).enumerate() {
+                out.extend([l, a.0, a.1]);
+                out.extend_from_slice(&depth[q * ks..(q + 1) * ks]);
+            }
+            out
+        };
+        let own = records(&post.lit, &post.amplitude, &post.depth);
+        let (above, below) = space::neighbour_rows(space, &own, n * record, radius);
+        let (mut lit, mut amplitude, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+        for r in [&above, &own, &below]
+            .iter()
+            .flat_map(|v| v.chunks_exact(record))
+        {
+            lit.push(r[0]);
+            amplitude.push((r[1], r[2]));
+            depth.extend_from_slice(&r[3..]);
+        }
+        Self {
+            rows: lit.len() / n.max(1),
+            above: above.len() / (n * record).max(1),
+            lit,
+            amplitude,
+            depth,
+        }
+    }
+}
+
 /// The fraction of pixels whose estimate (empty, or the depth of its return) differs between two
-/// scenes with at most one nonzero per pixel.
-fn changed_fraction<T: Real>(a: &[T], b: &[T], ks: usize) -> f64 {
+/// scenes with at most one nonzero per pixel, over every part.
+fn changed_fraction<T: Real>(space: &dyn Space, a: &[T], b: &[T], ks: usize) -> f64 {
     let state = |c: &[T]| c.iter().position(|v| *v != T::zero());
-    let pixels = a.len() / ks;
     let changed = a
         .chunks(ks)
         .zip(b.chunks(ks))
         .filter(|(p, q)| state(p) != state(q))
         .count();
-    changed as f64 / pixels.max(1) as f64
+    let [changed, pixels] = space::sums(space, [changed as f64, (a.len() / ks) as f64]);
+    changed / pixels.max(1.0)
 }
 
 /// The restarted rounds ([`TvDepthParams::neighbour_restart`]) run only when the fit after the
@@ -264,7 +328,8 @@ where
     };
     let (mut rep, mut post, mut state) =
         reflector_amp_constrained(op, y, x, &first, PixelConstraints::default(), &mut ())?;
-    let (mean, var) = post.amplitude_moments();
+    let space = op.space();
+    let (mean, var) = post.amplitude_moments(space);
     let hood = Neighbourhood {
         radius: params.neighbour_radius,
         floor: params.neighbour_floor,
@@ -277,7 +342,7 @@ where
         if rep.termination == Termination::Residual || mean <= 0.0 {
             break;
         }
-        let priors = neighbour_priors(&post, grid, ks, &hood);
+        let priors = neighbour_priors(space, &post, grid, ks, &hood);
         let resume = (schedule == Schedule::Continued).then_some(&state);
         let (more, p, s) = reflector_amp_constrained(
             op,
@@ -294,7 +359,7 @@ where
         rep.absorb(more);
         post = p;
         state = s;
-        if changed_fraction(x, &last, ks) <= params.neighbour_change {
+        if changed_fraction(space, x, &last, ks) <= params.neighbour_change {
             break;
         }
         last.copy_from_slice(x);
@@ -456,11 +521,9 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    let amp = params
-        .model
-        .amp
-        .as_ref()
-        .filter(|_| params.neighbour_rounds > 0 && x.iter().all(|v| *v == T::zero()));
+    let amp = params.model.amp.as_ref().filter(|_| {
+        params.neighbour_rounds > 0 && space::all(op.space(), x.iter().all(|v| *v == T::zero()))
+    });
     let Some(amp) = amp else {
         return model_based_windowed(op, y, x, &params.model, None, observer);
     };
@@ -492,6 +555,41 @@ where
     Ok(report)
 }
 
+/// The depths of the peaks `found` (the strongest `amax`), denoised by weighted TV on the depth
+/// map and rounded to bins, for this part's `grid` = (its rows, N) of an image split by rows.
+/// TV couples every pixel with its neighbours: the depth map and the weights (K_s times
+/// smaller than the unknowns) are gathered, and every part denoises the whole map.
+fn regularized_depths(
+    space: &dyn Space,
+    found: &[Option<(usize, f64)>],
+    amax: f64,
+    (m, n): (usize, usize),
+    ks: usize,
+    tv: &TvParams,
+) -> Result<Vec<usize>> {
+    let depth: Vec<f64> = found
+        .iter()
+        .map(|p| p.map_or(0.0, |p| p.0 as f64))
+        .collect();
+    let weight: Vec<f64> = found
+        .iter()
+        .map(|p| p.map_or(0.0, |p| (p.1 / amax).powi(2)))
+        .collect();
+    let first = space.offset(m * n);
+    let depth = space::whole_values(space, depth);
+    let weight = space::whole_values(space, weight);
+    let rows = depth.len() / n.max(1);
+    let f = Array2::from_shape_vec((rows, n), depth).expect("whole rows");
+    let w = Array2::from_shape_vec((rows, n), weight).expect("whole rows");
+    let mut u = f.clone();
+    tv_denoise(f.view(), w.view(), &mut u, tv, &mut ())?;
+    Ok(u.iter()
+        .skip(first)
+        .take(m * n)
+        .map(|v| v.round().clamp(0.0, (ks - 1) as f64) as usize)
+        .collect())
+}
+
 /// The rounds of TV on the depth map of `x`, each followed by the model-based fit within the
 /// windows around the regularized depths; a round whose fit more than doubles the squared
 /// residual is undone and ends them. Adds each fit to `report`.
@@ -520,24 +618,17 @@ where
     };
     let mut before = x.to_vec();
     let mut fit_before = residual_norm_sq(op, y, x);
+    let space = op.space();
     for _ in 0..params.rounds {
         let found = column_peaks(x, ks, PeakRule::LargestPositive);
-        let amax = found.iter().flatten().map(|p| p.1).fold(0.0, f64::max);
+        let amax = space::max(
+            space,
+            found.iter().flatten().map(|p| p.1).fold(0.0, f64::max),
+        );
         if amax == 0.0 {
             break;
         }
-        let f = Array2::from_shape_fn((m, n), |(i, j)| {
-            found[i * n + j].map_or(0.0, |p| p.0 as f64)
-        });
-        let w = Array2::from_shape_fn((m, n), |(i, j)| {
-            found[i * n + j].map_or(0.0, |p| (p.1 / amax).powi(2))
-        });
-        let mut u = f.clone();
-        tv_denoise(f.view(), w.view(), &mut u, &tv, &mut ())?;
-        let centre: Vec<usize> = u
-            .iter()
-            .map(|v| v.round().clamp(0.0, (ks - 1) as f64) as usize)
-            .collect();
+        let centre = regularized_depths(space, &found, amax, (m, n), ks, &tv)?;
         let windows: Vec<(usize, usize)> = centre
             .iter()
             .map(|&c| {
