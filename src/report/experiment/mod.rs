@@ -170,8 +170,11 @@ pub struct Row {
     pub termination: Option<String>,
     /// Forward applications of the operator.
     pub forward_applies: Option<usize>,
-    /// Adjoint applications of the operator.
+    /// Adjoint applications of the operator (correlations included).
     pub adjoint_applies: Option<usize>,
+    /// Applications of the operator restricted to a few columns (a support, a pixel's columns),
+    /// each costing about its share of a full application.
+    pub support_applies: Option<usize>,
     /// The solver's error, if it failed.
     pub error: Option<String>,
 }

@@ -85,6 +85,7 @@ fn run_one<T: Real>(
         termination: None,
         forward_applies: None,
         adjoint_applies: None,
+        support_applies: None,
         error: None,
     };
     let options = ReconstructOptions {
@@ -116,6 +117,7 @@ fn run_one<T: Real>(
                 row.termination = Some(snake_case(&format!("{:?}", rep.termination)));
                 row.forward_applies = Some(rep.forward_applies);
                 row.adjoint_applies = Some(rep.adjoint_applies);
+                row.support_applies = Some(rep.support_applies);
             }
             (row, Some(r.depth.depth))
         }

@@ -10,7 +10,7 @@ use super::config::{noise_text, ExperimentConfig, NoiseLevel};
 use super::Row;
 
 /// The columns of `results.csv`, in order (the field names of [`Row`]).
-pub const CSV_COLUMNS: [&str; 29] = [
+pub const CSV_COLUMNS: [&str; 30] = [
     "scene",
     "size",
     "precision",
@@ -38,6 +38,7 @@ pub const CSV_COLUMNS: [&str; 29] = [
     "termination",
     "forward_applies",
     "adjoint_applies",
+    "support_applies",
     "error",
     "status",
 ];
@@ -96,6 +97,7 @@ pub fn csv_line(r: &Row) -> String {
         csv_field(&opt(&r.termination)),
         opt(&r.forward_applies),
         opt(&r.adjoint_applies),
+        opt(&r.support_applies),
         csv_field(&opt(&r.error)),
         if r.error.is_some() { "error" } else { "ok" }.into(),
     ];
@@ -497,6 +499,7 @@ mod tests {
             termination: Some("converged".into()),
             forward_applies: Some(10),
             adjoint_applies: Some(9),
+            support_applies: Some(4),
             error: Some("a, \"quoted\" error".into()),
         }
     }
