@@ -6,12 +6,9 @@
 //! Every solver and every reconstruction method is checked, auto on each of its ways (TV on the
 //! depth map, the information criterion in noise, several returns per pixel).
 //!
-//! The part operator is a column block of the whole operator: its forward application is the
-//! block's partial measurement summed over the parts (a collective), its adjoint and its column
-//! queries are local, and as a lidar operator its geometry is that of its rows. A split operator
-//! must answer the per-pixel column queries ([`VoxelOperator`]) locally, as this one does: the
-//! defaults, which apply the whole operator to one column at a time, would make one part's query
-//! a collective the others do not join.
+//! Each part is the library's [`Part`]: the lidar operator of its rows alone (their pixels'
+//! codes), whose forward application is summed over the parts (a collective) and whose adjoint
+//! and column queries are its own, and whose space is the exchange.
 //!
 //! A part that calls a collective the others do not (a solver deciding on a local value) is
 //! caught: the exchange checks that every part calls the same collective on the same length, and
@@ -23,12 +20,11 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use rdlidar::error::Result;
 use rdlidar::lidar::{
-    paper_scene, semi_transparent_scene, Codes, Geometry, LidarOperator, NoiseModel, NoiseStage,
-    Pulse, RdOperator, Scene,
+    paper_scene, semi_transparent_scene, Codes, Geometry, NoiseModel, NoiseStage, Pulse,
+    RdOperator, Scene,
 };
-use rdlidar::operator::{LinearOperator, VoxelOperator};
+use rdlidar::operator::{LinearOperator, Part, VoxelOperator};
 use rdlidar::recon::{reconstruct, Method, ReconstructOptions, Reconstruction};
 use rdlidar::solver::{
     cgls, cosamp, fista, iht, model_based, reflector_amp, CglsParams, CosampParams, FistaParams,
@@ -164,171 +160,19 @@ impl Space for PartSpace {
     }
 }
 
-/// A block of columns of an operator whose outputs are summed over the parts.
-struct Summed<'a> {
-    block: Box<dyn LinearOperator<f64> + 'a>,
-    space: &'a PartSpace,
-}
-
-impl LinearOperator<f64> for Summed<'_> {
-    fn nrows(&self) -> usize {
-        self.block.nrows()
-    }
-    fn ncols(&self) -> usize {
-        self.block.ncols()
-    }
-    fn forward_kernel(&self, x: &[f64], y: &mut [f64], _: &mut [f64]) {
-        self.block.apply(x, y);
-        self.space.sum(y);
-    }
-    fn adjoint_kernel(&self, y: &[f64], x: &mut [f64], _: &mut [f64]) {
-        self.block.apply_adjoint(y, x);
-    }
-    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<f64> + '_>> {
-        Ok(Box::new(Summed {
-            block: self.block.restrict_columns(columns)?,
-            space: self.space,
-        }))
-    }
-    fn space(&self) -> &dyn Space {
-        self.space
-    }
-}
-
-/// One part of a lidar operator split by image rows: the rows `rows` of the scene, the columns
-/// `first..first + ncols` of `whole`.
-struct Part<'a> {
-    whole: &'a RdOperator<f64>,
-    geometry: Geometry,
-    first: usize,
-    summed: Summed<'a>,
-}
-
-impl<'a> Part<'a> {
-    fn new(whole: &'a RdOperator<f64>, rows: Range<usize>, space: &'a PartSpace) -> Self {
-        let g = whole.geometry();
-        let row = g.n * g.ks;
-        let columns: Vec<usize> = (rows.start * row..rows.end * row).collect();
-        Self {
-            whole,
-            geometry: Geometry::new(rows.len(), g.n, g.ks).unwrap(),
-            first: rows.start * row,
-            summed: Summed {
-                block: whole.restrict_columns(columns).unwrap(),
-                space,
-            },
-        }
-    }
-
-    fn global(&self, local: &[usize]) -> Vec<usize> {
-        local.iter().map(|c| c + self.first).collect()
-    }
-
-    /// `x` in the whole's columns, zero outside this part's.
-    fn padded(&self, x: &[f64]) -> Vec<f64> {
-        let mut all = vec![0.0; self.whole.ncols()];
-        all[self.first..self.first + x.len()].copy_from_slice(x);
-        all
-    }
-}
-
-/// An operator of the whole seen through one part's columns: forward from the part's unknowns
-/// (zero elsewhere), summed over the parts; adjoint restricted to them.
-struct PartOf<'a> {
-    whole: Box<dyn LinearOperator<f64> + 'a>,
-    columns: Range<usize>,
-    space: &'a PartSpace,
-}
-
-impl LinearOperator<f64> for PartOf<'_> {
-    fn nrows(&self) -> usize {
-        self.whole.nrows()
-    }
-    fn ncols(&self) -> usize {
-        self.columns.len()
-    }
-    fn forward_kernel(&self, x: &[f64], y: &mut [f64], _: &mut [f64]) {
-        let mut all = vec![0.0; self.whole.ncols()];
-        all[self.columns.clone()].copy_from_slice(x);
-        self.whole.apply(&all, y);
-        self.space.sum(y);
-    }
-    fn adjoint_kernel(&self, y: &[f64], x: &mut [f64], _: &mut [f64]) {
-        let mut all = vec![0.0; self.whole.ncols()];
-        self.whole.apply_adjoint(y, &mut all);
-        x.copy_from_slice(&all[self.columns.clone()]);
-    }
-    fn space(&self) -> &dyn Space {
-        self.space
-    }
-}
-
-impl LidarOperator<f64> for Part<'_> {
-    fn geometry(&self) -> Geometry {
-        self.geometry
-    }
-    fn pulse(&self) -> &[f64] {
-        self.whole.pulse()
-    }
-    fn apply_sparse(&self, x: &[f64], y: &mut [f64]) {
-        self.whole.apply_sparse(&self.padded(x), y);
-        self.summed.space.sum(y);
-    }
-    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<f64> + '_> {
-        Box::new(PartOf {
-            whole: self.whole.zero_mean_operator(),
-            columns: self.first..self.first + self.ncols(),
-            space: self.summed.space,
-        })
-    }
-}
-
-impl LinearOperator<f64> for Part<'_> {
-    fn nrows(&self) -> usize {
-        self.summed.nrows()
-    }
-    fn ncols(&self) -> usize {
-        self.summed.ncols()
-    }
-    fn forward_kernel(&self, x: &[f64], y: &mut [f64], s: &mut [f64]) {
-        self.summed.forward_kernel(x, y, s)
-    }
-    fn adjoint_kernel(&self, y: &[f64], x: &mut [f64], s: &mut [f64]) {
-        self.summed.adjoint_kernel(y, x, s)
-    }
-    fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<f64> + '_>> {
-        self.summed.restrict_columns(columns)
-    }
-    fn space(&self) -> &dyn Space {
-        self.summed.space
-    }
-}
-
-impl VoxelOperator<f64> for Part<'_> {
-    fn column_len(&self) -> usize {
-        self.whole.column_len()
-    }
-    fn correlate(&self, r: &[f64], u: &mut [f64]) {
-        let mut all = vec![0.0; self.whole.ncols()];
-        self.whole.correlate(r, &mut all);
-        u.copy_from_slice(&all[self.first..self.first + u.len()]);
-    }
-    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
-        self.whole.self_correlations(&self.global(voxels))
-    }
-    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
-        self.whole
-            .pixel_gram(pixel + self.first / self.whole.column_len())
-    }
-    fn uniform_pixel_gram(&self) -> bool {
-        self.whole.uniform_pixel_gram()
-    }
-    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
-        self.whole.column_norms(&self.global(columns))
-    }
-    fn structured_columns(&self) -> bool {
-        true
-    }
+/// The lidar operator of the rows `rows` of `op`'s scene alone (their pixels' codes), as the
+/// part of the whole that combines with the others through `space`.
+fn part_of(
+    op: &RdOperator<f64>,
+    rows: Range<usize>,
+    space: Arc<dyn Space>,
+) -> Part<RdOperator<f64>> {
+    let g = op.geometry();
+    let pixels: Vec<usize> = (rows.start * g.n..rows.end * g.n).collect();
+    let codes = op.codes().select_pixels(&pixels).unwrap();
+    let rows_geometry = Geometry::new(rows.len(), g.n, g.ks).unwrap();
+    let local = RdOperator::new(rows_geometry, op.pulse().to_vec(), Arc::new(codes)).unwrap();
+    Part::new(local, space)
 }
 
 /// A solver run on one operator: the report, or the error's text.
@@ -341,11 +185,12 @@ type Solved = (Vec<f64>, Report);
 /// The gathered unknowns and every part's report of a split run.
 type SolvedInParts = (Vec<f64>, Vec<Report>);
 
-/// `run` on each of `parts` parts of `op`, each in its own thread, in part order.
+/// `run` on each of `parts` parts of `op` (split by image rows), each in its own thread, in
+/// part order.
 fn in_parts<R: Send>(
     op: &RdOperator<f64>,
     parts: usize,
-    run: &(dyn Fn(&Part<'_>) -> R + Sync),
+    run: &(dyn Fn(&Part<RdOperator<f64>>) -> R + Sync),
 ) -> Vec<R> {
     let m = op.geometry().m;
     let shared = Shared::new(parts);
@@ -354,9 +199,8 @@ fn in_parts<R: Send>(
             .map(|p| {
                 let shared = Arc::clone(&shared);
                 s.spawn(move || {
-                    let space = PartSpace { shared, part: p };
-                    let part = Part::new(op, p * m / parts..(p + 1) * m / parts, &space);
-                    run(&part)
+                    let space: Arc<dyn Space> = Arc::new(PartSpace { shared, part: p });
+                    run(&part_of(op, p * m / parts..(p + 1) * m / parts, space))
                 })
             })
             .collect();
@@ -719,6 +563,45 @@ fn each_part_sees_the_rows_within_the_radius_even_across_thin_parts() {
                 below,
                 &image[below_rows.start * 3..below_rows.end * 3],
                 "part {p}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_parts_adjoints_are_the_adjoint_of_their_summed_forward() {
+    // ⟨A x, y⟩ = Σ_r ⟨x_r, A_rᵀ y⟩, with A x = Σ_r A_r x_r computed by the parts together.
+    let (op, _) = problem(300, 21);
+    let n = op.ncols();
+    let x: Vec<f64> = (0..n)
+        .map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0)
+        .collect();
+    let y: Vec<f64> = (0..op.nrows())
+        .map(|k| ((k * 104_729) % 97) as f64 / 48.0 - 1.0)
+        .collect();
+    for parts in [2, 3] {
+        let sides = in_parts(&op, parts, &|part| {
+            let first = part.space().offset(part.ncols());
+            let xr = &x[first..first + part.ncols()];
+            let mut ax = vec![0.0; part.nrows()];
+            part.apply(xr, &mut ax);
+            let mut aty = vec![0.0; part.ncols()];
+            part.apply_adjoint(&y, &mut aty);
+            let lhs: f64 = ax.iter().zip(&y).map(|(a, b)| a * b).sum();
+            let rhs = space::dot(part.space(), xr, &aty);
+            (lhs, rhs)
+        });
+        let mut whole = vec![0.0; op.nrows()];
+        op.apply(&x, &mut whole);
+        let direct: f64 = whole.iter().zip(&y).map(|(a, b)| a * b).sum();
+        for (p, (lhs, rhs)) in sides.into_iter().enumerate() {
+            assert!(
+                (lhs - rhs).abs() <= 1e-12 * lhs.abs(),
+                "part {p}: {lhs} against {rhs}"
+            );
+            assert!(
+                (lhs - direct).abs() <= 1e-12 * direct.abs(),
+                "part {p}: {lhs} against the whole's {direct}"
             );
         }
     }

@@ -8,7 +8,7 @@
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
-use crate::operator::{Counted, LinearOperator, VStack, VoxelOperator};
+use crate::operator::{Counted, LinearOperator, Part, VStack, VoxelOperator};
 use crate::real::Real;
 
 use super::codes::Codes;
@@ -20,7 +20,8 @@ use super::rdop::RdOperator;
 ///
 /// # Split unknowns
 /// An operator whose unknowns are one part of a scene split across processes
-/// ([`space`](LinearOperator::space)) holds whole consecutive rows of the image: its
+/// ([`space`](LinearOperator::space)), such as a [`Part`] whose block is the operator of a
+/// band of rows alone, holds whole consecutive rows of the image: its
 /// [`geometry`](Self::geometry) is that of its rows (M_part × N × K_s), the parts' rows in part
 /// order make the image, and it answers the column queries of [`VoxelOperator`] for its own
 /// columns without applying the operator of the whole. The reconstructions then run on it
@@ -106,6 +107,34 @@ impl<T: Real, A: LidarOperator<T> + ?Sized> LidarOperator<T> for &A {
     }
     fn regime(&self) -> Regime {
         (**self).regime()
+    }
+}
+
+/// One process's rows of a lidar operator whose pixels are split across processes: the
+/// geometry, pulse and column queries of its own rows' operator, the sparse forward and the
+/// zero-mean operator summed over the parts, the regime of the whole.
+impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Part<A> {
+    fn geometry(&self) -> Geometry {
+        self.inner().geometry()
+    }
+    fn pulse(&self) -> &[T] {
+        self.inner().pulse()
+    }
+    fn code_sets(&self) -> usize {
+        self.inner().code_sets()
+    }
+    fn apply_sparse(&self, x: &[T], y: &mut [T]) {
+        self.inner().apply_sparse(x, y);
+        crate::operator::sum_over(self.space(), y);
+    }
+    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
+        Box::new(Part::new(
+            self.inner().zero_mean_operator(),
+            Arc::clone(self.shared_space()),
+        ))
+    }
+    fn observed_pixels(&self) -> Option<Vec<bool>> {
+        self.inner().observed_pixels()
     }
 }
 
