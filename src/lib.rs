@@ -53,6 +53,8 @@
 #![warn(missing_docs)]
 
 pub mod acquisition;
+#[cfg(feature = "mpi")]
+pub mod distributed;
 pub mod error;
 pub mod io;
 #[cfg(feature = "lapack")]

@@ -37,6 +37,8 @@ mod iteration;
 mod lapack;
 mod metrics;
 mod model_based;
+#[cfg(feature = "mpi")]
+mod mpi;
 mod noise;
 mod norm;
 mod npy_fuzz;

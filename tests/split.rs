@@ -167,12 +167,7 @@ fn part_of(
     rows: Range<usize>,
     space: Arc<dyn Space>,
 ) -> Part<RdOperator<f64>> {
-    let g = op.geometry();
-    let pixels: Vec<usize> = (rows.start * g.n..rows.end * g.n).collect();
-    let codes = op.codes().select_pixels(&pixels).unwrap();
-    let rows_geometry = Geometry::new(rows.len(), g.n, g.ks).unwrap();
-    let local = RdOperator::new(rows_geometry, op.pulse().to_vec(), Arc::new(codes)).unwrap();
-    Part::new(local, space)
+    Part::new(op.row_band(rows).unwrap(), space)
 }
 
 /// A solver run on one operator: the report, or the error's text.

@@ -295,6 +295,30 @@ impl<T: Real> RdOperator<T> {
         &self.codes
     }
 
+    /// The operator of the image rows `rows` alone: their pixels' codes and the same pulse, an
+    /// M_band × N × K_s operator whose measurements are this band's share of the whole's. The
+    /// bands of a split of the rows, each in an [`operator::Part`](crate::operator::Part), make
+    /// the whole operator split across processes.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for an empty band or one beyond the image.
+    pub fn row_band(&self, rows: std::ops::Range<usize>) -> Result<Self> {
+        let g = self.geom;
+        if rows.is_empty() || rows.end > g.m {
+            return Err(Error::param(
+                "rows",
+                format!("need a non-empty band of the {} rows, got {rows:?}", g.m),
+            ));
+        }
+        let pixels: Vec<usize> = (rows.start * g.n..rows.end * g.n).collect();
+        let codes = self.codes.select_pixels(&pixels)?;
+        Self::new(
+            Geometry::new(rows.len(), g.n, g.ks)?,
+            self.pulse.clone(),
+            Arc::new(codes),
+        )
+    }
+
     /// The kernels' instruction set, for kernels run outside the operator.
     pub(crate) fn isa_kind(&self) -> Isa {
         self.isa
