@@ -245,3 +245,76 @@ pub fn neighbour_rows(
     }
     (above, below)
 }
+
+/// The key of `v` in the order of [`f64::total_cmp`], as an unsigned integer.
+fn order_key(v: f64) -> u64 {
+    let bits = v.to_bits();
+    if bits >> 63 == 1 {
+        !bits
+    } else {
+        bits | (1 << 63)
+    }
+}
+
+/// The value whose [`order_key`] is `key`.
+fn from_order_key(key: u64) -> f64 {
+    f64::from_bits(if key >> 63 == 1 {
+        key & !(1 << 63)
+    } else {
+        !key
+    })
+}
+
+/// The `k`-th smallest (from 0) of the values of every part, in the order of
+/// [`f64::total_cmp`]; `k` must be below their count. Reorders `local`. Over split values, a
+/// bisection on the values' order keys, one counting collective per bit (64): no part holds more
+/// than its own values.
+pub fn kth_smallest(space: &dyn Space, local: &mut [f64], k: usize) -> f64 {
+    if space.parts() == 1 {
+        return *local.select_nth_unstable_by(k, f64::total_cmp).1;
+    }
+    let keys: Vec<u64> = local.iter().map(|&v| order_key(v)).collect();
+    // The smallest key with more than k values at or below it.
+    let (mut lo, mut hi) = (0u64, u64::MAX);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if count(space, keys.iter().filter(|&&key| key <= mid).count()) > k {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    from_order_key(lo)
+}
+
+/// The median of the values of every part, as [`linalg::median`](crate::linalg::median) gives
+/// it for them together (NaN when there are none). Reorders `local`.
+pub fn median(space: &dyn Space, local: &mut [f64]) -> f64 {
+    if space.parts() == 1 {
+        return crate::linalg::median(local);
+    }
+    let n = count(space, local.len());
+    if n == 0 {
+        return f64::NAN;
+    }
+    let upper = kth_smallest(space, local, n / 2);
+    if n % 2 == 1 {
+        upper
+    } else {
+        0.5 * (kth_smallest(space, local, n / 2 - 1) + upper)
+    }
+}
+
+/// [`linalg::robust_sigma`](crate::linalg::robust_sigma) of the values of every part about
+/// `center`: 1.4826 · their median absolute deviation (0 when there are none). Overwrites `local`
+/// with the absolute deviations.
+pub fn robust_sigma(space: &dyn Space, local: &mut [f64], center: f64) -> f64 {
+    if space.parts() == 1 {
+        return crate::linalg::robust_sigma(local, center);
+    }
+    if count(space, local.len()) == 0 {
+        return 0.0;
+    }
+    local.iter_mut().for_each(|x| *x = (*x - center).abs());
+    1.4826 * median(space, local)
+}

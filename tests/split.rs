@@ -601,3 +601,60 @@ fn the_parts_adjoints_are_the_adjoint_of_their_summed_forward() {
         }
     }
 }
+
+#[test]
+fn order_statistics_over_split_values_are_those_of_the_whole() {
+    // Ties, signed zeros, negatives, an even and an odd count, parts of unequal (and no) length.
+    let mut values: Vec<f64> = (0..41)
+        .map(|i| (((i * 37) % 23) as f64 - 11.0) * 0.25)
+        .collect();
+    values.extend([0.0, -0.0, 1e300, -1e-300, 2.5, 2.5]);
+    for len in [values.len(), values.len() - 1] {
+        let whole = &values[..len];
+        let bounds = [0, 5, 5, 30, len];
+        let shared = Shared::new(4);
+        let seen: Vec<(f64, f64, Vec<f64>)> = thread::scope(|s| {
+            let handles: Vec<_> = (0..4)
+                .map(|p| {
+                    let shared = Arc::clone(&shared);
+                    let mine = whole[bounds[p]..bounds[p + 1]].to_vec();
+                    s.spawn(move || {
+                        let space = PartSpace { shared, part: p };
+                        let mut v = mine.clone();
+                        let med = space::median(&space, &mut v);
+                        let mut v = mine.clone();
+                        let sigma = space::robust_sigma(&space, &mut v, med);
+                        let ks: Vec<f64> = [0, 7, len / 2, len - 1]
+                            .iter()
+                            .map(|&k| space::kth_smallest(&space, &mut mine.clone(), k))
+                            .collect();
+                        (med, sigma, ks)
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        let mut sorted = whole.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let med = rdlidar::linalg::median(&mut whole.to_vec());
+        let sigma = rdlidar::linalg::robust_sigma(&mut whole.to_vec(), med);
+        for (p, (m, s, ks)) in seen.iter().enumerate() {
+            assert_eq!(m.to_bits(), med.to_bits(), "part {p}, {len} values: median");
+            assert_eq!(
+                s.to_bits(),
+                sigma.to_bits(),
+                "part {p}, {len} values: spread"
+            );
+            let expected: Vec<f64> = [0, 7, len / 2, len - 1]
+                .iter()
+                .map(|&k| sorted[k])
+                .collect();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(ks),
+                bits(&expected),
+                "part {p}, {len} values: order statistics"
+            );
+        }
+    }
+}

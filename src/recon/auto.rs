@@ -416,9 +416,9 @@ fn hidden_returns<T: Real>(
         rep.add_counts(&op);
     }
     let space = crate::LinearOperator::space(&op);
-    let mut all = space::whole_values(space, u.iter().map(|v| v.as_f64()).collect());
-    let med = crate::linalg::median(&mut all);
-    let level = med + HIDDEN_Z * crate::linalg::robust_sigma(&mut all, med);
+    let mut all: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
+    let med = space::median(space, &mut all);
+    let level = med + HIDDEN_Z * space::robust_sigma(space, &mut all, med);
     let (mut hidden, mut lit) = (0, 0);
     for (col, cu) in x.chunks(ks).zip(u.chunks(ks)) {
         if col.iter().all(|v| *v == T::zero()) {

@@ -434,13 +434,13 @@ pub(super) fn estimate_returns_in<T: Real>(space: &dyn Space, x: &[T], ks: usize
         .filter(|&c| c > 0)
         .map(|c| c as f64)
         .collect();
-    let mut counts = space::whole_values(space, counts);
-    if counts.is_empty() {
+    let mut counts = counts;
+    let n = space::count(space, counts.len());
+    if n == 0 {
         return 1;
     }
-    counts.sort_unstable_by(f64::total_cmp);
-    let at = ((0.99 * counts.len() as f64).ceil() as usize).clamp(1, counts.len());
-    (counts[at - 1] as usize).clamp(1, MAX_RETURNS_ESTIMATE)
+    let at = ((0.99 * n as f64).ceil() as usize).clamp(1, n);
+    (space::kth_smallest(space, &mut counts, at - 1) as usize).clamp(1, MAX_RETURNS_ESTIMATE)
 }
 
 /// The sparsity for IHT and CoSaMP: the larger of twice the number of pixels the debiased

@@ -132,9 +132,9 @@ pub(super) fn backproject<T: Real>(
 /// `x` is the operator's part of the unknowns (`space`): the threshold is that of the whole.
 pub(super) fn returns<T: Real>(space: &dyn Space, x: &[T], g: Geometry) -> Vec<T> {
     debug_assert_eq!(x.len(), g.voxels());
-    let mut all = space::whole_values(space, x.iter().map(|v| v.as_f64()).collect());
-    let med = crate::linalg::median(&mut all);
-    let robust = med + AUTO_K * crate::linalg::robust_sigma(&mut all, med);
+    let mut all: Vec<f64> = x.iter().map(|v| v.as_f64()).collect();
+    let med = space::median(space, &mut all);
+    let robust = med + AUTO_K * space::robust_sigma(space, &mut all, med);
     let strongest = space::max(space, x.iter().map(|v| v.as_f64()).fold(0.0, f64::max));
     let floor = robust.max(RELATIVE_FLOOR * strongest);
     x.iter()

@@ -6,7 +6,7 @@ use std::ops::ControlFlow;
 
 use crate::error::Result;
 use crate::lidar::LidarOperator;
-use crate::linalg::{dot, median, robust_sigma};
+use crate::linalg::dot;
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
 use crate::solver::{solve_with, Iteration, Iterative, Progress, Report, Stopping, Termination};
@@ -218,9 +218,9 @@ impl<T: Real, A: LidarOperator<T>> Iteration<T, A> for PursuitIteration<T> {
         let ks = op.geometry().ks;
         let space = op.space();
         op.correlate(&self.r, &mut self.u);
-        let mut all = space::whole_values(space, self.u.iter().map(|v| v.as_f64()).collect());
-        let med = median(&mut all);
-        let level = med + CANDIDATE_Z * robust_sigma(&mut all, med);
+        let mut all: Vec<f64> = self.u.iter().map(|v| v.as_f64()).collect();
+        let med = space::median(space, &mut all);
+        let level = med + CANDIDATE_Z * space::robust_sigma(space, &mut all, med);
         // Each pixel's best positive voxel outside the support.
         let x = &self.prev;
         let candidates: Vec<(usize, f64)> = self

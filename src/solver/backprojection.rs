@@ -1,7 +1,7 @@
 //! Backprojection and per-column peak thresholding: the paper's reconstruction.
 
 use crate::error::{Error, Result};
-use crate::linalg::{column_peaks, median, robust_sigma, PeakRule};
+use crate::linalg::{column_peaks, PeakRule};
 use crate::operator::LinearOperator;
 use crate::real::Real;
 use crate::space::{self, Space};
@@ -134,13 +134,15 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
     })
 }
 
-/// The `q`-quantile of `v` (nearest rank, `q` in [0, 1]); −∞ for an empty slice. Reorders `v`.
-fn quantile_of(v: &mut [f64], q: f64) -> f64 {
-    if v.is_empty() {
+/// The `q`-quantile of the values `v` of every part (nearest rank, `q` in [0, 1]); −∞ when there
+/// are none. Reorders `v`.
+fn quantile_of(space: &dyn Space, v: &mut [f64], q: f64) -> f64 {
+    let n = space::count(space, v.len());
+    if n == 0 {
         return f64::NEG_INFINITY;
     }
-    let rank = ((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1);
-    *v.select_nth_unstable_by(rank, f64::total_cmp).1
+    let rank = ((q * (n - 1) as f64).round() as usize).min(n - 1);
+    space::kth_smallest(space, v, rank)
 }
 
 /// What [`select_peaks`] keeps.
@@ -189,14 +191,13 @@ pub(crate) fn select_peaks_in<T: Real>(
             f * space::max(space, local)
         }
         Threshold::PeakQuantile { quantile, fraction } => {
-            let peaks: Vec<f64> = found.iter().flatten().map(|p| p.1).collect();
-            fraction * quantile_of(&mut space::whole_values(space, peaks), quantile)
+            let mut peaks: Vec<f64> = found.iter().flatten().map(|p| p.1).collect();
+            fraction * quantile_of(space, &mut peaks, quantile)
         }
         Threshold::Auto { k } => {
-            let all: Vec<f64> = values.iter().map(|v| v.as_f64()).collect();
-            let mut all = space::whole_values(space, all);
-            let med = median(&mut all);
-            med + k * robust_sigma(&mut all, med)
+            let mut all: Vec<f64> = values.iter().map(|v| v.as_f64()).collect();
+            let med = space::median(space, &mut all);
+            med + k * space::robust_sigma(space, &mut all, med)
         }
     };
     let mut x = vec![T::zero(); values.len()];

@@ -136,8 +136,8 @@ impl ModelBasedParams {
 /// 1.4826 · median |u| over the whole of the unknowns: a robust standard deviation of the
 /// correlations, dominated by the empty voxels.
 fn robust_sigma<T: Real>(space: &dyn Space, u: &[T]) -> f64 {
-    let mut a = space::whole_values(space, u.iter().map(|v| v.as_f64()).collect());
-    crate::linalg::robust_sigma(&mut a, 0.0)
+    let mut a: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
+    space::robust_sigma(space, &mut a, 0.0)
 }
 
 /// y − A_S b for the restriction `restricted` of the operator to a support.
