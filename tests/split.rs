@@ -16,6 +16,7 @@
 //! timeout).
 
 use std::ops::Range;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -56,6 +57,8 @@ struct Shared {
     parts: usize,
     exchange: Mutex<Exchange>,
     arrived: Condvar,
+    /// The values each part has sent, over every collective.
+    sent: Vec<AtomicUsize>,
 }
 
 impl Shared {
@@ -67,6 +70,7 @@ impl Shared {
                 ..Exchange::default()
             }),
             arrived: Condvar::new(),
+            sent: (0..parts).map(|_| AtomicUsize::new(0)).collect(),
         })
     }
 
@@ -77,6 +81,7 @@ impl Shared {
 
     /// Every part's deposit of one collective, in part order, once all have come.
     fn all(&self, part: usize, kind: &'static str, values: Vec<f64>) -> Arc<Vec<Deposit>> {
+        self.sent[part].fetch_add(values.len(), Ordering::Relaxed);
         let mut ex = self.lock();
         let round = ex.round;
         assert!(ex.slots[part].is_none(), "part {part} deposited twice");
@@ -187,12 +192,20 @@ fn in_parts<R: Send>(
     parts: usize,
     run: &(dyn Fn(&Part<RdOperator<f64>>) -> R + Sync),
 ) -> Vec<R> {
-    let m = op.geometry().m;
-    let shared = Shared::new(parts);
+    in_parts_of(&Shared::new(parts), op, run)
+}
+
+/// [`in_parts`] through the exchange `shared` (of as many parts as it has).
+fn in_parts_of<R: Send>(
+    shared: &Arc<Shared>,
+    op: &RdOperator<f64>,
+    run: &(dyn Fn(&Part<RdOperator<f64>>) -> R + Sync),
+) -> Vec<R> {
+    let (m, parts) = (op.geometry().m, shared.parts);
     thread::scope(|s| {
         let handles: Vec<_> = (0..parts)
             .map(|p| {
-                let shared = Arc::clone(&shared);
+                let shared = Arc::clone(shared);
                 s.spawn(move || {
                     let space: Arc<dyn Space> = Arc::new(PartSpace { shared, part: p });
                     run(&part_of(op, p * m / parts..(p + 1) * m / parts, space))
@@ -654,6 +667,98 @@ fn order_statistics_over_split_values_are_those_of_the_whole() {
                 bits(ks),
                 bits(&expected),
                 "part {p}, {len} values: order statistics"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_solvers_send_the_measurements_and_a_few_scalars_per_iteration() {
+    // What a part sends, in values: K per forward application (the sum of the measurements),
+    // and per iteration scalars (inner products, norms, counts, order statistics) and candidate
+    // lists (top-k) far below its unknowns: a solver that gathered the unknowns each iteration
+    // would send at least half as many again (n/2 per part here, the bound n/4).
+    let (op, y) = problem(600, 13);
+    let (k, n) = (op.nrows(), op.ncols());
+    let s = returns();
+    type Solve = fn(&dyn VoxelOperator<f64>, &[f64], &mut [f64], usize) -> rdlidar::Result<Report>;
+    let solvers: [(&str, Solve); 6] = [
+        ("cgls", |op, y, x, _| {
+            cgls(
+                op,
+                y,
+                x,
+                &CglsParams {
+                    stopping: stopping(20),
+                    ..CglsParams::default()
+                },
+                &mut (),
+            )
+        }),
+        ("fista", |op, y, x, _| {
+            fista(
+                op,
+                y,
+                x,
+                &FistaParams {
+                    stopping: stopping(20),
+                    ..FistaParams::default()
+                },
+                &mut (),
+            )
+        }),
+        ("iht", |op, y, x, s| {
+            iht(
+                op,
+                y,
+                x,
+                &IhtParams {
+                    stopping: stopping(20),
+                    ..IhtParams::new(s)
+                },
+                &mut (),
+            )
+        }),
+        ("cosamp", |op, y, x, s| {
+            cosamp(
+                op,
+                y,
+                x,
+                &CosampParams {
+                    stopping: stopping(5),
+                    ..CosampParams::new(s)
+                },
+                &mut (),
+            )
+        }),
+        ("amp", |op, y, x, _| {
+            reflector_amp(op, y, x, &ReflectorAmpParams::default(), &mut ())
+        }),
+        ("model-based", |op, y, x, _| {
+            model_based(op, y, x, &ModelBasedParams::default(), &mut ())
+        }),
+    ];
+    for (name, solve) in solvers {
+        let shared = Shared::new(2);
+        let reports = in_parts_of(&shared, &op, &|part| {
+            let mut x = vec![0.0; part.ncols()];
+            solve(part, &y, &mut x, s).unwrap()
+        });
+        for (p, r) in reports.iter().enumerate() {
+            let sent = shared.sent[p].load(Ordering::Relaxed);
+            // Every forward application, of the whole or of a support, sums K values.
+            let sums = k * (r.forward_applies + r.support_applies);
+            let beyond = sent.saturating_sub(sums);
+            assert!(
+                beyond <= n / 4 * (r.iterations + 1),
+                "{name}: part {p} sent {beyond} values beyond the measurements' sums in {} \
+                 iterations, of {} unknowns per part",
+                r.iterations,
+                n / 2
+            );
+            assert!(
+                sent >= k * r.forward_applies,
+                "{name}: part {p} sent too little"
             );
         }
     }
