@@ -763,3 +763,33 @@ fn the_solvers_send_the_measurements_and_a_few_scalars_per_iteration() {
         }
     }
 }
+
+#[test]
+fn one_parts_observer_ends_every_parts_run_at_the_same_iteration() {
+    let (op, y) = problem(3000, 11);
+    let params = CglsParams {
+        stopping: stopping(30),
+        ..CglsParams::default()
+    };
+    let reports = in_parts(&op, 3, &|part| {
+        let first = part.space().offset(part.ncols());
+        let mut x = vec![0.0; part.ncols()];
+        // Only the part holding the first unknowns stops, after its third iteration.
+        let mut observer = |info: &rdlidar::solver::IterationInfo<'_, f64>| {
+            if first == 0 && info.iteration == 3 {
+                rdlidar::solver::Control::Stop
+            } else {
+                rdlidar::solver::Control::Continue
+            }
+        };
+        cgls(part, &y, &mut x, &params, &mut observer).unwrap()
+    });
+    for (p, r) in reports.iter().enumerate() {
+        assert_eq!(r.iterations, 3, "part {p}");
+        assert_eq!(
+            r.termination,
+            rdlidar::solver::Termination::Observer,
+            "part {p}"
+        );
+    }
+}

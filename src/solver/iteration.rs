@@ -11,9 +11,10 @@
 
 use std::ops::ControlFlow;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
+use crate::space::{self, Space};
 
 use super::{Monitor, Observer, Report, Stopping, Termination};
 
@@ -132,6 +133,33 @@ pub(super) fn ending(rules: Option<Termination>, p: &Progress) -> Option<Termina
     }
 }
 
+/// Every ending, in the order [`agreed`] ranks them.
+const ENDINGS: [Termination; 8] = [
+    Termination::MaxIterations,
+    Termination::Residual,
+    Termination::Change,
+    Termination::Stagnation,
+    Termination::Converged,
+    Termination::ZeroResidual,
+    Termination::TimeLimit,
+    Termination::Observer,
+];
+
+/// The ending of every part of split unknowns: a part's own observer or clock may end its run
+/// alone (the other rules see the same reduced values in every part), and then every part ends
+/// with it, with the last of [`ENDINGS`] any part reached. `local` itself when the space is
+/// whole.
+fn agreed(space: &dyn Space, local: Option<Termination>) -> Option<Termination> {
+    if space.parts() == 1 {
+        return local;
+    }
+    let code = local.map_or(0, |t| 1 + ENDINGS.iter().position(|&e| e == t).unwrap_or(0));
+    match space::max(space, code as f64) as usize {
+        0 => None,
+        c => Some(ENDINGS[c - 1]),
+    }
+}
+
 /// The native loop: `prepare`, `step`, and the [`Stopping`] rules with the observer, until one
 /// of them ends the run; then `finish`. The solver's own ending takes precedence over the
 /// iteration limit.
@@ -173,8 +201,17 @@ where
     I: Iteration<T, Counted<&'a A>>,
 {
     let op = Counted::new(op);
+    let space = LinearOperator::space(&op);
     let mut monitor = Monitor::new(I::NAME, I::stopping(params), observer);
-    let mut run = match I::start(&op, y, x, params)? {
+    let started = I::start(&op, y, x, params);
+    // Over split unknowns every part starts, or none does.
+    if space.parts() > 1 && !space::all(space, started.is_ok()) && started.is_ok() {
+        return Err(Error::param(
+            "parts",
+            "another part of the split unknowns could not start the solver",
+        ));
+    }
+    let mut run = match started? {
         ControlFlow::Continue(run) => run,
         ControlFlow::Break(termination) => return Ok((monitor.finish(0, termination, &op), None)),
     };
@@ -185,7 +222,8 @@ where
         }
         it += 1;
         let p = run.step(&op, y, x, it)?;
-        if let Some(t) = ending(monitor.step(it, p.residual, p.objective, p.change, x), &p) {
+        let local = ending(monitor.step(it, p.residual, p.objective, p.change, x), &p);
+        if let Some(t) = agreed(space, local) {
             break t;
         }
     };
