@@ -7,19 +7,21 @@
 //! inner products, norms and selections through an [`MpiSpace`], whose collectives are MPI's.
 //!
 //! ```no_run
-//! # fn main() -> rdlidar::Result<()> {
 //! use std::sync::Arc;
 //! use rdlidar::distributed::{Mpi, MpiSpace};
+//! use rdlidar::lidar::RdOperator;
 //! use rdlidar::operator::Part;
-//! # let (whole, y): (rdlidar::lidar::RdOperator<f64>, Vec<f64>) = unimplemented!();
-//! let mpi = Mpi::init()?; // once per process, before any other MPI call
-//! let space = MpiSpace::world(&mpi);
-//! let rows = space.band(whole.geometry().m); // this rank's rows of the image
-//! let part = Part::new(whole.row_band(rows)?, Arc::new(space));
-//! let mut x = vec![0.0; rdlidar::LinearOperator::ncols(&part)];
-//! rdlidar::solver::cgls(&part, &y, &mut x, &Default::default(), &mut ())?;
-//! // x holds this rank's rows of the solution.
-//! # Ok(()) }
+//!
+//! /// This rank's rows of the least-squares solution of `whole` x = `y`.
+//! fn my_rows(mpi: &Mpi, whole: &RdOperator<f64>, y: &[f64]) -> rdlidar::Result<Vec<f64>> {
+//!     let space = MpiSpace::world(mpi);
+//!     let rows = space.band(whole.geometry().m); // this rank's rows of the image
+//!     let part = Part::new(whole.row_band(rows)?, Arc::new(space));
+//!     let mut x = vec![0.0; rdlidar::LinearOperator::ncols(&part)];
+//!     rdlidar::solver::cgls(&part, y, &mut x, &Default::default(), &mut ())?;
+//!     Ok(x)
+//! }
+//! // Mpi::init() once per process, before any other MPI call; hold it while solving.
 //! ```
 
 use std::ops::Range;
