@@ -34,7 +34,7 @@ use mpi::traits::{Communicator, CommunicatorCollectives};
 use mpi::Threading;
 
 use crate::error::{Error, Result};
-use crate::space::Space;
+use crate::space::{self, Space};
 
 /// MPI, initialized for this process; finalized when dropped. Hold it for as long as any
 /// [`MpiSpace`] is used.
@@ -108,10 +108,10 @@ impl MpiSpace {
     }
 
     /// This rank's share of `rows` rows split as evenly as the ranks allow, in rank order (the
-    /// first ranks take one row more when they do not divide evenly). Empty for ranks beyond
-    /// the rows.
+    /// first ranks take one row more when they do not divide evenly; see [`space::band`]).
+    /// Empty for ranks beyond the rows.
     pub fn band(&self, rows: usize) -> Range<usize> {
-        band(rows, self.parts(), self.rank())
+        space::my_band(self, rows)
     }
 
     /// Every rank's count of items (`local` here), in rank order.
@@ -122,18 +122,13 @@ impl MpiSpace {
     }
 }
 
-/// Part `part` of `rows` rows split into `parts` bands as evenly as possible, in order.
-pub fn band(rows: usize, parts: usize, part: usize) -> Range<usize> {
-    let parts = parts.max(1);
-    let (base, extra) = (rows / parts, rows % parts);
-    let start = part * base + part.min(extra);
-    let len = base + usize::from(part < extra);
-    start.min(rows)..(start + len).min(rows)
-}
-
 impl Space for MpiSpace {
     fn parts(&self) -> usize {
         self.comm.size() as usize
+    }
+
+    fn part(&self) -> usize {
+        self.rank()
     }
 
     fn sum(&self, values: &mut [f64]) {

@@ -15,6 +15,8 @@
 //! reductions on them. Every part must call the same collectives in the same order, so a solver
 //! decides only on reduced values (never, e.g., on whether its own part of a support is empty).
 
+use std::ops::Range;
+
 use crate::real::Real;
 
 /// How the parts of a vector of unknowns combine. The methods are collective: every part calls
@@ -22,6 +24,9 @@ use crate::real::Real;
 pub trait Space: Send + Sync + std::fmt::Debug {
     /// How many parts the unknowns are split into (1: whole).
     fn parts(&self) -> usize;
+
+    /// This part's index, from 0 to [`Space::parts`] − 1, in the order of the parts.
+    fn part(&self) -> usize;
 
     /// Replaces each entry of `values` by its sum over the parts, added in part order.
     fn sum(&self, values: &mut [f64]);
@@ -45,6 +50,9 @@ impl Space for Whole {
     fn parts(&self) -> usize {
         1
     }
+    fn part(&self) -> usize {
+        0
+    }
     fn sum(&self, _values: &mut [f64]) {}
     fn max(&self, _values: &mut [f64]) {}
     fn gather(&self, local: &[f64]) -> Vec<f64> {
@@ -57,6 +65,44 @@ impl Space for Whole {
 
 /// The one [`Whole`] space, for operators to return.
 pub static WHOLE: Whole = Whole;
+
+/// Part `part` of `rows` rows split into `parts` bands as evenly as possible, in order (the first
+/// parts take one row more when they do not divide evenly); empty for parts beyond the rows.
+pub fn band(rows: usize, parts: usize, part: usize) -> Range<usize> {
+    let parts = parts.max(1);
+    let (base, extra) = (rows / parts, rows % parts);
+    let start = part * base + part.min(extra);
+    let len = base + usize::from(part < extra);
+    start.min(rows)..(start + len).min(rows)
+}
+
+/// This part's [`band`] of `rows` rows.
+pub fn my_band(space: &dyn Space, rows: usize) -> Range<usize> {
+    band(rows, space.parts(), space.part())
+}
+
+/// The first failure over the parts: `local` is this part's (None when it succeeded); every
+/// part receives the failure of the lowest-numbered part that failed, with that part's index,
+/// or None when every part succeeded. Two collectives (a maximum, then a gather of the one
+/// message), so that parts that must all stop agree on it and one of them can report it.
+pub fn first_failure(space: &dyn Space, local: Option<&str>) -> Option<(usize, String)> {
+    if space.parts() == 1 {
+        return local.map(|m| (0, m.to_string()));
+    }
+    // The lowest failing part, as the maximum of parts − index over the failing parts.
+    let mine = local.map_or(0.0, |_| (space.parts() - space.part()) as f64);
+    let top = max(space, mine);
+    if top == 0.0 {
+        return None;
+    }
+    let failed = space.parts() - top as usize;
+    let sent: Vec<f64> = match local {
+        Some(m) if space.part() == failed => m.bytes().map(f64::from).collect(),
+        _ => Vec::new(),
+    };
+    let bytes: Vec<u8> = space.gather(&sent).into_iter().map(|b| b as u8).collect();
+    Some((failed, String::from_utf8_lossy(&bytes).into_owned()))
+}
 
 /// The sum over the parts of a local value.
 pub fn sum(space: &dyn Space, local: f64) -> f64 {

@@ -392,3 +392,61 @@ fn reconstruct_refuses_bad_flags_and_files_and_writes_nothing() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(listing(&f.out), ["d.npy", "x.npy"]);
 }
+
+/// `rdlidar` as process `rank` of `size` of a job, as a launcher's variables say, without a
+/// launcher.
+fn as_process(rank: usize, size: usize, args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_rdlidar"))
+        .args(args)
+        .env("OMPI_COMM_WORLD_RANK", rank.to_string())
+        .env("OMPI_COMM_WORLD_SIZE", size.to_string())
+        .output()
+        .expect("the binary runs")
+}
+
+#[test]
+fn launched_as_several_processes_a_command_that_cannot_split_refuses_from_the_first() {
+    let tmp = TempDir::new("launched");
+    let out = tmp.path("run");
+    let simulate = [
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "4x4x4",
+        "--pulse-len",
+        "10",
+        "--out",
+        s(&out),
+        "--quiet",
+    ];
+    let e = as_process(0, 3, &simulate);
+    assert_one_line_error(&e, &["rdlidar simulate runs on one process", "3 processes"]);
+    // The other processes end quietly: the first reports for the job.
+    let other = as_process(2, 3, &simulate);
+    assert!(other.status.success() && other.stderr.is_empty() && other.stdout.is_empty());
+    assert!(!out.exists());
+    // One process of one is not a job.
+    assert!(as_process(0, 1, &simulate).status.success());
+    #[cfg(not(feature = "mpi"))]
+    {
+        let run = &out;
+        let xt = tmp.path("xt.npy");
+        let args = [
+            "adjoint",
+            "--pulse",
+            &format!("{}/pulse.npy", s(run)),
+            "--codes",
+            &format!("{}/codes.npy", s(run)),
+            "--meas",
+            &format!("{}/meas.npy", s(run)),
+            "--depth-bins",
+            "4",
+            "--out",
+            s(&xt),
+        ];
+        let e = as_process(0, 2, &args);
+        assert_one_line_error(&e, &["built without MPI", "--features mpi"]);
+        assert!(!xt.exists());
+    }
+}

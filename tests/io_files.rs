@@ -189,3 +189,96 @@ fn io_code_sets_and_measurement_rows_are_read_only_when_asked() {
         "{err}"
     );
 }
+
+#[test]
+fn io_a_band_of_rows_of_any_codes_file_is_those_rows_of_the_whole() {
+    use ndarray::{Array4, ShapeBuilder};
+    use rdlidar::io::{
+        read_code_band, read_code_sets, read_codes, write_code_sets, write_codes,
+        write_packed_code_sets, write_packed_codes, ShapeExpectation,
+    };
+    use rdlidar::lidar::Codes;
+    let tmp = TempDir::new("io-band");
+    let (m, n, k) = (5, 3, 12);
+    let expect = ShapeExpectation {
+        pulse_len: 9,
+        depth_bins: 4,
+        grid: Some((m, n)),
+    };
+    let binary = Codes::random_binary(m * n, k, 1).unwrap();
+    let ternary = Codes::random_ternary(m * n, k, 0.3, 2).unwrap();
+    let second = Codes::random_binary(m * n, k, 3).unwrap();
+    let dense = ternary.to_dense();
+    let files: Vec<(&str, std::path::PathBuf)> = {
+        let at = |name: &str| tmp.path(name);
+        write_codes(at("int8.npy"), (m, n), &ternary).unwrap();
+        write_packed_codes(at("packed.npy"), (m, n), &binary).unwrap();
+        write_code_sets(at("sets.npy"), (m, n), &[&ternary, &second]).unwrap();
+        write_packed_code_sets(at("packed-sets.npy"), (m, n), &[&binary, &second]).unwrap();
+        let as_f32 = dense
+            .mapv(f32::from)
+            .into_shape_with_order((m, n, k))
+            .unwrap();
+        write_npy(at("float32.npy"), &as_f32).unwrap();
+        // The same values in Fortran order (column-major on disk).
+        let mut fortran = Array3::<i8>::zeros((m, n, k).f());
+        fortran.assign(&dense.clone().into_shape_with_order((m, n, k)).unwrap());
+        write_npy(at("fortran.npy"), &fortran).unwrap();
+        [
+            "int8",
+            "packed",
+            "sets",
+            "packed-sets",
+            "float32",
+            "fortran",
+        ]
+        .iter()
+        .map(|&f| (f, at(&format!("{f}.npy"))))
+        .collect()
+    };
+    for (name, path) in &files {
+        let whole = if name.contains("sets") {
+            read_code_sets(path, &expect).unwrap().1
+        } else {
+            vec![read_codes(path, &expect).unwrap().1]
+        };
+        for rows in [0..1, 1..3, 4..5, 0..5] {
+            let (grid, band) = read_code_band(path, &expect, rows.clone()).unwrap();
+            assert_eq!(grid, (m, n), "{name}");
+            assert_eq!(band.len(), whole.len(), "{name}");
+            let pixels: Vec<usize> = (rows.start * n..rows.end * n).collect();
+            for (b, w) in band.iter().zip(&whole) {
+                assert_eq!(
+                    b.to_dense(),
+                    w.select_pixels(&pixels).unwrap().to_dense(),
+                    "{name}, rows {rows:?}"
+                );
+            }
+        }
+        for bad in [2..2, 3..6] {
+            let e = read_code_band(path, &expect, bad.clone())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("5 pixel rows") && e.contains(&format!("{}..{}", bad.start, bad.end)),
+                "{e}"
+            );
+        }
+    }
+    // A bad value is named by its index in the whole file, and only the band's values are read.
+    let mut bad = dense.into_shape_with_order((m, n, k)).unwrap();
+    bad[[3, 1, 7]] = 2;
+    write_npy(tmp.path("bad.npy"), &bad).unwrap();
+    let e = read_code_band(tmp.path("bad.npy"), &expect, 2..4)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("(3, 1, 7)"), "{e}");
+    assert!(read_code_band(tmp.path("bad.npy"), &expect, 0..3).is_ok());
+    let mut sets = Array4::<i8>::ones((2, m, n, k));
+    sets[[1, 4, 2, 0]] = -3;
+    write_npy(tmp.path("bad-sets.npy"), &sets).unwrap();
+    let e = read_code_band(tmp.path("bad-sets.npy"), &expect, 4..5)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("(1, 4, 2, 0)"), "{e}");
+}

@@ -39,6 +39,8 @@ mod metrics;
 mod model_based;
 #[cfg(feature = "mpi")]
 mod mpi;
+#[cfg(feature = "mpi")]
+mod mpi_cli;
 mod noise;
 mod norm;
 mod npy_fuzz;

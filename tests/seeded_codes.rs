@@ -121,3 +121,29 @@ fn a_tile_is_generated_alone_equal_to_its_pixels_of_the_whole_array() {
     assert!(SeededCodes::new(1, 0, 5, 5).is_err());
     let _: Codes = s.select(1, &[0]).unwrap();
 }
+
+#[test]
+fn a_band_of_seeded_codes_is_those_pixels_of_the_whole() {
+    let whole = SeededCodes::new(17, 2, 40, 37).unwrap();
+    let band = whole.band(10..25).unwrap();
+    assert_eq!(
+        (band.pixels(), band.first_pixel(), band.sets()),
+        (15, 10, 2)
+    );
+    let inner = band.band(5..9).unwrap();
+    assert_eq!(inner.first_pixel(), 15);
+    for set in 0..2 {
+        let all: Vec<usize> = (0..15).collect();
+        let rows: Vec<usize> = (10..25).collect();
+        assert_eq!(
+            band.select(set, &all).unwrap().to_dense(),
+            whole.select(set, &rows).unwrap().to_dense()
+        );
+        assert_eq!(
+            inner.materialize(set).unwrap().to_dense(),
+            whole.select(set, &[15, 16, 17, 18]).unwrap().to_dense()
+        );
+    }
+    assert!(whole.band(30..41).is_err());
+    assert!(whole.band(3..3).is_err());
+}

@@ -21,9 +21,10 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread;
 use std::time::{Duration, Instant};
 
+use rdlidar::acquisition::{observe_nothing, Acquisition, CodeStore, Reconstructed, Streaming};
 use rdlidar::lidar::{
     paper_scene, semi_transparent_scene, Codes, Geometry, NoiseModel, NoiseStage, Pulse,
-    RdOperator, Scene,
+    RdOperator, Scene, SeededCodes,
 };
 use rdlidar::operator::{LinearOperator, Part, VoxelOperator};
 use rdlidar::recon::{reconstruct, Method, ReconstructOptions, Reconstruction};
@@ -142,6 +143,9 @@ struct PartSpace {
 impl Space for PartSpace {
     fn parts(&self) -> usize {
         self.shared.parts
+    }
+    fn part(&self) -> usize {
+        self.part
     }
     fn sum(&self, values: &mut [f64]) {
         let all = self.shared.all(self.part, "sum", values.to_vec());
@@ -791,5 +795,202 @@ fn one_parts_observer_ends_every_parts_run_at_the_same_iteration() {
             rdlidar::solver::Termination::Observer,
             "part {p}"
         );
+    }
+}
+
+/// `run` in each of `parts` parts, each in its own thread with its space, in part order.
+fn in_spaces<R: Send>(parts: usize, run: &(dyn Fn(Arc<dyn Space>) -> R + Sync)) -> Vec<R> {
+    let shared = Shared::new(parts);
+    thread::scope(|s| {
+        let handles: Vec<_> = (0..parts)
+            .map(|p| {
+                let shared = Arc::clone(&shared);
+                s.spawn(move || run(Arc::new(PartSpace { shared, part: p })))
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    })
+}
+
+#[test]
+fn the_parts_agree_on_the_first_failure() {
+    let failing = |fails: &'static [usize]| {
+        in_spaces(3, &move |space| {
+            let mine = fails
+                .contains(&space.part())
+                .then(|| format!("part {} failed", space.part()));
+            space::first_failure(&*space, mine.as_deref())
+        })
+    };
+    assert_eq!(failing(&[]), vec![None, None, None]);
+    let second = Some((1, "part 1 failed".to_string()));
+    assert_eq!(
+        failing(&[2, 1]),
+        vec![second.clone(), second.clone(), second]
+    );
+    let first = Some((0, "part 0 failed".to_string()));
+    assert_eq!(failing(&[0, 2]), vec![first.clone(), first.clone(), first]);
+}
+
+/// The acquisitions of a 13×10×16 paper scene: one ADC of int8 codes, two ADCs, and seeded
+/// codes streamed block by block, with their measurements.
+fn acquisitions() -> Vec<(&'static str, Acquisition, Vec<f64>, Scene<f64>)> {
+    let g = Geometry::new(13, 10, 16).unwrap();
+    let truth = paper_scene(g).unwrap();
+    let kp = 300;
+    let pulse = Pulse::<f64>::bernoulli(kp, 3).unwrap().into_inner();
+    let k = g.samples(kp);
+    let held = |seeds: &[u64]| {
+        CodeStore::Held(
+            seeds
+                .iter()
+                .map(|&s| Arc::new(Codes::random_binary(g.pixels(), k, s).unwrap()))
+                .collect(),
+        )
+    };
+    let seeded = CodeStore::Seeded(SeededCodes::new(8, 1, g.pixels(), k).unwrap());
+    [
+        ("one ADC", held(&[4]), Streaming::Never),
+        ("two ADCs", held(&[5, 6]), Streaming::Never),
+        ("seeded, streamed", seeded, Streaming::Always),
+    ]
+    .into_iter()
+    .map(|(name, codes, streaming)| {
+        let acq = Acquisition::new(g, pulse.clone(), codes, None, streaming).unwrap();
+        let op = acq.operator::<f64>().unwrap();
+        let mut y = vec![0.0; op.nrows()];
+        op.apply(truth.as_slice(), &mut y);
+        (name, acq, y, truth.clone())
+    })
+    .collect()
+}
+
+#[test]
+fn an_acquisition_split_over_parts_measures_and_reconstructs_as_the_whole() {
+    let options = ReconstructOptions::default();
+    for (name, acq, y, truth) in acquisitions() {
+        for method in [Method::Auto, Method::Cgls] {
+            let whole = match acq
+                .reconstruct(&y, method, &options, &observe_nothing, &|_| {})
+                .unwrap()
+            {
+                Reconstructed::Single(r) => r,
+                Reconstructed::Tiled(_) => unreachable!("not tiled"),
+            };
+            let parts = in_spaces(3, &|space| {
+                let part = acq.split_over(space).unwrap();
+                let share = part.share().expect("split").clone();
+                // Its forward application of its rows of the scene sums to the whole's.
+                let op = part.operator::<f64>().unwrap();
+                let mut y_part = vec![0.0; op.nrows()];
+                op.apply(share.rows_of(truth.as_slice(), 16), &mut y_part);
+                let r = match part
+                    .reconstruct(&y, method, &options, &observe_nothing, &|_| {})
+                    .unwrap()
+                {
+                    Reconstructed::Single(r) => r,
+                    Reconstructed::Tiled(_) => unreachable!("not tiled"),
+                };
+                (
+                    y_part,
+                    share.rows(),
+                    share.gather_reconstruction(r).unwrap(),
+                )
+            });
+            let mut rows = Vec::new();
+            for (y_part, band, r) in parts {
+                let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let worst = y
+                    .iter()
+                    .zip(&y_part)
+                    .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+                assert!(
+                    worst <= 1e-13 * scale,
+                    "{name}: forward differs by {worst:e}"
+                );
+                assert_eq!(r.method_used, whole.method_used, "{name} {method}");
+                assert_eq!(
+                    r.depth.depth, whole.depth.depth,
+                    "{name} {method}: depth maps"
+                );
+                let (a, b) = (whole.scene.as_slice(), r.scene.as_slice());
+                let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let worst = a
+                    .iter()
+                    .zip(b)
+                    .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                assert!(
+                    worst <= 1e-8 * scale,
+                    "{name} {method}: scenes differ by {worst:e}"
+                );
+                rows.push(band);
+            }
+            // Bands of 5, 4 and 4 rows, in order.
+            assert_eq!(rows, vec![0..5, 5..9, 9..13], "{name}");
+        }
+    }
+}
+
+#[test]
+fn codes_files_split_over_parts_give_each_part_its_rows_only() {
+    use rdlidar::acquisition::{AcquisitionFiles, InputNames};
+    use rdlidar::io::{write_codes, write_packed_code_sets};
+    let dir = std::env::temp_dir().join(format!("rdlidar-split-files-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let g = Geometry::new(13, 10, 16).unwrap();
+    for (name, acq, _, _) in acquisitions().into_iter().take(2) {
+        let CodeStore::Held(sets) = acq.codes() else {
+            unreachable!("held codes")
+        };
+        let path = dir.join("codes.npy");
+        if sets.len() == 1 {
+            write_codes(&path, (g.m, g.n), &sets[0]).unwrap();
+        } else {
+            write_packed_code_sets(&path, (g.m, g.n), sets).unwrap();
+        }
+        let pulse = acq.pulse().to_vec();
+        let dense = |a: &Acquisition| match a.codes() {
+            CodeStore::Held(sets) => sets.iter().map(|c| c.to_dense()).collect::<Vec<_>>(),
+            CodeStore::Seeded(_) => unreachable!("held codes"),
+        };
+        let loaded = in_spaces(3, &|space| {
+            let files = AcquisitionFiles::describe(
+                &path,
+                pulse.len(),
+                g.ks,
+                None,
+                None,
+                Streaming::Auto,
+                InputNames::COMMAND_LINE,
+            )
+            .unwrap()
+            .split_over(Arc::clone(&space))
+            .unwrap();
+            let from_file = files.load(pulse.clone()).unwrap();
+            let in_memory = acq.split_over(space).unwrap();
+            (dense(&from_file), dense(&in_memory), from_file.geometry())
+        });
+        for (p, (file, memory, geometry)) in loaded.into_iter().enumerate() {
+            assert_eq!(file, memory, "{name}, part {p}");
+            assert_eq!(geometry.m, [5, 4, 4][p], "{name}, part {p}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    // More parts than pixel rows, and a tiled acquisition, are refused by every part alike.
+    let (_, acq, _, _) = acquisitions().remove(0);
+    for r in in_spaces(14, &|space| acq.split_over(space).map(|_| ())) {
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("14 processes for the 13 pixel rows"), "{e}");
+    }
+    let tiled = Acquisition::new(
+        g,
+        acq.pulse().to_vec(),
+        acq.codes().clone(),
+        Some(rdlidar::lidar::TileSize { m: 5, n: 5 }),
+        Streaming::Never,
+    )
+    .unwrap();
+    for r in in_spaces(2, &|space| tiled.split_over(space).map(|_| ())) {
+        assert!(r.unwrap_err().to_string().contains("tiles"));
     }
 }

@@ -11,7 +11,12 @@ use crate::lidar::{Architecture, Geometry, SeededCodes, TileSize};
 use crate::limits::{self, MemoryPlan};
 use crate::real::Real;
 
-use super::{count_of, held, plan, streams, Acquisition, CodeStore, Streaming, Use};
+use std::sync::Arc;
+
+use crate::space::Space;
+
+use super::share::refuse_tiles;
+use super::{count_of, held, plan, streams, Acquisition, CodeStore, Share, Streaming, Use};
 
 /// The codes file of an acquisition, described from its header (or its `meta.json`) and
 /// checked against the pulse length, the depth bins and the architecture, before any data are
@@ -30,6 +35,8 @@ pub struct AcquisitionFiles {
     tiles: Option<TileSize>,
     streaming: Streaming,
     names: InputNames,
+    /// This process's band of rows, when the rows are split over processes.
+    share: Option<Share>,
 }
 
 /// What the messages call the inputs: the command line's flags, or the Python arguments.
@@ -219,7 +226,38 @@ impl AcquisitionFiles {
                 Streaming::Never
             },
             names,
+            share: None,
         })
+    }
+
+    /// The codes split by pixel rows over the parts of `space` (the processes of an MPI job):
+    /// [`AcquisitionFiles::memory_plan`] is then this process's, and
+    /// [`AcquisitionFiles::load`] reads only its band of rows of the codes (of an `.npy` file
+    /// in C order, only those bytes) and gives its share of the acquisition
+    /// ([`Acquisition::split_over`]). With one part, unchanged.
+    ///
+    /// # Errors
+    /// [`Share::of`]: more parts than pixel rows; [`Error::InvalidParameter`] (`tiles`) for a
+    /// tiled acquisition.
+    pub fn split_over(mut self, space: Arc<dyn Space>) -> Result<Self> {
+        if space.parts() == 1 {
+            return Ok(self);
+        }
+        refuse_tiles(self.architecture, self.names.tiles)?;
+        let share = Share::of(space, self.geometry)?;
+        // Whether this process's seeded codes are streamed is decided on its band.
+        if let (Some(_), Streaming::Never) = (self.seeded, self.streaming) {
+            self.streamed = streams(
+                Streaming::Auto,
+                true,
+                self.architecture,
+                share.geometry(),
+                self.samples(),
+            )
+            .unwrap_or(false);
+        }
+        self.share = Some(share);
+        Ok(self)
     }
 
     /// The codes file.
@@ -266,8 +304,9 @@ impl AcquisitionFiles {
     /// The memory a request on the loaded acquisition needs in `T` (see
     /// [`Acquisition::memory_plan`]), before anything is read.
     pub fn memory_plan<T: Real>(&self, scenes: u128, request: Use) -> MemoryPlan {
+        let geometry = self.share.as_ref().map_or(self.geometry, Share::geometry);
         let held = held(
-            self.geometry,
+            geometry,
             self.samples(),
             self.architecture,
             self.seeded.is_some(),
@@ -275,7 +314,7 @@ impl AcquisitionFiles {
             request,
         );
         plan::<T>(
-            self.geometry,
+            geometry,
             self.pulse_len,
             &held,
             self.rows().unwrap_or(1),
@@ -339,6 +378,11 @@ impl AcquisitionFiles {
                 ))
             }
             Some(s) => CodeStore::Seeded(s),
+            None if self.share.is_some() => {
+                let rows = self.share.as_ref().map_or(0..0, Share::rows);
+                let (_, sets) = io::read_code_band(&self.codes, &expect, rows)?;
+                CodeStore::Held(sets.into_iter().map(Into::into).collect())
+            }
             None if self.shape.len() == 4 => {
                 let (_, sets) = io::read_code_sets(&self.codes, &expect)?;
                 CodeStore::Held(sets.into_iter().map(Into::into).collect())
@@ -348,6 +392,9 @@ impl AcquisitionFiles {
                 CodeStore::Held(vec![c.into()])
             }
         };
+        if let Some(share) = &self.share {
+            return self.load_share(share, pulse, codes);
+        }
         let acq = Acquisition::new(self.geometry, pulse, codes, self.tiles, self.streaming)
             .map_err(|e| file_error(&self.codes, e.to_string()))?;
         Ok(if self.architecture == Architecture::MultiAdc(1) {
@@ -355,6 +402,24 @@ impl AcquisitionFiles {
         } else {
             acq
         })
+    }
+
+    /// This process's share of the acquisition, from its band's `codes` (a seed: the whole's).
+    fn load_share(&self, share: &Share, pulse: Vec<f64>, codes: CodeStore) -> Result<Acquisition> {
+        let codes = match codes {
+            CodeStore::Seeded(s) => CodeStore::Seeded(s.band(share.pixels())?),
+            held => held,
+        };
+        let streaming = if self.streamed {
+            Streaming::Always
+        } else {
+            Streaming::Never
+        };
+        let at_codes = |e: Error| file_error(&self.codes, e.to_string());
+        let acq =
+            Acquisition::new(share.geometry(), pulse, codes, None, streaming).map_err(at_codes)?;
+        acq.band_of(share.clone(), self.architecture)
+            .map_err(at_codes)
     }
 
     /// Reads the measurements `meas` in the shape the architecture needs: (K,) for one ADC,

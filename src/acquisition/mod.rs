@@ -42,6 +42,7 @@ mod files;
 mod plan;
 mod reconstructed;
 mod rules;
+mod share;
 mod simulation;
 #[cfg(test)]
 mod tests;
@@ -56,7 +57,7 @@ use crate::lidar::{
     StreamedOperator, TileSize, STREAM_BLOCK_BYTES,
 };
 use crate::limits::{self, MemoryPlan};
-use crate::operator::{BoxedOperator, OperatorExt};
+use crate::operator::{BoxedOperator, OperatorExt, Part};
 use crate::real::Real;
 use crate::recon::{
     reconstruct_observed, tile_places, ArrayCodes, Method, ReconstructOptions, Reconstruction,
@@ -69,6 +70,7 @@ pub use plan::Use;
 pub(crate) use plan::{held, plan, streams};
 pub use reconstructed::{observe_nothing, Reconstructed};
 pub use rules::{check_finite, check_finite_result, check_pulse, count_of, pulse_in};
+pub use share::Share;
 pub use simulation::{
     codes_shape, simulation_meta, write_simulation, CodesFormat, SimulationRequest, SCENES,
 };
@@ -107,6 +109,8 @@ pub struct Acquisition {
     architecture: Architecture,
     codes: CodeStore,
     streamed: bool,
+    /// This process's band of rows, when the rows are split over processes.
+    share: Option<Share>,
 }
 
 impl Acquisition {
@@ -218,6 +222,7 @@ impl Acquisition {
             architecture,
             codes,
             streamed,
+            share: None,
         })
     }
 
@@ -323,7 +328,7 @@ impl Acquisition {
                 self.samples(),
                 t.m.min(self.geometry.m) * t.n.min(self.geometry.n) * self.geometry.ks,
             ),
-            _ => Regime::of(self.measurements(), self.geometry.voxels()),
+            _ => Regime::of(self.measurements(), self.whole_geometry().voxels()),
         }
     }
 
@@ -467,7 +472,7 @@ impl Acquisition {
     ) -> Result<Box<dyn LidarOperator<T>>> {
         self.check_pulse_len(pulse.len())?;
         let g = self.geometry;
-        Ok(match (&self.codes, self.architecture) {
+        let op: Box<dyn LidarOperator<T>> = match (&self.codes, self.architecture) {
             (_, Architecture::Tiles(t)) => {
                 return Err(Error::param(
                     "tiles",
@@ -482,6 +487,10 @@ impl Acquisition {
                 Box::new(multi_adc(g, &pulse, sets.clone())?)
             }
             (CodeStore::Held(sets), _) => Box::new(RdOperator::new(g, pulse, sets[0].clone())?),
+        };
+        Ok(match &self.share {
+            Some(share) => Box::new(Part::new(op, Arc::clone(share.space()))),
+            None => op,
         })
     }
 

@@ -85,30 +85,35 @@ impl<T: Real> LidarOperator<T> for RdOperator<T> {
     }
 }
 
-/// A reference to a lidar operator is one.
-impl<T: Real, A: LidarOperator<T> + ?Sized> LidarOperator<T> for &A {
-    fn geometry(&self) -> Geometry {
-        (**self).geometry()
-    }
-    fn pulse(&self) -> &[T] {
-        (**self).pulse()
-    }
-    fn code_sets(&self) -> usize {
-        (**self).code_sets()
-    }
-    fn apply_sparse(&self, x: &[T], y: &mut [T]) {
-        (**self).apply_sparse(x, y)
-    }
-    fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
-        (**self).zero_mean_operator()
-    }
-    fn observed_pixels(&self) -> Option<Vec<bool>> {
-        (**self).observed_pixels()
-    }
-    fn regime(&self) -> Regime {
-        (**self).regime()
-    }
+/// A reference to a lidar operator, or a box of one, is one.
+macro_rules! forward_lidar {
+    ($($ty:ty),*) => {$(
+        impl<T: Real, A: LidarOperator<T> + ?Sized> LidarOperator<T> for $ty {
+            fn geometry(&self) -> Geometry {
+                (**self).geometry()
+            }
+            fn pulse(&self) -> &[T] {
+                (**self).pulse()
+            }
+            fn code_sets(&self) -> usize {
+                (**self).code_sets()
+            }
+            fn apply_sparse(&self, x: &[T], y: &mut [T]) {
+                (**self).apply_sparse(x, y)
+            }
+            fn zero_mean_operator(&self) -> Box<dyn LinearOperator<T> + '_> {
+                (**self).zero_mean_operator()
+            }
+            fn observed_pixels(&self) -> Option<Vec<bool>> {
+                (**self).observed_pixels()
+            }
+            fn regime(&self) -> Regime {
+                (**self).regime()
+            }
+        }
+    )*};
 }
+forward_lidar!(&A, Box<A>);
 
 /// One process's rows of a lidar operator whose pixels are split across processes: the
 /// geometry, pulse and column queries of its own rows' operator, the sparse forward and the

@@ -35,6 +35,10 @@ pub struct SeededCodes {
     sets: usize,
     pixels: usize,
     len: usize,
+    /// The first of these pixels in the whole array ([`SeededCodes::band`]); 0 for the whole.
+    first: usize,
+    /// Pixels per set of the whole array, which number the nonces.
+    whole: usize,
 }
 
 impl SeededCodes {
@@ -67,7 +71,36 @@ impl SeededCodes {
             sets,
             pixels,
             len,
+            first: 0,
+            whole: pixels,
         })
+    }
+
+    /// The codes of the consecutive pixels `pixels` of these (a band of image rows, row-major),
+    /// every set: pixel p of the band is pixel `pixels.start + p` here, with its codes.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for an empty range or one beyond these pixels.
+    pub fn band(&self, pixels: std::ops::Range<usize>) -> Result<Self> {
+        if pixels.is_empty() || pixels.end > self.pixels {
+            return Err(Error::param(
+                "codes",
+                format!(
+                    "pixels {}..{} are not a band of the {} pixels of the seeded codes",
+                    pixels.start, pixels.end, self.pixels
+                ),
+            ));
+        }
+        Ok(SeededCodes {
+            pixels: pixels.len(),
+            first: self.first + pixels.start,
+            ..*self
+        })
+    }
+
+    /// The first of these pixels in the whole array they are a band of (0 for the whole).
+    pub fn first_pixel(&self) -> usize {
+        self.first
     }
 
     /// The seed.
@@ -80,7 +113,7 @@ impl SeededCodes {
         self.sets
     }
 
-    /// Number of pixels of each set.
+    /// Number of pixels of each set (of the band, for a [`SeededCodes::band`]).
     pub fn pixels(&self) -> usize {
         self.pixels
     }
@@ -109,7 +142,7 @@ impl SeededCodes {
         let mut key = [0u8; 32];
         key[..8].copy_from_slice(&self.seed.to_le_bytes());
         let mut rng = ChaCha8Rng::from_seed(key);
-        rng.set_stream((set * self.pixels + pixel) as u64);
+        rng.set_stream((set * self.whole + self.first + pixel) as u64);
         rng.fill_bytes(out);
         let pad = 8 * out.len() - self.len;
         if let Some(last) = out.last_mut() {

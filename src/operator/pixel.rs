@@ -60,31 +60,36 @@ pub trait VoxelOperator<T: Real>: LinearOperator<T> {
     }
 }
 
-/// A reference to a per-pixel operator is one (so that wrappers such as
-/// [`Counted`](super::Counted) can hold a borrowed operator).
-impl<T: Real, A: VoxelOperator<T> + ?Sized> VoxelOperator<T> for &A {
-    fn column_len(&self) -> usize {
-        (**self).column_len()
-    }
-    fn correlate(&self, r: &[T], u: &mut [T]) {
-        (**self).correlate(r, u)
-    }
-    fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
-        (**self).self_correlations(voxels)
-    }
-    fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
-        (**self).pixel_gram(pixel)
-    }
-    fn uniform_pixel_gram(&self) -> bool {
-        (**self).uniform_pixel_gram()
-    }
-    fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
-        (**self).column_norms(columns)
-    }
-    fn structured_columns(&self) -> bool {
-        (**self).structured_columns()
-    }
+/// A reference to a per-pixel operator, or a box of one, is one (so that wrappers such as
+/// [`Counted`](super::Counted) can hold a borrowed or boxed operator).
+macro_rules! forward_voxel {
+    ($($ty:ty),*) => {$(
+        impl<T: Real, A: VoxelOperator<T> + ?Sized> VoxelOperator<T> for $ty {
+            fn column_len(&self) -> usize {
+                (**self).column_len()
+            }
+            fn correlate(&self, r: &[T], u: &mut [T]) {
+                (**self).correlate(r, u)
+            }
+            fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
+                (**self).self_correlations(voxels)
+            }
+            fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
+                (**self).pixel_gram(pixel)
+            }
+            fn uniform_pixel_gram(&self) -> bool {
+                (**self).uniform_pixel_gram()
+            }
+            fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
+                (**self).column_norms(columns)
+            }
+            fn structured_columns(&self) -> bool {
+                (**self).structured_columns()
+            }
+        }
+    )*};
 }
+forward_voxel!(&A, Box<A>);
 
 /// [`VoxelOperator::self_correlations`] from applications of `op`: one forward application and
 /// one correlation per voxel.

@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Error, Result};
-use crate::linalg::{dot, norm2};
+use crate::linalg::{dot, norm2, norm2_sq};
 use crate::real::Real;
 
 use super::LinearOperator;
@@ -100,7 +100,20 @@ impl DotTest {
     /// Measures the gap without judging it.
     pub fn measure<T: Real, A: LinearOperator<T> + ?Sized>(&self, op: &A) -> DotTestReport {
         let mut rng = check_rng(self.seed, DOT_STREAM);
-        let x: Vec<T> = gaussian_vector(op.ncols(), &mut rng);
+        // Over split unknowns, x is drawn whole (the vector one process would draw) and each
+        // part takes its own entries; inner products over the unknowns combine the parts.
+        let space = op.space();
+        let (total, first) = if space.parts() > 1 {
+            (
+                crate::space::count(space, op.ncols()),
+                space.offset(op.ncols()),
+            )
+        } else {
+            (op.ncols(), 0)
+        };
+        let mut x: Vec<T> = gaussian_vector(total, &mut rng);
+        x.truncate(first + op.ncols());
+        x.drain(..first);
         let y: Vec<T> = gaussian_vector(op.nrows(), &mut rng);
         let mut ax = vec![T::zero(); op.nrows()];
         let mut aty = vec![T::zero(); op.ncols()];
@@ -108,8 +121,9 @@ impl DotTest {
         op.apply_with_scratch(&x, &mut ax, &mut scratch);
         op.apply_adjoint_with_scratch(&y, &mut aty, &mut scratch);
         let lhs = dot(&ax, &y);
-        let rhs = dot(&x, &aty);
-        let scale = (norm2(&ax) * norm2(&y)).max(norm2(&x) * norm2(&aty));
+        let rhs = crate::space::dot(space, &x, &aty);
+        let [xx, aa] = crate::space::sums(space, [norm2_sq(&x), norm2_sq(&aty)]);
+        let scale = (norm2(&ax) * norm2(&y)).max(xx.sqrt() * aa.sqrt());
         let gap = if !(lhs.is_finite() && rhs.is_finite() && scale.is_finite()) {
             f64::NAN
         } else if scale == 0.0 {

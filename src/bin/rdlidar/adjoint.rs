@@ -7,12 +7,13 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, Scene, TileSize};
 use rdlidar::Real;
 
-use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames, Use};
+use rdlidar::acquisition::{pulse_in, Use};
 
 use crate::common::{
     architecture_note, at_pulse, check_finite_result, check_out_file, npy_dtype, outln, parse_tile,
-    streaming, with_precision, CliResult, Globals, MeasurementFiles,
+    with_precision, CliResult, Globals, MeasurementFiles,
 };
+use crate::ranks::Ranks;
 
 /// Apply the adjoint (backprojection): x̃ = A* y.
 ///
@@ -45,36 +46,40 @@ pub struct AdjointArgs {
 }
 
 /// Runs `adjoint`.
-pub fn run(a: &AdjointArgs, globals: &Globals) -> CliResult {
+pub fn run(a: &AdjointArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     check_out_file(&a.out, "--out", &a.files.inputs())?;
     with_precision!(
         globals.precision_of(&[&a.files.meas, &a.files.pulse])?,
-        adjoint(a)
+        adjoint(a, ranks)
     )
 }
 
-fn adjoint<T: Real + WritableElement>(a: &AdjointArgs) -> CliResult {
+fn adjoint<T: Real + WritableElement>(a: &AdjointArgs, ranks: &Ranks) -> CliResult {
     let out = &a.out;
-    let p = io::read_pulse::<f64>(&a.files.pulse)?;
-    let files = AcquisitionFiles::describe(
-        &a.files.codes,
-        p.len(),
-        a.files.depth_bins,
-        None,
-        a.tiles,
-        streaming(a.stream_codes),
-        InputNames::COMMAND_LINE,
-    )?;
-    let y = files.read_measurements::<T>(&a.files.meas)?;
-    files.check_memory::<T>("adjoint", 2, Use::Operator)?;
-    let acq = files.load(p.into_inner())?;
-    let g = acq.geometry();
-    let pulse = pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;
-    let pulse = if a.debiased { zero_mean(&pulse) } else { pulse };
-    let op = acq.operator_with_pulse(pulse)?;
-    let mut x = vec![T::zero(); g.voxels()];
-    op.apply_adjoint(&y, &mut x);
-    check_finite_result(&x, "backprojection", &a.files.meas, "--meas")?;
+    // Every process backprojects onto its own rows, then they agree on any failure.
+    let local = (|| -> CliResult<_> {
+        let (acq, y) = a.files.load::<T>(
+            ranks,
+            (a.tiles, a.stream_codes),
+            ("adjoint", 2, Use::Operator),
+        )?;
+        let pulse = pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;
+        let pulse = if a.debiased { zero_mean(&pulse) } else { pulse };
+        let op = acq.operator_with_pulse(pulse)?;
+        let mut x = vec![T::zero(); acq.geometry().voxels()];
+        op.apply_adjoint(&y, &mut x);
+        check_finite_result(&x, "backprojection", &a.files.meas, "--meas")?;
+        Ok((acq, x))
+    })();
+    let (acq, x) = ranks.agree(local)?;
+    let g = acq.whole_geometry();
+    let x = match acq.share() {
+        Some(share) => share.gather(&x),
+        None => x,
+    };
+    if !ranks.is_first() {
+        return Ok(());
+    }
     let xt = Scene::from_vec(g, x).map_err(|e| {
         format!(
             "{}: the backprojection overflows {}: {e}",

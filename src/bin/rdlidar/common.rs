@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::ValueEnum;
-use rdlidar::acquisition::{count_of, Acquisition, Streaming};
+use rdlidar::acquisition::{count_of, Acquisition, Streaming, Use};
 use rdlidar::io::{self, NpyDtype};
 use rdlidar::lidar::{Architecture, Geometry, TileSize};
 use rdlidar::{limits, Real};
@@ -35,6 +35,9 @@ impl From<String> for Failure {
 /// write error (a full device, a closed descriptor) a one-line failure; never a panic.
 pub fn write_stdout(line: std::fmt::Arguments<'_>) -> CliResult {
     use std::io::Write;
+    if crate::ranks::silent() {
+        return Ok(());
+    }
     let mut out = std::io::stdout().lock();
     writeln!(out, "{line}")
         .and_then(|()| out.flush())
@@ -54,6 +57,9 @@ pub fn stdout_failure(e: std::io::Error) -> Failure {
 /// (nor panic, as `eprintln!` does when standard error is closed or full).
 pub fn write_stderr(line: std::fmt::Arguments<'_>) {
     use std::io::Write;
+    if crate::ranks::silent() {
+        return;
+    }
     let _ = writeln!(std::io::stderr().lock(), "{line}");
 }
 
@@ -107,6 +113,29 @@ pub struct MeasurementFiles {
 }
 
 impl MeasurementFiles {
+    /// Reads the measurements in `T` and this process's acquisition (its rows, when the rows
+    /// are split over processes), after checking that `command`, holding `scenes` scenes, fits
+    /// in memory as `request` uses the operator. `tiles` and `stream_codes` are the flags.
+    pub fn load<T: Real>(
+        &self,
+        ranks: &crate::ranks::Ranks,
+        (tiles, stream_codes): (Option<TileSize>, bool),
+        (command, scenes, request): (&str, u128, Use),
+    ) -> CliResult<(Acquisition, Vec<T>)> {
+        let p = io::read_pulse::<f64>(&self.pulse)?;
+        let files = ranks.describe(
+            &self.codes,
+            (p.len(), self.depth_bins),
+            None,
+            tiles,
+            stream_codes,
+        )?;
+        let y = files.read_measurements::<T>(&self.meas)?;
+        files.check_memory::<T>(command, scenes, request)?;
+        let acq = files.load(p.into_inner())?;
+        Ok((acq, y))
+    }
+
     /// The three input files with their flags.
     pub fn inputs(&self) -> [Input<'_>; 3] {
         [
@@ -330,7 +359,7 @@ pub fn at_pulse(path: &Path) -> impl Fn(rdlidar::Error) -> Failure + '_ {
 /// A note on the architecture for the messages of several ADCs (empty for one ADC).
 pub fn architecture_note(acq: &Acquisition) -> String {
     let g = acq.geometry();
-    match acq.architecture() {
+    let mut note = match acq.architecture() {
         Architecture::MultiAdc(n) => {
             format!(", {} (one code set each)", count_of(n, "ADC", "ADCs"))
         }
@@ -339,7 +368,14 @@ pub fn architecture_note(acq: &Acquisition) -> String {
             count_of(t.count(g.m, g.n), "ADC", "ADCs")
         ),
         _ => String::new(),
+    };
+    if let Some(share) = acq.share() {
+        note.push_str(&format!(
+            ", pixel rows split over {} processes",
+            share.space().parts()
+        ));
     }
+    note
 }
 
 /// Refuses outputs that name one destination, however spelt (see [`io::same_destination`]).

@@ -7,11 +7,12 @@ use rdlidar::io;
 use rdlidar::lidar::{zero_mean, TileSize};
 use rdlidar::operator::DotTest;
 
-use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames, Use};
+use rdlidar::acquisition::{pulse_in, Use};
 
 use crate::common::{
-    architecture_note, errln, outln, parse_depth_bins, parse_tile, streaming, CliResult, Globals,
+    architecture_note, errln, outln, parse_depth_bins, parse_tile, CliResult, Globals,
 };
+use crate::ranks::Ranks;
 
 /// Check the adjoint identity <Ax, y> = <x, A*y> of the operator built from files.
 ///
@@ -46,28 +47,31 @@ pub struct DottestArgs {
 }
 
 /// Runs `dottest`: exit status 1 when a gap is above its tolerance.
-pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
+pub fn run(a: &DottestArgs, globals: &Globals, ranks: &Ranks) -> CliResult<ExitCode> {
     let seed = globals.seed();
-    let p = io::read_pulse::<f64>(&a.pulse)?;
-    // Operators in both precisions, each with its test vectors.
-    let files = AcquisitionFiles::describe(
-        &a.codes,
-        p.len(),
-        a.depth_bins,
-        None,
-        a.tiles,
-        streaming(a.stream_codes),
-        InputNames::COMMAND_LINE,
-    )?;
-    files.check_memory::<f64>("dottest", 6, Use::Operator)?;
-    let acq = files.load(p.into_inner())?;
-    let p64 = acq.pulse().to_vec();
-    let p32 = pulse_in::<f32>(&p64).map_err(|e| {
-        format!(
-            "{} (--pulse): {e}; the dot test runs in f32 too",
-            a.pulse.display()
-        )
-    })?;
+    // Every process reads its rows' codes; they agree on any failure before testing together.
+    let prepared = (|| -> CliResult<_> {
+        let p = io::read_pulse::<f64>(&a.pulse)?;
+        // Operators in both precisions, each with its test vectors.
+        let files = ranks.describe(
+            &a.codes,
+            (p.len(), a.depth_bins),
+            None,
+            a.tiles,
+            a.stream_codes,
+        )?;
+        files.check_memory::<f64>("dottest", 6, Use::Operator)?;
+        let acq = files.load(p.into_inner())?;
+        let p64 = acq.pulse().to_vec();
+        let p32 = pulse_in::<f32>(&p64).map_err(|e| {
+            format!(
+                "{} (--pulse): {e}; the dot test runs in f32 too",
+                a.pulse.display()
+            )
+        })?;
+        Ok((acq, p64, p32))
+    })();
+    let (acq, p64, p32) = ranks.agree(prepared)?;
     let test = DotTest::new().seed(seed);
     // One operator at a time: each holds the codes (and a tiled one its tiles' copies).
     let measure32 =
@@ -89,7 +93,7 @@ pub fn run(a: &DottestArgs, globals: &Globals) -> CliResult<ExitCode> {
     outln!(
         "dot test |<Ax,y> - <x,A*y>| / max(|Ax||y|, |x||A*y|): {}, K_p {}, K {}, {} \
          codes{}, seed {seed}",
-        acq.geometry(),
+        acq.whole_geometry(),
         acq.pulse_len(),
         acq.samples(),
         acq.alphabet().name(),

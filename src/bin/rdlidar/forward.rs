@@ -7,12 +7,13 @@ use rdlidar::io;
 use rdlidar::lidar::TileSize;
 use rdlidar::Real;
 
-use rdlidar::acquisition::{pulse_in, AcquisitionFiles, InputNames, Use};
+use rdlidar::acquisition::{pulse_in, Use};
 
 use crate::common::{
     architecture_note, at_pulse, check_finite_result, check_out_file, npy_dtype, outln, parse_tile,
-    streaming, with_precision, CliResult, Globals,
+    with_precision, CliResult, Globals,
 };
+use crate::ranks::Ranks;
 
 /// Apply the measurement operator: y = A x.
 ///
@@ -49,7 +50,7 @@ pub struct ForwardArgs {
 }
 
 /// Runs `forward`.
-pub fn run(a: &ForwardArgs, globals: &Globals) -> CliResult {
+pub fn run(a: &ForwardArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     check_out_file(
         &a.out,
         "--out",
@@ -59,39 +60,54 @@ pub fn run(a: &ForwardArgs, globals: &Globals) -> CliResult {
             (&a.scene, "--scene"),
         ],
     )?;
-    with_precision!(globals.precision_of(&[&a.scene, &a.pulse])?, forward(a))
+    with_precision!(
+        globals.precision_of(&[&a.scene, &a.pulse])?,
+        forward(a, ranks)
+    )
 }
 
-fn forward<T: Real + WritableElement>(a: &ForwardArgs) -> CliResult {
+fn forward<T: Real + WritableElement>(a: &ForwardArgs, ranks: &Ranks) -> CliResult {
     let out = &a.out;
-    let p = io::read_pulse::<f64>(&a.pulse)?;
-    let x = io::read_scene::<T>(&a.scene)?;
-    let g = x.geometry();
-    let files = AcquisitionFiles::describe(
-        &a.codes,
-        p.len(),
-        g.ks,
-        Some((g.m, g.n)),
-        a.tiles,
-        streaming(a.stream_codes),
-        InputNames::COMMAND_LINE,
-    )?;
-    files.check_memory::<T>("forward", 2, Use::Operator)?;
-    let acq = files.load(p.into_inner())?;
-    let pulse = pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.pulse))?;
-    let op = acq.operator_with_pulse(pulse)?;
+    // Every process reads its inputs; they agree on any failure before computing together.
+    let prepared = (|| -> CliResult<_> {
+        let p = io::read_pulse::<f64>(&a.pulse)?;
+        let x = io::read_scene::<T>(&a.scene)?;
+        let g = x.geometry();
+        let files = ranks.describe(
+            &a.codes,
+            (p.len(), g.ks),
+            Some((g.m, g.n)),
+            a.tiles,
+            a.stream_codes,
+        )?;
+        files.check_memory::<T>("forward", 2, Use::Operator)?;
+        let acq = files.load(p.into_inner())?;
+        let pulse = pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.pulse))?;
+        let op = acq.operator_with_pulse(pulse)?;
+        Ok((x, acq, op))
+    })();
+    let (x, acq, op) = ranks.agree(prepared)?;
+    let ks = x.geometry().ks;
+    let x = acq
+        .share()
+        .map_or(x.as_slice(), |s| s.rows_of(x.as_slice(), ks));
     let mut y = vec![T::zero(); op.nrows()];
-    op.apply(x.as_slice(), &mut y);
+    op.apply(x, &mut y);
+    // The measurements are the same in every process.
     check_finite_result(&y, "measurements", &a.scene, "--scene")?;
+    if !ranks.is_first() {
+        return Ok(());
+    }
     let k = acq.samples();
     match acq.rows() {
         None => {
             io::write_measurements(out, &y)?;
             outln!(
-                "wrote {}: measurements ({},) {}",
+                "wrote {}: measurements ({},) {}{}",
                 out.display(),
                 y.len(),
-                npy_dtype::<T>()
+                npy_dtype::<T>(),
+                architecture_note(&acq)
             );
         }
         Some(rows) => {

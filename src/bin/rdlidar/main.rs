@@ -11,6 +11,7 @@ mod dottest;
 mod experiment;
 mod forward;
 mod info;
+mod ranks;
 mod reconstruct;
 mod selfcheck;
 mod simulate;
@@ -18,6 +19,7 @@ mod stress;
 
 use common::{errln, parse_threads, set_threads, CliResult, Failure, Globals, Precision};
 use experiment::{CompareArgs, Experiment, ExperimentArgs, Preset};
+use ranks::Ranks;
 
 /// Compressive time-of-flight lidar by random demodulation.
 ///
@@ -32,6 +34,9 @@ use experiment::{CompareArgs, Experiment, ExperimentArgs, Preset};
 /// A closed pipe on stdout ends a command quietly with status 141. Sizes and counts have bounds
 /// and a request needing more memory than is available is refused before allocating
 /// (RDLIDAR_MEMORY_LIMIT=BYTES lowers the budget); see docs/reliability.md.
+///
+/// Built with the feature `mpi`, forward, adjoint, dottest and reconstruct run under
+/// `mpirun -n R` with the pixel rows split over the R processes (docs/scale.md).
 #[derive(Parser, Debug)]
 #[command(name = "rdlidar", version, about, long_about)]
 struct Cli {
@@ -140,6 +145,36 @@ enum Command {
     Stress(stress::StressArgs),
 }
 
+impl Command {
+    /// The subcommand's name.
+    fn name(&self) -> &'static str {
+        match self {
+            Command::Demo(_) => "demo",
+            Command::Compare(_) => "compare",
+            Command::Selfcheck => "selfcheck",
+            Command::Simulate(_) => "simulate",
+            Command::Forward(_) => "forward",
+            Command::Adjoint(_) => "adjoint",
+            Command::Dottest(_) => "dottest",
+            Command::Reconstruct(_) => "reconstruct",
+            Command::Info(_) => "info",
+            Command::Bench(_) => "bench",
+            Command::Stress(_) => "stress",
+        }
+    }
+
+    /// Whether it splits its pixel rows over the processes of an MPI job.
+    fn splits(&self) -> bool {
+        matches!(
+            self,
+            Command::Forward(_)
+                | Command::Adjoint(_)
+                | Command::Dottest(_)
+                | Command::Reconstruct(_)
+        )
+    }
+}
+
 fn run(cli: Cli) -> CliResult<ExitCode> {
     let globals = Globals {
         threads: cli.threads,
@@ -148,6 +183,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         quiet: cli.quiet,
     };
     let Some(command) = cli.command else {
+        Ranks::start("demo", false)?;
         return experiment::run(Experiment::Demo, &cli.demo, Preset::Default, &globals);
     };
     if cli.demo != ExperimentArgs::default() {
@@ -162,6 +198,9 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
     if !matches!(command, Command::Demo(_) | Command::Compare(_)) {
         set_threads(cli.threads, "--threads")?;
     }
+    // Under mpirun, the commands that split the pixel rows over the processes start MPI; the
+    // others refuse to run as several processes.
+    let ranks = Ranks::start(command.name(), command.splits())?;
     let done = |()| ExitCode::SUCCESS;
     match command {
         Command::Demo(a) => experiment::run(Experiment::Demo, &a, Preset::Default, &globals),
@@ -175,10 +214,10 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         }
         Command::Selfcheck => selfcheck::run(&globals),
         Command::Simulate(a) => simulate::run(&a, &globals).map(done),
-        Command::Forward(a) => forward::run(&a, &globals).map(done),
-        Command::Adjoint(a) => adjoint::run(&a, &globals).map(done),
-        Command::Dottest(a) => dottest::run(&a, &globals),
-        Command::Reconstruct(a) => reconstruct::run(&a, &globals).map(done),
+        Command::Forward(a) => forward::run(&a, &globals, &ranks).map(done),
+        Command::Adjoint(a) => adjoint::run(&a, &globals, &ranks).map(done),
+        Command::Dottest(a) => dottest::run(&a, &globals, &ranks),
+        Command::Reconstruct(a) => reconstruct::run(&a, &globals, &ranks).map(done),
         Command::Info(a) => info::run(&a).map(done),
         Command::Bench(a) => bench::run(&a, &globals).map(done),
         Command::Stress(a) => stress::run(&a, &globals),
@@ -188,6 +227,9 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(code) => code,
+        // Under mpirun, the first process reports a failure that every process agreed on; the
+        // others end quietly, so that the launcher does not end the job before it has.
+        Err(Failure::Message(_)) if ranks::silent() => ExitCode::SUCCESS,
         Err(Failure::Message(msg)) => {
             errln!("error: {msg}");
             ExitCode::FAILURE

@@ -3,9 +3,7 @@
 use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
-use rdlidar::acquisition::{
-    observe_nothing, pulse_in, AcquisitionFiles, InputNames, Reconstructed, Use,
-};
+use rdlidar::acquisition::{observe_nothing, pulse_in, Acquisition, Reconstructed, Use};
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
     depth_bin_m, Architecture, DepthMap, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED,
@@ -18,8 +16,9 @@ use rdlidar::Real;
 
 use crate::common::{
     architecture_note, at_pulse, check_distinct_outputs, check_out_file, errln, npy_dtype, outln,
-    parse_positive, parse_tile, streaming, with_precision, CliResult, Globals, MeasurementFiles,
+    parse_positive, parse_tile, with_precision, CliResult, Globals, MeasurementFiles,
 };
+use crate::ranks::Ranks;
 
 /// Reconstruct the scene from measurements: a depth map and the returns found.
 ///
@@ -143,7 +142,7 @@ fn parse_method(text: &str) -> Result<Method, String> {
 }
 
 /// Runs `reconstruct`.
-pub fn run(a: &ReconstructArgs, globals: &Globals) -> CliResult {
+pub fn run(a: &ReconstructArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     let mut inputs = a.files.inputs().to_vec();
     if let Some(t) = &a.truth {
         inputs.push((t, "--truth"));
@@ -161,32 +160,27 @@ pub fn run(a: &ReconstructArgs, globals: &Globals) -> CliResult {
     check_distinct_outputs(&outputs)?;
     with_precision!(
         globals.precision_of(&[&a.files.meas, &a.files.pulse])?,
-        reconstruct_files(a, globals)
+        reconstruct_files(a, globals, ranks)
     )
 }
 
-fn reconstruct_files<T: Real + WritableElement>(
-    a: &ReconstructArgs,
-    globals: &Globals,
-) -> CliResult {
-    let p = io::read_pulse::<f64>(&a.files.pulse)?;
-    let files = AcquisitionFiles::describe(
-        &a.files.codes,
-        p.len(),
-        a.files.depth_bins,
-        None,
-        a.tiles,
-        streaming(a.stream_codes),
-        InputNames::COMMAND_LINE,
-    )?;
-    let y = files.read_measurements::<T>(&a.files.meas)?;
+/// The acquisition and measurements of `reconstruct`, and the true scene (read by the first
+/// process only).
+type Inputs<T> = (Acquisition, Vec<T>, Option<Scene<T>>);
+
+/// Reads the inputs of `reconstruct`: this process's rows of the codes, the measurements and,
+/// in the first process, the true scene.
+fn read_inputs<T: Real>(a: &ReconstructArgs, ranks: &Ranks) -> CliResult<Inputs<T>> {
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
-    files.check_memory::<T>("reconstruct", 10, Use::Reconstruct)?;
-    let acq = files.load(p.into_inner())?;
+    let (acq, y) = a.files.load::<T>(
+        ranks,
+        (a.tiles, a.stream_codes),
+        ("reconstruct", 10, Use::Reconstruct),
+    )?;
     pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;
-    let g = acq.geometry();
+    let g = acq.whole_geometry();
     let truth = match &a.truth {
-        Some(path) => {
+        Some(path) if ranks.is_first() => {
             let t = io::read_scene::<T>(path)?;
             if t.geometry() != g {
                 return Err(format!(
@@ -198,11 +192,22 @@ fn reconstruct_files<T: Real + WritableElement>(
             }
             Some(t)
         }
-        None => None,
+        _ => None,
     };
+    Ok((acq, y, truth))
+}
+
+fn reconstruct_files<T: Real + WritableElement>(
+    a: &ReconstructArgs,
+    globals: &Globals,
+    ranks: &Ranks,
+) -> CliResult {
+    // Every process reads its inputs; they agree on any failure before solving together.
+    let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
+    let g = acq.whole_geometry();
     let options = ReconstructOptions {
         max_iter: a.max_iter,
-        progress: !globals.quiet,
+        progress: !globals.quiet && ranks.is_first(),
         seed: globals.seed(),
         power_iterations: None,
         threshold: a.threshold,
@@ -220,7 +225,16 @@ fn reconstruct_files<T: Real + WritableElement>(
     };
     let r = acq
         .reconstruct(&y, a.solver, &options, &observe_nothing, &on_tile)
-        .map_err(|e| format!("--solver {}: {e}", a.solver))?;
+        .map_err(|e| format!("--solver {}: {e}", a.solver).into());
+    let r = match (ranks.agree(r)?, acq.share()) {
+        (Reconstructed::Single(r), Some(share)) => {
+            Reconstructed::Single(share.gather_reconstruction(r)?)
+        }
+        (r, _) => r,
+    };
+    if !ranks.is_first() {
+        return Ok(());
+    }
     let mut r = Outcome::new(r, acq.architecture(), kp);
     // A coded aperture's blocked pixels reach no ADC: they are unobserved (−2 in the depth
     // map), judged apart from the observed ones, and filled from their neighbours on request.
@@ -284,7 +298,7 @@ fn reconstruct_files<T: Real + WritableElement>(
         "reconstruct {g} from {}: solver {}; {}; {:.3} s; {} of {} pixels with a return; wrote \
          {} (depth int32, scene {}).",
         match acq.rows() {
-            None => format!("K = {}", y.len()),
+            None => format!("K = {}{}", y.len(), architecture_note(&acq)),
             Some(rows) => format!(
                 "{rows} × {} = {} measurements{}",
                 acq.samples(),

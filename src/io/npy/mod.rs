@@ -27,10 +27,11 @@
 //! [`Error::File`] whose message starts with the path.
 
 use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::ops::Range;
 use std::path::Path;
 
-use ndarray::{ArrayD, Dimension, IxDyn, ShapeBuilder};
+use ndarray::{ArrayD, Axis, Dimension, IxDyn, ShapeBuilder};
 
 use crate::error::{Error, Result};
 use crate::real::Real;
@@ -45,8 +46,8 @@ use header::HeaderError;
 pub use header::{escape_all, MAX_HEADER_BYTES, MAX_NESTING};
 
 pub use read::{
-    read_code_sets, read_codes, read_depth, read_measurement_rows, read_measurements, read_pulse,
-    read_scene, ShapeExpectation,
+    read_code_band, read_code_sets, read_codes, read_depth, read_measurement_rows,
+    read_measurements, read_pulse, read_scene, ShapeExpectation,
 };
 pub use write::{
     stage_array, stage_code_sets, stage_codes, stage_masked_codes, stage_packed_code_sets,
@@ -212,6 +213,8 @@ struct Opened {
     header: NpyHeader,
     /// Little-endian data (`false` for big-endian files).
     little_endian: bool,
+    /// Where the data start in the file.
+    data_offset: u64,
     reader: BufReader<File>,
 }
 
@@ -292,6 +295,7 @@ fn open_npy(path: &Path) -> Result<Opened> {
     Ok(Opened {
         header: info,
         little_endian,
+        data_offset: raw.data_offset,
         reader,
     })
 }
@@ -336,8 +340,26 @@ element!(i32);
 
 /// Reads the data of an opened file as elements `E` (the dtype and the file's length have been
 /// checked), in C order. The data are decoded in blocks, so no second copy of the file is held.
-fn read_data<E: Element>(path: &Path, mut opened: Opened) -> Result<ArrayD<E>> {
-    let shape = opened.header.shape.clone();
+fn read_data<E: Element>(path: &Path, opened: Opened) -> Result<ArrayD<E>> {
+    let rows = 0..opened.header.shape.first().copied().unwrap_or(0);
+    read_data_rows(path, opened, 0, rows)
+}
+
+/// Reads the slice `rows` of axis `axis` of an opened file's data as elements `E`, in C order:
+/// for a C-order file, only those bytes (one contiguous run per index of the axes before
+/// `axis`); a Fortran-order file is read whole and sliced.
+fn read_data_rows<E: Element>(
+    path: &Path,
+    mut opened: Opened,
+    axis: usize,
+    rows: Range<usize>,
+) -> Result<ArrayD<E>> {
+    let full = opened.header.shape.clone();
+    let fortran = opened.header.fortran_order;
+    let mut shape = full.clone();
+    if !fortran && axis < shape.len() {
+        shape[axis] = rows.len();
+    }
     let len: usize = shape.iter().product();
     // The data, and the converted copy the readers make of it, must fit in memory.
     crate::limits::MemoryPlan::new()
@@ -354,6 +376,44 @@ fn read_data<E: Element>(path: &Path, mut opened: Opened) -> Result<ArrayD<E>> {
     values
         .try_reserve_exact(len)
         .map_err(|_| file_error(path, format!("not enough memory for {} values", len)))?;
+    if fortran || axis >= full.len() || rows == (0..full[axis]) {
+        read_values(path, &mut opened, len, &mut values)?;
+    } else {
+        let inner: usize = full[axis + 1..].iter().product();
+        let outer: usize = full[..axis].iter().product();
+        for o in 0..outer {
+            let first = (o * full[axis] + rows.start) * inner * E::SIZE;
+            opened
+                .reader
+                .seek(SeekFrom::Start(opened.data_offset + first as u64))
+                .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+            read_values(path, &mut opened, rows.len() * inner, &mut values)?;
+        }
+    }
+    let dim = IxDyn(&shape);
+    let mut a = if fortran {
+        ArrayD::from_shape_vec(dim.f(), values)
+    } else {
+        ArrayD::from_shape_vec(dim, values)
+    }
+    .map_err(|e| file_error(path, format!("cannot shape the data: {e}")))?;
+    if fortran && axis < full.len() {
+        a.slice_axis_inplace(Axis(axis), rows.into());
+    }
+    Ok(if a.is_standard_layout() {
+        a
+    } else {
+        a.as_standard_layout().into_owned()
+    })
+}
+
+/// Decodes the next `len` elements of an opened file into `values`, in blocks.
+fn read_values<E: Element>(
+    path: &Path,
+    opened: &mut Opened,
+    len: usize,
+    values: &mut Vec<E>,
+) -> Result<()> {
     let mut block = vec![0u8; (1 << 16) * E::SIZE];
     let mut left = len;
     while left > 0 {
@@ -375,18 +435,7 @@ fn read_data<E: Element>(path: &Path, mut opened: Opened) -> Result<ArrayD<E>> {
         );
         left -= n;
     }
-    let dim = IxDyn(&shape);
-    let a = if opened.header.fortran_order {
-        ArrayD::from_shape_vec(dim.f(), values)
-    } else {
-        ArrayD::from_shape_vec(dim, values)
-    }
-    .map_err(|e| file_error(path, format!("cannot shape the data: {e}")))?;
-    Ok(if a.is_standard_layout() {
-        a
-    } else {
-        a.as_standard_layout().into_owned()
-    })
+    Ok(())
 }
 
 /// Checks the number of dimensions and that no axis is empty.

@@ -1,5 +1,6 @@
 //! Reading the interchange arrays, checked against each other.
 
+use std::ops::Range;
 use std::path::Path;
 
 use ndarray::{Array2, ArrayD, Ix1, Ix2, Ix3};
@@ -10,8 +11,8 @@ use crate::real::Real;
 
 use super::super::file_error;
 use super::{
-    check_ndim, first_bad, index_text, into_dim, open_npy, read_data, read_real, shape_text,
-    wrong_dtype, NpyDtype,
+    check_ndim, first_bad, index_text, into_dim, open_npy, read_data, read_data_rows, read_real,
+    shape_text, wrong_dtype, NpyDtype,
 };
 
 /// Reads a scene: a float32 or float64 array of shape (M, N, K_s), converted to `T`.
@@ -173,20 +174,12 @@ pub fn read_codes(
     expect: &ShapeExpectation,
 ) -> Result<((usize, usize), Codes)> {
     let path = path.as_ref();
-    if let Some((shape, sets)) = read_packed_codes(path, expect, 3)? {
-        let codes = sets
-            .into_iter()
-            .next()
-            .ok_or_else(|| file_error(path, "no codes"))?;
-        return Ok(((shape[0], shape[1]), codes));
-    }
-    let (shape, codes) = read_dense_codes(path, expect, 3, "(M, N, K)")?;
-    let (m, n, k) = (shape[0], shape[1], shape[2]);
-    let flat = codes
-        .into_shape_with_order((m * n, k))
-        .map_err(|e| file_error(path, format!("cannot reshape the codes: {e}")))?;
-    let packed = Codes::from_dense(flat.view()).map_err(|e| file_error(path, e.to_string()))?;
-    Ok(((m, n), packed))
+    let (grid, sets) = read_code_rows(path, expect, 3, None)?;
+    let codes = sets
+        .into_iter()
+        .next()
+        .ok_or_else(|| file_error(path, "no codes"))?;
+    Ok((grid, codes))
 }
 
 /// Reads G code sets, one per ADC of a multi-ADC array: an int8 (or float32/float64) array of
@@ -205,20 +198,72 @@ pub fn read_code_sets(
     path: impl AsRef<Path>,
     expect: &ShapeExpectation,
 ) -> Result<((usize, usize), Vec<Codes>)> {
+    read_code_rows(path.as_ref(), expect, 4, None)
+}
+
+/// Reads the codes of the band `rows` of pixel rows only, of every code set: of an (M, N, K)
+/// codes file (or packed) as [`read_codes`] reads it, one code set; of a (G, M, N, K) file as
+/// [`read_code_sets`] reads it, G. Returns (M, N) of the whole file and each set's codes of
+/// the band's pixels (row-major). From a C-order file only the band's bytes are read (one run
+/// per code set); a Fortran-order file is read whole.
+///
+/// # Errors
+/// As [`read_codes`] and [`read_code_sets`] (bad values named by their index in the whole
+/// file); [`Error::File`] when `rows` is empty or beyond the file's M rows.
+pub fn read_code_band(
+    path: impl AsRef<Path>,
+    expect: &ShapeExpectation,
+    rows: Range<usize>,
+) -> Result<((usize, usize), Vec<Codes>)> {
     let path = path.as_ref();
-    if let Some((shape, sets)) = read_packed_codes(path, expect, 4)? {
-        return Ok(((shape[1], shape[2]), sets));
+    let ndim = super::read_header(path)?.shape.len();
+    read_code_rows(path, expect, if ndim == 4 { 4 } else { 3 }, Some(rows))
+}
+
+/// The codes of a file of `ndim` dimensions, (M, N, K) or (G, M, N, K), int8 or packed, of the
+/// pixel rows `rows` (all when None): the whole grid and every set's codes.
+fn read_code_rows(
+    path: &Path,
+    expect: &ShapeExpectation,
+    ndim: usize,
+    rows: Option<Range<usize>>,
+) -> Result<((usize, usize), Vec<Codes>)> {
+    if let Some((shape, sets)) = read_packed_codes(path, expect, ndim, rows.clone())? {
+        return Ok(((shape[ndim - 3], shape[ndim - 2]), sets));
     }
-    let (shape, codes) = read_dense_codes(path, expect, 4, "(G, M, N, K)")?;
-    let (sets, m, n, k) = (shape[0], shape[1], shape[2], shape[3]);
+    let axes = if ndim == 4 {
+        "(G, M, N, K)"
+    } else {
+        "(M, N, K)"
+    };
+    let (shape, codes) = read_dense_codes(path, expect, ndim, axes, rows.clone())?;
+    let (m, n, k) = (shape[ndim - 3], shape[ndim - 2], shape[ndim - 1]);
+    let band = rows.map_or(m, |r| r.len());
+    let sets = if ndim == 4 { shape[0] } else { 1 };
     let flat = codes
-        .into_shape_with_order((sets, m * n, k))
+        .into_shape_with_order((sets, band * n, k))
         .map_err(|e| file_error(path, format!("cannot reshape the codes: {e}")))?;
     let packed = flat
         .outer_iter()
         .map(|set| Codes::from_dense(set).map_err(|e| file_error(path, e.to_string())))
         .collect::<Result<Vec<_>>>()?;
     Ok(((m, n), packed))
+}
+
+/// Refuses a band of pixel rows that is empty or beyond the `m` rows of the codes.
+fn check_band(path: &Path, shape: &[usize], m: usize, rows: &Option<Range<usize>>) -> Result<()> {
+    match rows {
+        Some(r) if r.is_empty() || r.end > m => Err(file_error(
+            path,
+            format!(
+                "codes of shape {} have {m} pixel rows: rows {}..{} are not a band of them",
+                shape_text(shape),
+                r.start,
+                r.end
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Reads a uint8 codes file of `ndim` dimensions whose last three axes are (M, N, ⌈K/8⌉), as
@@ -229,6 +274,7 @@ fn read_packed_codes(
     path: &Path,
     expect: &ShapeExpectation,
     ndim: usize,
+    rows: Option<Range<usize>>,
 ) -> Result<Option<(Vec<usize>, Vec<Codes>)>> {
     check_expectation(expect)?;
     let opened = open_npy(path)?;
@@ -261,20 +307,23 @@ fn read_packed_codes(
             ),
         ));
     }
-    let a = read_data::<u8>(path, opened)?;
+    check_band(path, &h.shape, m, &rows)?;
+    let (first, band) = rows.as_ref().map_or((0, m), |r| (r.start, r.len()));
+    let a = read_data_rows::<u8>(path, opened, ndim - 3, first..first + band)?;
     let bytes = a
         .as_slice()
         .ok_or_else(|| file_error(path, "cannot read the packed codes in C order"))?;
     let pad = 8 * nb - k;
-    let per_set = m * n * nb;
+    let per_set = band * n * nb;
     if pad > 0 {
         let mask = (1u8 << pad) - 1;
         if let Some(at) = (0..bytes.len() / nb).find(|p| bytes[p * nb + nb - 1] & mask != 0) {
-            let pixel = at % (m * n);
+            let pixel = at % (band * n);
+            let row = first + pixel / n;
             let index = if ndim == 4 {
-                format!("({}, {}, {})", at / (m * n), pixel / n, pixel % n)
+                format!("({}, {row}, {})", at / (band * n), pixel % n)
             } else {
-                format!("({}, {})", pixel / n, pixel % n)
+                format!("({row}, {})", pixel % n)
             };
             return Err(file_error(
                 path,
@@ -288,7 +337,9 @@ fn read_packed_codes(
     }
     let sets = bytes
         .chunks_exact(per_set)
-        .map(|set| Codes::from_packbits(set, m * n, k).map_err(|e| file_error(path, e.to_string())))
+        .map(|set| {
+            Codes::from_packbits(set, band * n, k).map_err(|e| file_error(path, e.to_string()))
+        })
         .collect::<Result<Vec<_>>>()?;
     Ok(Some((h.shape, sets)))
 }
@@ -340,6 +391,7 @@ fn read_dense_codes(
     expect: &ShapeExpectation,
     ndim: usize,
     axes: &str,
+    rows: Option<Range<usize>>,
 ) -> Result<(Vec<usize>, ArrayD<i8>)> {
     check_expectation(expect)?;
     let opened = open_npy(path)?;
@@ -369,25 +421,37 @@ fn read_dense_codes(
             ),
         ));
     }
+    check_band(path, &h.shape, m, &rows)?;
+    let band = rows.unwrap_or(0..m);
+    let first = band.start;
     let bad_value = |idx: &[usize], v: String| {
+        // The index in the whole file.
+        let mut idx = idx.to_vec();
+        idx[ndim - 3] += first;
         file_error(
             path,
             format!(
                 "codes value {v} at index {} is not in {{-1, 0, 1}}",
-                index_text(idx)
+                index_text(&idx)
             ),
         )
     };
     let codes: ArrayD<i8> = match h.dtype {
         NpyDtype::Int8 => {
-            let a = read_data::<i8>(path, opened)?;
+            let a = read_data_rows::<i8>(path, opened, ndim - 3, band)?;
             if let Some((i, v)) = first_bad(&a, |v| (-1..=1).contains(&v)) {
                 return Err(bad_value(&i, v.to_string()));
             }
             a
         }
-        NpyDtype::Float32 => float_codes(read_data::<f32>(path, opened)?, bad_value)?,
-        NpyDtype::Float64 => float_codes(read_data::<f64>(path, opened)?, bad_value)?,
+        NpyDtype::Float32 => float_codes(
+            read_data_rows::<f32>(path, opened, ndim - 3, band)?,
+            bad_value,
+        )?,
+        NpyDtype::Float64 => float_codes(
+            read_data_rows::<f64>(path, opened, ndim - 3, band)?,
+            bad_value,
+        )?,
         ref other => return Err(wrong_dtype(path, role, other, CODE_DTYPES)),
     };
     Ok((h.shape, codes))

@@ -1,0 +1,342 @@
+//! The command line under `mpirun -n R` (feature `mpi`): `forward`, `adjoint`, `dottest` and
+//! `reconstruct` split the pixel rows over R = 2 and 3 processes and give the one-process
+//! outputs (depth maps identical, scenes and measurements within round-off), for int8 codes,
+//! packed codes of two ADCs and seeded codes (streamed); bad inputs end every process with one
+//! error line from the first and status 1, and no output.
+//!
+//! Needs `mpirun` (Debian: openmpi-bin); as root, OpenMPI's run-as-root variables are set here.
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use ndarray::ArrayD;
+use ndarray_npy::read_npy;
+
+use crate::cli_support::{assert_one_line_error, rdlidar, s, stderr, stdout, TempDir};
+
+/// How long one job may take before it is killed.
+const JOB_LIMIT: Duration = Duration::from_secs(120);
+
+/// Runs the binary under `mpirun -q -n ranks` (one rayon thread per process), killed after
+/// [`JOB_LIMIT`].
+fn mpirun(ranks: usize, args: &[&str]) -> Output {
+    let mut child = Command::new("mpirun")
+        .args([
+            "-q",
+            "-n",
+            &ranks.to_string(),
+            env!("CARGO_BIN_EXE_rdlidar"),
+        ])
+        .args(args)
+        .env("RAYON_NUM_THREADS", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mpirun (Debian: openmpi-bin) runs");
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > JOB_LIMIT {
+            let _ = child.kill();
+            panic!("mpirun -n {ranks} {args:?} did not end in {JOB_LIMIT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn ok(out: Output, what: &str) -> String {
+    assert!(
+        out.status.success(),
+        "{what}: {}\n{}",
+        stdout(&out),
+        stderr(&out)
+    );
+    stdout(&out)
+}
+
+fn load_f64(p: &Path) -> ArrayD<f64> {
+    read_npy(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// max |a − b| / max |a|.
+fn rel_diff(a: &ArrayD<f64>, b: &ArrayD<f64>) -> f64 {
+    assert_eq!(a.shape(), b.shape());
+    let scale = a
+        .iter()
+        .fold(0.0f64, |m, v| m.max(v.abs()))
+        .max(f64::MIN_POSITIVE);
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
+}
+
+/// An acquisition written by `simulate`: its folder and codes file.
+struct Acquisition {
+    dir: std::path::PathBuf,
+    codes: &'static str,
+    ks: usize,
+}
+
+fn simulate(tmp: &TempDir, name: &str, extra: &[&str], codes: &'static str) -> Acquisition {
+    let dir = tmp.path(name);
+    let mut args = vec!["simulate", "--scene", "paper", "--quiet", "--out", s(&dir)];
+    args.extend_from_slice(extra);
+    ok(rdlidar(&args), name);
+    Acquisition { dir, codes, ks: 16 }
+}
+
+impl Acquisition {
+    fn file(&self, name: &str) -> String {
+        s(&self.dir.join(name)).to_string()
+    }
+}
+
+#[test]
+fn forward_adjoint_dottest_and_reconstruct_under_mpirun_give_the_one_process_outputs() {
+    let tmp = TempDir::new("mpi-cli");
+    let sets = [
+        // int8 codes of one ADC, compressive (auto goes through TV on the depth map).
+        simulate(
+            &tmp,
+            "int8",
+            &["--size", "12x12x16", "--pulse-len", "200"],
+            "codes.npy",
+        ),
+        // Packed codes of two ADCs, 13 rows (bands of unequal height).
+        simulate(
+            &tmp,
+            "adcs",
+            &[
+                "--size",
+                "13x10x16",
+                "--pulse-len",
+                "300",
+                "--adcs",
+                "2",
+                "--codes-format",
+                "packed",
+            ],
+            "codes.npy",
+        ),
+        // Seeded codes, regenerated block by block by each process for its rows.
+        simulate(
+            &tmp,
+            "seeded",
+            &[
+                "--size",
+                "13x10x16",
+                "--pulse-len",
+                "1500",
+                "--codes-format",
+                "seed",
+            ],
+            "meta.json",
+        ),
+    ];
+    for acq in &sets {
+        let name = acq.dir.file_name().unwrap().to_string_lossy().into_owned();
+        let stream: &[&str] = if acq.codes == "meta.json" {
+            &["--stream-codes"]
+        } else {
+            &[]
+        };
+        let ks = acq.ks.to_string();
+        let run = |ranks: usize, tag: &str| -> Vec<String> {
+            let out = |what: &str| s(&tmp.path(&format!("{name}-{tag}-{what}.npy"))).to_string();
+            let files = [
+                "--pulse".to_string(),
+                acq.file("pulse.npy"),
+                "--codes".to_string(),
+                acq.file(acq.codes),
+            ];
+            let mut lines = Vec::new();
+            let mut go = |args: Vec<String>| {
+                let mut all: Vec<&str> = args.iter().map(String::as_str).collect();
+                all.extend_from_slice(stream);
+                lines.push(ok(
+                    mpirun(ranks, &all),
+                    &format!("{name} -n {ranks} {}", args[0]),
+                ));
+            };
+            let mut forward = vec!["forward".to_string()];
+            forward.extend(files.iter().cloned());
+            forward.extend([
+                "--scene".into(),
+                acq.file("scene.npy"),
+                "--out".into(),
+                out("y"),
+            ]);
+            go(forward);
+            let measured = [
+                "--meas".to_string(),
+                acq.file("meas.npy"),
+                "--depth-bins".to_string(),
+                ks.clone(),
+            ];
+            let mut adjoint = vec!["adjoint".to_string(), "--debiased".to_string()];
+            adjoint.extend(files.iter().cloned());
+            adjoint.extend(measured.iter().cloned());
+            adjoint.extend(["--out".into(), out("xt")]);
+            go(adjoint);
+            let mut dottest = vec!["dottest".to_string()];
+            dottest.extend(files.iter().cloned());
+            dottest.extend(["--depth-bins".into(), ks.clone()]);
+            go(dottest);
+            for solver in ["auto", "cgls"] {
+                let mut rec = vec!["reconstruct".to_string(), "--quiet".to_string()];
+                rec.extend(files.iter().cloned());
+                rec.extend(measured.iter().cloned());
+                rec.extend([
+                    "--solver".into(),
+                    solver.into(),
+                    "--max-iter".into(),
+                    "40".into(),
+                    "--out-depth".into(),
+                    out(&format!("{solver}-depth")),
+                    "--out-scene".into(),
+                    out(&format!("{solver}-scene")),
+                ]);
+                go(rec);
+            }
+            lines
+        };
+        let one = run(1, "n1");
+        for ranks in [2, 3] {
+            let tag = format!("n{ranks}");
+            let lines = run(ranks, &tag);
+            let file = |t: &str, what: &str| tmp.path(&format!("{name}-{t}-{what}.npy"));
+            // Measurements and backprojections: the same up to the order of the sums.
+            for (what, tol) in [("y", 1e-13), ("xt", 1e-12)] {
+                let d = rel_diff(&load_f64(&file("n1", what)), &load_f64(&file(&tag, what)));
+                assert!(d <= tol, "{name} -n {ranks}: {what} differs by {d:e}");
+            }
+            for solver in ["auto", "cgls"] {
+                let depth = |t: &str| -> ArrayD<i32> {
+                    read_npy(file(t, &format!("{solver}-depth"))).unwrap()
+                };
+                assert_eq!(
+                    depth("n1"),
+                    depth(&tag),
+                    "{name} -n {ranks} {solver}: depth maps"
+                );
+                let scene = |t: &str| load_f64(&file(t, &format!("{solver}-scene")));
+                let d = rel_diff(&scene("n1"), &scene(&tag));
+                assert!(
+                    d <= 1e-8,
+                    "{name} -n {ranks} {solver}: scenes differ by {d:e}"
+                );
+            }
+            // Every command says how it split the rows; the reconstructions' reports (method,
+            // iterations, termination, applications) are the one process's.
+            let note = format!("pixel rows split over {ranks} processes");
+            for (a, b) in one.iter().zip(&lines) {
+                assert!(b.contains(&note), "{name} -n {ranks}: {b}");
+                if a.starts_with("reconstruct") {
+                    let report = |l: &str| l.split("; ").nth(1).map(str::to_string);
+                    assert_eq!(report(a), report(b), "{name} -n {ranks}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output() {
+    let tmp = TempDir::new("mpi-cli-faults");
+    let acq = simulate(
+        &tmp,
+        "a",
+        &["--size", "5x6x8", "--pulse-len", "100"],
+        "codes.npy",
+    );
+    let (depth, scene) = (tmp.path("d.npy"), tmp.path("x.npy"));
+    let reconstruct = |extra: &[&str], ks: &str| -> Vec<String> {
+        let mut v: Vec<String> = [
+            "reconstruct",
+            "--solver",
+            "cgls",
+            "--pulse",
+            &acq.file("pulse.npy"),
+            "--codes",
+            &acq.file("codes.npy"),
+            "--meas",
+            &acq.file("meas.npy"),
+            "--depth-bins",
+            ks,
+            "--out-depth",
+            s(&depth),
+            "--out-scene",
+            s(&scene),
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect();
+        v.extend(extra.iter().map(|a| a.to_string()));
+        v
+    };
+    let truncated = tmp.path("truncated.npy");
+    let bytes = std::fs::read(acq.dir.join("codes.npy")).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() - 7]).unwrap();
+    let wrong_truth = tmp.path("truth.npy");
+    std::fs::copy(acq.dir.join("pulse.npy"), &wrong_truth).unwrap();
+    let cases: Vec<(usize, Vec<String>, Vec<&str>)> = vec![
+        // Measurements of another K: every process finds it.
+        (3, reconstruct(&[], "9"), vec!["meas.npy", "K_p + K_s − 1"]),
+        // A truncated codes file.
+        (
+            2,
+            {
+                let mut v = reconstruct(&[], "8");
+                v[6] = s(&truncated).to_string();
+                v
+            },
+            vec!["truncated.npy", "truncated"],
+        ),
+        // A bad true scene, read by the first process only.
+        (
+            2,
+            reconstruct(&["--truth", s(&wrong_truth)], "8"),
+            vec!["truth.npy"],
+        ),
+        // More processes than pixel rows.
+        (
+            6,
+            reconstruct(&[], "8"),
+            vec!["mpirun -n 6", "5 pixel rows"],
+        ),
+        // Tiles are not split by rows.
+        (
+            2,
+            reconstruct(&["--tiles", "2x3"], "8"),
+            vec!["--tiles 2x3", "one process"],
+        ),
+        // A command that does not split its work.
+        (
+            2,
+            ["info", "--size", "4x4x4", "--pulse-len", "10"]
+                .iter()
+                .map(|a| a.to_string())
+                .collect(),
+            vec!["rdlidar info runs on one process", "2 processes"],
+        ),
+    ];
+    for (ranks, args, needles) in cases {
+        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = mpirun(ranks, &argv);
+        assert_one_line_error(&out, &needles);
+        assert!(
+            !depth.exists() && !scene.exists(),
+            "{argv:?}: an output was written"
+        );
+        let leftovers: Vec<String> = crate::cli_support::listing(&tmp.0)
+            .into_iter()
+            .filter(|f| f != "a" && f != "truncated.npy" && f != "truth.npy")
+            .collect();
+        assert!(leftovers.is_empty(), "{argv:?}: left {leftovers:?}");
+    }
+}
