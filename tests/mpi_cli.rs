@@ -1,8 +1,9 @@
 //! The command line under `mpirun -n R` (feature `mpi`): `forward`, `adjoint`, `dottest` and
 //! `reconstruct` split the pixel rows over R = 2 and 3 processes and give the one-process
 //! outputs (depth maps identical, scenes and measurements within round-off), for int8 codes,
-//! packed codes of two ADCs and seeded codes (streamed); bad inputs end every process with one
-//! error line from the first and status 1, and no output.
+//! packed codes of two ADCs and seeded codes (streamed), and `reconstruct` of tiled arrays deals
+//! the tiles to the processes; bad inputs end every process with one error line from the first
+//! and status 1, and no output.
 //!
 //! Needs `mpirun` (Debian: openmpi-bin); as root, OpenMPI's run-as-root variables are set here.
 
@@ -309,11 +310,33 @@ fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output()
             reconstruct(&[], "8"),
             vec!["mpirun -n 6", "5 pixel rows"],
         ),
-        // Tiles are not split by rows.
+        // More processes than tiles.
+        (
+            5,
+            reconstruct(&["--tiles", "3x6"], "8"),
+            vec!["mpirun -n 5", "2 tiles of 3x6"],
+        ),
+        // The block-diagonal operator of tiles is one process's.
         (
             2,
-            reconstruct(&["--tiles", "2x3"], "8"),
-            vec!["--tiles 2x3", "one process"],
+            [
+                "forward",
+                "--pulse",
+                &acq.file("pulse.npy"),
+                "--codes",
+                &acq.file("codes.npy"),
+            ]
+            .iter()
+            .map(|a| a.to_string())
+            .chain([
+                "--scene".into(),
+                acq.file("scene.npy"),
+                "--tiles".into(),
+                "2x3".into(),
+            ])
+            .chain(["--out".into(), s(&depth).to_string()])
+            .collect(),
+            vec!["rdlidar forward --tiles runs on one process"],
         ),
         // A command that does not split its work.
         (
@@ -338,5 +361,98 @@ fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output()
             .filter(|f| f != "a" && f != "truncated.npy" && f != "truth.npy")
             .collect();
         assert!(leftovers.is_empty(), "{argv:?}: left {leftovers:?}");
+    }
+}
+
+#[test]
+fn reconstruct_deals_the_tiles_of_a_tiled_array_to_the_processes() {
+    let tmp = TempDir::new("mpi-cli-tiles");
+    let tiles = ["--tiles", "5x6"];
+    let sets = [
+        simulate(
+            &tmp,
+            "int8",
+            &["--size", "23x17x16", "--pulse-len", "400", "--tiles", "5x6"],
+            "codes.npy",
+        ),
+        simulate(
+            &tmp,
+            "seeded",
+            &[
+                "--size",
+                "23x17x16",
+                "--pulse-len",
+                "400",
+                "--tiles",
+                "5x6",
+                "--codes-format",
+                "seed",
+            ],
+            "meta.json",
+        ),
+    ];
+    for acq in &sets {
+        let name = acq.dir.file_name().unwrap().to_string_lossy().into_owned();
+        for solver in ["auto", "cgls"] {
+            let run = |ranks: usize| -> (String, ArrayD<i32>, ArrayD<f64>) {
+                let (d, x) = (
+                    tmp.path(&format!("{name}-{solver}-{ranks}-d.npy")),
+                    tmp.path(&format!("{name}-{solver}-{ranks}-x.npy")),
+                );
+                let (pulse, codes, meas) = (
+                    acq.file("pulse.npy"),
+                    acq.file(acq.codes),
+                    acq.file("meas.npy"),
+                );
+                let mut args = vec![
+                    "reconstruct",
+                    "--quiet",
+                    "--pulse",
+                    &pulse,
+                    "--codes",
+                    &codes,
+                    "--meas",
+                    &meas,
+                    "--depth-bins",
+                    "16",
+                    "--solver",
+                    solver,
+                    "--out-depth",
+                    s(&d),
+                    "--out-scene",
+                    s(&x),
+                ];
+                args.extend_from_slice(&tiles);
+                let line = ok(mpirun(ranks, &args), &format!("{name} {solver} -n {ranks}"));
+                (line, read_npy(&d).unwrap(), load_f64(&x))
+            };
+            let (one, depth, scene) = run(1);
+            // 15 tiles on 2, 4 and 15 processes (one tile each).
+            for ranks in [2, 4, 15] {
+                let (line, d, x) = run(ranks);
+                assert_eq!(d, depth, "{name} {solver} -n {ranks}: depth maps");
+                let diff = rel_diff(&scene, &x);
+                assert!(
+                    diff <= 1e-12,
+                    "{name} {solver} -n {ranks}: scenes differ by {diff:e}"
+                );
+                assert!(
+                    line.contains(&format!("tiles dealt to {ranks} processes")),
+                    "{line}"
+                );
+                // The tiles' methods and applications are the one process's.
+                let summary = |l: &str| -> Vec<String> {
+                    l.split("; ").skip(1).take(1).map(str::to_string).collect()
+                };
+                let methods = |l: &str| {
+                    l.split(": solver ")
+                        .nth(1)
+                        .and_then(|r| r.split(" (").next())
+                        .map(str::to_string)
+                };
+                assert_eq!(summary(&line), summary(&one), "{name} {solver} -n {ranks}");
+                assert_eq!(methods(&line), methods(&one), "{name} {solver} -n {ranks}");
+            }
+        }
     }
 }

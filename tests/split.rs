@@ -986,11 +986,83 @@ fn codes_files_split_over_parts_give_each_part_its_rows_only() {
         g,
         acq.pulse().to_vec(),
         acq.codes().clone(),
-        Some(rdlidar::lidar::TileSize { m: 5, n: 5 }),
+        Some(rdlidar::lidar::TileSize { m: 7, n: 10 }),
         Streaming::Never,
     )
     .unwrap();
-    for r in in_spaces(2, &|space| tiled.split_over(space).map(|_| ())) {
-        assert!(r.unwrap_err().to_string().contains("tiles"));
+    for r in in_spaces(3, &|space| tiled.split_over(space).map(|_| ())) {
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("3 processes for the 2 tiles"), "{e}");
+    }
+}
+
+#[test]
+fn the_tiles_of_an_acquisition_dealt_to_parts_are_reconstructed_as_on_one() {
+    let g = Geometry::new(23, 17, 16).unwrap();
+    let truth = paper_scene(g).unwrap();
+    let kp = 400;
+    let pulse = Pulse::<f64>::bernoulli(kp, 3).unwrap().into_inner();
+    let k = g.samples(kp);
+    let tile = rdlidar::lidar::TileSize { m: 5, n: 6 };
+    let options = ReconstructOptions::default();
+    for codes in [
+        CodeStore::Held(vec![Arc::new(
+            Codes::random_binary(g.pixels(), k, 4).unwrap(),
+        )]),
+        CodeStore::Seeded(SeededCodes::new(8, 1, g.pixels(), k).unwrap()),
+    ] {
+        let acq = Acquisition::new(g, pulse.clone(), codes, Some(tile), Streaming::Never).unwrap();
+        let op = acq.operator::<f64>().unwrap();
+        let mut y = vec![0.0; op.nrows()];
+        op.apply(truth.as_slice(), &mut y);
+        let tiled = |r: Reconstructed<f64>| match r {
+            Reconstructed::Tiled(r) => r,
+            Reconstructed::Single(_) => unreachable!("tiled"),
+        };
+        for method in [Method::Auto, Method::Cgls] {
+            let whole = tiled(
+                acq.reconstruct(&y, method, &options, &observe_nothing, &|_| {})
+                    .unwrap(),
+            );
+            // 15 tiles over 2 and 4 parts: bands of tile rows that share a tile row.
+            for parts in [2, 4] {
+                let seen = AtomicUsize::new(0);
+                let split = in_spaces(parts, &|space| {
+                    let part = acq.split_over(space).unwrap();
+                    let on_tile = |t: &rdlidar::recon::TileReconstruction<f64>| {
+                        // Whole places: the tile's rows and index in the whole array.
+                        assert_eq!(t.place, whole.tiles[t.place.index].place);
+                        seen.fetch_add(1, Ordering::Relaxed);
+                    };
+                    tiled(
+                        part.reconstruct(&y, method, &options, &observe_nothing, &on_tile)
+                            .unwrap(),
+                    )
+                });
+                assert_eq!(seen.load(Ordering::Relaxed), 15, "every tile once");
+                for r in split {
+                    assert_eq!(r.depth.depth, whole.depth.depth, "{method} in {parts}");
+                    assert_eq!(
+                        r.methods_used(),
+                        whole.methods_used(),
+                        "{method} in {parts}"
+                    );
+                    assert_eq!(r.applies(), whole.applies(), "{method} in {parts}");
+                    assert_eq!(r.regime(), whole.regime());
+                    let places: Vec<_> = r.tiles.iter().map(|t| t.place).collect();
+                    let want: Vec<_> = whole.tiles.iter().map(|t| t.place).collect();
+                    assert_eq!(places, want);
+                    let (a, b) = (whole.scene.as_slice(), r.scene.as_slice());
+                    let worst = a
+                        .iter()
+                        .zip(b)
+                        .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                    assert!(
+                        worst <= 1e-12,
+                        "{method} in {parts}: scenes differ by {worst:e}"
+                    );
+                }
+            }
+        }
     }
 }

@@ -15,7 +15,6 @@ use std::sync::Arc;
 
 use crate::space::Space;
 
-use super::share::refuse_tiles;
 use super::{count_of, held, plan, streams, Acquisition, CodeStore, Share, Streaming, Use};
 
 /// The codes file of an acquisition, described from its header (or its `meta.json`) and
@@ -237,14 +236,15 @@ impl AcquisitionFiles {
     /// ([`Acquisition::split_over`]). With one part, unchanged.
     ///
     /// # Errors
-    /// [`Share::of`]: more parts than pixel rows; [`Error::InvalidParameter`] (`tiles`) for a
-    /// tiled acquisition.
+    /// [`Share::of`] or [`Share::of_tiles`]: more parts than pixel rows, or than tiles.
     pub fn split_over(mut self, space: Arc<dyn Space>) -> Result<Self> {
         if space.parts() == 1 {
             return Ok(self);
         }
-        refuse_tiles(self.architecture, self.names.tiles)?;
-        let share = Share::of(space, self.geometry)?;
+        let share = match self.architecture {
+            Architecture::Tiles(t) => Share::of_tiles(space, self.geometry, t)?,
+            _ => Share::of(space, self.geometry)?,
+        };
         // Whether this process's seeded codes are streamed is decided on its band.
         if let (Some(_), Streaming::Never) = (self.seeded, self.streaming) {
             self.streamed = streams(

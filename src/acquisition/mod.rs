@@ -312,7 +312,8 @@ impl Acquisition {
 
     /// Rows of the measurements: `None` for the (K,) vector of one ADC, `Some(R)` for (R, K).
     pub fn rows(&self) -> Option<usize> {
-        self.architecture.rows(self.geometry.m, self.geometry.n)
+        let g = self.whole_geometry();
+        self.architecture.rows(g.m, g.n)
     }
 
     /// The number of measurements: K, or R·K for R ADCs.
@@ -430,6 +431,16 @@ impl Acquisition {
     pub fn operator_with_pulse<T: Real>(&self, pulse: Vec<T>) -> Result<BoxedOperator<T>> {
         self.check_pulse_len(pulse.len())?;
         if let Architecture::Tiles(t) = self.architecture {
+            if self.share.is_some() {
+                return Err(Error::param(
+                    "tiles",
+                    format!(
+                        "the tiles of {t} are dealt to processes: each process reconstructs its \
+                         own (Acquisition::reconstruct); the block-diagonal operator of the \
+                         whole array is one process's"
+                    ),
+                ));
+            }
             let g = self.geometry;
             let groups = tiles(g, t.m, t.n)?;
             return match &self.codes {
@@ -627,10 +638,20 @@ impl Acquisition {
         };
         let r = if matches!(self.architecture, Architecture::Tiles(_)) {
             let pulse = pulse_in::<T>(&self.pulse)?;
-            self.tiled(&pulse)?
-                .cancelled_by(cancel)
-                .reconstruct_observed(y, method, options, observe, on_tile)
-                .map(Reconstructed::Tiled)
+            let tiled = self.tiled(&pulse)?.cancelled_by(cancel);
+            match self.share.as_ref().and_then(|s| Some((s, s.tiles()?))) {
+                None => tiled
+                    .reconstruct_observed(y, method, options, observe, on_tile)
+                    .map(Reconstructed::Tiled),
+                Some((share, mine)) => self.reconstruct_dealt(
+                    &tiled,
+                    share,
+                    mine,
+                    (y, method, options),
+                    observe,
+                    on_tile,
+                ),
+            }
         } else {
             let op = self.lidar_operator::<T>()?;
             let op = Cancellable::new(op, cancel);

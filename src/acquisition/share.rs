@@ -4,7 +4,8 @@
 
 use std::ops::Range;
 
-use crate::space::{my_band, Space};
+use crate::recon::{assemble_tiles, decode_tiles, encode_tile};
+use crate::space::{first_failure, my_band, Space};
 
 use super::*;
 
@@ -15,6 +16,9 @@ pub struct Share {
     space: Arc<dyn Space>,
     rows: Range<usize>,
     whole: Geometry,
+    /// For a tiled array: the tile size and the tiles dealt to this part (its rows are those
+    /// of the tile rows they lie in).
+    tiles: Option<(TileSize, Range<usize>)>,
 }
 
 impl Share {
@@ -36,7 +40,55 @@ impl Share {
             ));
         }
         let rows = my_band(&*space, whole.m);
-        Ok(Share { space, rows, whole })
+        Ok(Share {
+            space,
+            rows,
+            whole,
+            tiles: None,
+        })
+    }
+
+    /// The tiles of `tile` pixels of `whole` dealt to this part of `space`: an even share of
+    /// the tiles in row-major order ([`band`](crate::space::band) of their indices), with the
+    /// pixel rows of the tile rows they lie in (tiles solve alone: no communication until their
+    /// results are gathered).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`parts`) when there are more parts than tiles.
+    pub fn of_tiles(space: Arc<dyn Space>, whole: Geometry, tile: TileSize) -> Result<Self> {
+        let places = tile_places(whole, tile)?;
+        let parts = space.parts();
+        if parts > places.len() {
+            return Err(Error::param(
+                "parts",
+                format!(
+                    "{parts} processes for the {} tiles of {tile} of {whole}: the tiles are \
+                     dealt to the processes, at most one process per tile",
+                    places.len()
+                ),
+            ));
+        }
+        let mine = crate::space::band(places.len(), parts, space.part());
+        let (first, last) = (places[mine.start], places[mine.end - 1]);
+        Ok(Share {
+            space,
+            rows: first.row..last.row + last.geometry.m,
+            whole,
+            tiles: Some((tile, mine)),
+        })
+    }
+
+    /// For a tiled array, the tiles dealt to this part.
+    pub fn tiles(&self) -> Option<Range<usize>> {
+        self.tiles.as_ref().map(|(_, r)| r.clone())
+    }
+
+    /// The index in the whole array of the first tile of this part's rows.
+    pub(crate) fn first_tile_of_rows(&self) -> usize {
+        match self.tiles {
+            Some((t, _)) => self.rows.start / t.m * self.whole.n.div_ceil(t.n),
+            None => 0,
+        }
     }
 
     /// The space the parts combine through.
@@ -82,6 +134,54 @@ impl Share {
     pub fn rows_of<'a, T>(&self, whole: &'a [T], per_pixel: usize) -> &'a [T] {
         let p = self.pixels();
         &whole[p.start * per_pixel..p.end * per_pixel]
+    }
+
+    /// The whole tiled reconstruction from this part's tiles, `local` (on the grid of this
+    /// part's rows, as [`TiledArray::only`](crate::recon::TiledArray::only) gives it), in
+    /// every part: each part's tiles gathered and stitched. The tiles of other parts carry
+    /// their scene, depth map, method and report counts, without histories or auto's stages.
+    /// The parts first agree on failure: if any part's `local` is an error, every part returns
+    /// one (its own, or the first failing part's).
+    ///
+    /// # Errors
+    /// A part's error; [`Error::InvalidParameter`] (`parts`) for another part's.
+    pub fn gather_tiled<T: Real>(
+        &self,
+        local: Result<TiledReconstruction<T>>,
+        samples: usize,
+    ) -> Result<TiledReconstruction<T>> {
+        let message = local.as_ref().err().map(ToString::to_string);
+        match first_failure(&*self.space, message.as_deref()) {
+            Some((part, _)) if part == self.space.part() => return local,
+            Some((part, m)) => {
+                return Err(Error::param("parts", format!("process {part}: {m}")));
+            }
+            None => {}
+        }
+        let local = local?;
+        let Some((tile, _)) = self.tiles else {
+            return Err(Error::param(
+                "tiles",
+                "the acquisition's tiles are not dealt to parts",
+            ));
+        };
+        let first = self.first_tile_of_rows();
+        let mut values = Vec::new();
+        for t in &local.tiles {
+            let mut t = t.clone();
+            t.place.index += first;
+            t.place.row += self.rows.start;
+            values.extend(encode_tile(&t));
+        }
+        let all = self.space.gather(&values);
+        let places = tile_places(self.whole, tile)?;
+        let tiles = decode_tiles(&all, &places, samples)?;
+        let seconds = crate::space::max(&*self.space, local.elapsed.as_secs_f64());
+        assemble_tiles(
+            self.whole,
+            tiles,
+            std::time::Duration::from_secs_f64(seconds),
+        )
     }
 
     /// The whole reconstruction from this part's: its scene and depth map gathered from every
@@ -131,15 +231,19 @@ impl Acquisition {
     /// local). The reconstructions then run on every part at once and give each its rows of the
     /// whole one's result. With one part, the acquisition itself.
     ///
+    /// A tiled acquisition's tiles are dealt to the parts instead ([`Share::of_tiles`]): each
+    /// holds the codes of the tile rows its tiles lie in and solves its tiles alone.
+    ///
     /// # Errors
-    /// [`Share::of`]; [`Error::InvalidParameter`] (`tiles`) for a tiled acquisition (its tiles
-    /// are independent problems, reconstructed whole).
+    /// [`Share::of`] or [`Share::of_tiles`]: more parts than pixel rows, or than tiles.
     pub fn split_over(&self, space: Arc<dyn Space>) -> Result<Acquisition> {
         if space.parts() == 1 {
             return Ok(self.clone());
         }
-        refuse_tiles(self.architecture, "tiles")?;
-        let share = Share::of(space, self.geometry)?;
+        let share = match self.architecture {
+            Architecture::Tiles(t) => Share::of_tiles(space, self.geometry, t)?,
+            _ => Share::of(space, self.geometry)?,
+        };
         let pixels: Vec<usize> = share.pixels().collect();
         let codes = match &self.codes {
             CodeStore::Held(sets) => CodeStore::Held(
@@ -180,6 +284,42 @@ impl Acquisition {
         })
     }
 
+    /// A tiled acquisition's share: solves the tiles `mine` (whole indices) of `tiled` (the
+    /// array of this part's rows) from the whole measurements, then gathers every part's tiles
+    /// ([`Share::gather_tiled`]). `observe` and `on_tile` see the whole array's tile indices and
+    /// places.
+    pub(crate) fn reconstruct_dealt<T: Real>(
+        &self,
+        tiled: &TiledArray<'_, T>,
+        share: &Share,
+        mine: Range<usize>,
+        (y, method, options): (&[T], Method, &ReconstructOptions),
+        observe: &(dyn Fn(usize, &IterationInfo<'_, T>) -> Control + Sync),
+        on_tile: &(dyn Fn(&TileReconstruction<T>) + Sync),
+    ) -> Result<Reconstructed<T>> {
+        let (k, first) = (self.samples(), share.first_tile_of_rows());
+        let here = self.tile_places().len();
+        let rows = share.rows.start;
+        let observe = |i: usize, info: &IterationInfo<'_, T>| observe(i + first, info);
+        let on_tile = |t: &TileReconstruction<T>| {
+            let mut t = t.clone();
+            t.place.index += first;
+            t.place.row += rows;
+            on_tile(&t);
+        };
+        let local = match y.get(first * k..(first + here) * k) {
+            Some(y) => (*tiled)
+                .only(mine.start - first..mine.end - first)
+                .reconstruct_observed(y, method, options, &observe, &on_tile),
+            None => Err(Error::shape(
+                "a part's tiles' measurements",
+                (first + here) * k,
+                y.len(),
+            )),
+        };
+        share.gather_tiled(local, k).map(Reconstructed::Tiled)
+    }
+
     /// How the pixel rows are split over processes, when they are.
     pub fn share(&self) -> Option<&Share> {
         self.share.as_ref()
@@ -189,20 +329,5 @@ impl Acquisition {
     /// acquisition make together.
     pub fn whole_geometry(&self) -> Geometry {
         self.share.as_ref().map_or(self.geometry, Share::whole)
-    }
-}
-
-/// Refuses to split a tiled acquisition by rows; `flag` names the tile size.
-pub(crate) fn refuse_tiles(architecture: Architecture, flag: &str) -> Result<()> {
-    match architecture {
-        Architecture::Tiles(t) => Err(Error::param(
-            "tiles",
-            format!(
-                "{flag} {t}: the tiles of an array are independent problems, each solved by one \
-                 process; the pixel rows of one ADC or of several code sets are split over \
-                 processes"
-            ),
-        )),
-        _ => Ok(()),
     }
 }

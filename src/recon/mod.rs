@@ -24,6 +24,7 @@ pub use reconstruct::{
     is_piecewise_smooth, reconstruct, reconstruct_observed, Reconstruction, SMOOTH_BINS,
     SMOOTH_FRACTION,
 };
+pub(crate) use tiled::{assemble_tiles, decode_tiles, encode_tile};
 pub use tiled::{
     tile_places, ArrayCodes, TilePlace, TileReconstruction, TiledArray, TiledReconstruction,
 };

@@ -4,6 +4,7 @@
 //! with its true neighbourhood (TV's prior works inside a tile), and stitches the depth maps
 //! and scenes.
 
+use std::ops::Range;
 use std::time::{Duration, Instant};
 
 use std::sync::atomic::AtomicBool;
@@ -18,7 +19,7 @@ use crate::real::Real;
 
 use super::method::{Method, ReconstructOptions};
 use super::reconstruct::{reconstruct_observed, Reconstruction};
-use crate::solver::{Control, IterationInfo};
+use crate::solver::{Control, IterationInfo, Report, Termination};
 
 /// Where a tile lies in the array: its first pixel row and column and its own grid (edge tiles
 /// are clipped).
@@ -199,6 +200,8 @@ pub struct TiledArray<'a, T> {
     codes: ArrayCodes<'a>,
     tile: TileSize,
     cancel: Option<&'a AtomicBool>,
+    /// The tiles to solve, from the first to before the second (all when None).
+    only: Option<(usize, usize)>,
 }
 
 impl<'a, T: Real> TiledArray<'a, T> {
@@ -227,7 +230,18 @@ impl<'a, T: Real> TiledArray<'a, T> {
             codes,
             tile,
             cancel: None,
+            only: None,
         })
+    }
+
+    /// The same array of which [`TiledArray::reconstruct`] solves only the tiles numbered
+    /// `tiles` (this process's share of a split over processes): the others are left empty in
+    /// the stitched result and missing from its tiles.
+    pub fn only(self, tiles: Range<usize>) -> Self {
+        TiledArray {
+            only: Some((tiles.start, tiles.end)),
+            ..self
+        }
     }
 
     /// The same array whose reconstructions stop within one application once `flag` is
@@ -295,6 +309,11 @@ impl<'a, T: Real> TiledArray<'a, T> {
         let start = Instant::now();
         let places = self.places();
         let k = self.samples();
+        let solved: Vec<TilePlace> = places
+            .iter()
+            .filter(|p| self.only.is_none_or(|(a, b)| (a..b).contains(&p.index)))
+            .copied()
+            .collect();
         if Some(y.len()) != places.len().checked_mul(k) {
             return Err(Error::shape(
                 format!(
@@ -310,7 +329,7 @@ impl<'a, T: Real> TiledArray<'a, T> {
             progress: false,
             ..*options
         };
-        let tiles = places
+        let tiles = solved
             .par_iter()
             .map(|place| {
                 let name = |e: Error| {
@@ -387,4 +406,134 @@ fn stitch<T: Real>(array: Geometry, tiles: &[TileReconstruction<T>]) -> Result<S
         }
     }
     Scene::from_vec(array, x)
+}
+
+/// Values per tile before its arrays in [`encode_tile`].
+const TILE_HEADER: usize = 9;
+
+/// One tile's reconstruction as values: its index, method, report (iterations, termination,
+/// applications, time) and elapsed time, then its scene, depth bins and amplitudes (to gather the
+/// tiles solved by several processes). The auto stages and the histories are not sent.
+pub(crate) fn encode_tile<T: Real>(t: &TileReconstruction<T>) -> Vec<f64> {
+    let r = &t.reconstruction;
+    let method = Method::ALL.iter().position(|&m| m == r.method_used);
+    let report = r.report.as_ref();
+    let termination =
+        report.and_then(|rep| Termination::ALL.iter().position(|&x| x == rep.termination));
+    let mut v = vec![
+        t.place.index as f64,
+        method.map_or(-1.0, |m| m as f64),
+        report.map_or(-1.0, |rep| rep.iterations as f64),
+        termination.map_or(-1.0, |x| x as f64),
+        report.map_or(0.0, |rep| rep.forward_applies as f64),
+        report.map_or(0.0, |rep| rep.adjoint_applies as f64),
+        report.map_or(0.0, |rep| rep.support_applies as f64),
+        report.map_or(0.0, |rep| rep.elapsed.as_secs_f64()),
+        r.elapsed.as_secs_f64(),
+    ];
+    v.extend(r.scene.data().iter().map(|x| x.as_f64()));
+    v.extend(r.depth.depth.iter().map(|&d| f64::from(d)));
+    v.extend(r.depth.amplitude.iter().map(|a| a.as_f64()));
+    v
+}
+
+/// The tiles of `values`, one [`encode_tile`] after another, each of its place in `places` (by
+/// index); a tile's report holds its counts and time, without histories.
+pub(crate) fn decode_tiles<T: Real>(
+    values: &[f64],
+    places: &[TilePlace],
+    k: usize,
+) -> Result<Vec<TileReconstruction<T>>> {
+    let bad = || {
+        Error::param(
+            "tiles",
+            "the tiles gathered from the processes are malformed",
+        )
+    };
+    let mut out = Vec::new();
+    let mut at = 0;
+    while at < values.len() {
+        let head = values.get(at..at + TILE_HEADER).ok_or_else(bad)?;
+        let place = *places.get(head[0] as usize).ok_or_else(bad)?;
+        let g = place.geometry;
+        let body = values
+            .get(at + TILE_HEADER..at + TILE_HEADER + g.voxels() + 2 * g.pixels())
+            .ok_or_else(bad)?;
+        let (scene, rest) = body.split_at(g.voxels());
+        let (depth, amplitude) = rest.split_at(g.pixels());
+        let method = *Method::ALL.get(head[1] as usize).ok_or_else(bad)?;
+        let seconds = |s: f64| Duration::from_secs_f64(s.max(0.0));
+        let report = match Termination::ALL.get(head[3] as usize) {
+            Some(&termination) if head[2] >= 0.0 => Some(Report {
+                solver: method.name(),
+                iterations: head[2] as usize,
+                termination,
+                residual_history: Vec::new(),
+                objective_history: Vec::new(),
+                forward_applies: head[4] as usize,
+                adjoint_applies: head[5] as usize,
+                support_applies: head[6] as usize,
+                elapsed: seconds(head[7]),
+            }),
+            _ => None,
+        };
+        let shape = (g.m, g.n);
+        let map = |_| bad();
+        let reconstruction = Reconstruction {
+            scene: Scene::from_vec(g, scene.iter().map(|&x| T::of_f64(x)).collect())?,
+            depth: DepthMap {
+                depth: ndarray::Array2::from_shape_vec(
+                    shape,
+                    depth.iter().map(|&d| d as i32).collect(),
+                )
+                .map_err(map)?,
+                amplitude: ndarray::Array2::from_shape_vec(
+                    shape,
+                    amplitude.iter().map(|&a| T::of_f64(a)).collect(),
+                )
+                .map_err(map)?,
+            },
+            method_used: method,
+            regime: Regime::of(k, g.voxels()),
+            report,
+            stages: Vec::new(),
+            elapsed: seconds(head[8]),
+        };
+        out.push(TileReconstruction {
+            place,
+            reconstruction,
+        });
+        at += TILE_HEADER + g.voxels() + 2 * g.pixels();
+    }
+    Ok(out)
+}
+
+/// The whole array's reconstruction from all its tiles' (in any order): stitched, with the
+/// depth map of every tile as its reconstruction gave it.
+pub(crate) fn assemble_tiles<T: Real>(
+    array: Geometry,
+    mut tiles: Vec<TileReconstruction<T>>,
+    elapsed: Duration,
+) -> Result<TiledReconstruction<T>> {
+    tiles.sort_by_key(|t| t.place.index);
+    let scene = stitch(array, &tiles)?;
+    let mut depth = DepthMap {
+        depth: ndarray::Array2::from_elem((array.m, array.n), crate::lidar::NO_RETURN),
+        amplitude: ndarray::Array2::zeros((array.m, array.n)),
+    };
+    for t in &tiles {
+        let (p, d) = (t.place, &t.reconstruction.depth);
+        for i in 0..p.geometry.m {
+            for j in 0..p.geometry.n {
+                depth.depth[[p.row + i, p.col + j]] = d.depth[[i, j]];
+                depth.amplitude[[p.row + i, p.col + j]] = d.amplitude[[i, j]];
+            }
+        }
+    }
+    Ok(TiledReconstruction {
+        scene,
+        depth,
+        tiles,
+        elapsed,
+    })
 }

@@ -79,6 +79,21 @@ pub enum Termination {
     ZeroResidual,
 }
 
+impl Termination {
+    /// Every termination, in a fixed order (to number them, e.g. to send them between
+    /// processes).
+    pub const ALL: [Termination; 8] = [
+        Termination::MaxIterations,
+        Termination::Residual,
+        Termination::Change,
+        Termination::Stagnation,
+        Termination::TimeLimit,
+        Termination::Observer,
+        Termination::Converged,
+        Termination::ZeroResidual,
+    ];
+}
+
 /// What an observer sees after each iteration.
 #[derive(Debug)]
 pub struct IterationInfo<'a, T> {

@@ -358,7 +358,7 @@ pub fn at_pulse(path: &Path) -> impl Fn(rdlidar::Error) -> Failure + '_ {
 
 /// A note on the architecture for the messages of several ADCs (empty for one ADC).
 pub fn architecture_note(acq: &Acquisition) -> String {
-    let g = acq.geometry();
+    let g = acq.whole_geometry();
     let mut note = match acq.architecture() {
         Architecture::MultiAdc(n) => {
             format!(", {} (one code set each)", count_of(n, "ADC", "ADCs"))
@@ -370,10 +370,12 @@ pub fn architecture_note(acq: &Acquisition) -> String {
         _ => String::new(),
     };
     if let Some(share) = acq.share() {
-        note.push_str(&format!(
-            ", pixel rows split over {} processes",
-            share.space().parts()
-        ));
+        let how = if share.tiles().is_some() {
+            "tiles dealt to"
+        } else {
+            "pixel rows split over"
+        };
+        note.push_str(&format!(", {how} {} processes", share.space().parts()));
     }
     note
 }

@@ -20,6 +20,7 @@ mod stress;
 use common::{errln, parse_threads, set_threads, CliResult, Failure, Globals, Precision};
 use experiment::{CompareArgs, Experiment, ExperimentArgs, Preset};
 use ranks::Ranks;
+use rdlidar::lidar::TileSize;
 
 /// Compressive time-of-flight lidar by random demodulation.
 ///
@@ -163,15 +164,16 @@ impl Command {
         }
     }
 
-    /// Whether it splits its pixel rows over the processes of an MPI job.
+    /// Whether it splits its work over the processes of an MPI job: its pixel rows, or for
+    /// `reconstruct` of a tiled array its tiles.
     fn splits(&self) -> bool {
-        matches!(
-            self,
-            Command::Forward(_)
-                | Command::Adjoint(_)
-                | Command::Dottest(_)
-                | Command::Reconstruct(_)
-        )
+        match self {
+            Command::Forward(a) => a.tiles.is_none(),
+            Command::Adjoint(a) => a.tiles.is_none(),
+            Command::Dottest(a) => a.tiles.is_none(),
+            Command::Reconstruct(_) => true,
+            _ => false,
+        }
     }
 }
 
@@ -200,7 +202,15 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
     }
     // Under mpirun, the commands that split the pixel rows over the processes start MPI; the
     // others refuse to run as several processes.
-    let ranks = Ranks::start(command.name(), command.splits())?;
+    let with_tiles = |t: &Option<TileSize>| if t.is_some() { " --tiles" } else { "" };
+    let label = match &command {
+        Command::Forward(a) => with_tiles(&a.tiles),
+        Command::Adjoint(a) => with_tiles(&a.tiles),
+        Command::Dottest(a) => with_tiles(&a.tiles),
+        _ => "",
+    };
+    let name = format!("{}{label}", command.name());
+    let ranks = Ranks::start(&name, command.splits())?;
     let done = |()| ExitCode::SUCCESS;
     match command {
         Command::Demo(a) => experiment::run(Experiment::Demo, &a, Preset::Default, &globals),

@@ -71,7 +71,7 @@ impl Ranks {
             return Err(format!(
                 "rdlidar {command} runs on one process, but it was launched as {size} \
                  processes: under mpirun, forward, adjoint, dottest and reconstruct split the \
-                 pixel rows over the processes"
+                 pixel rows over the processes, and reconstruct --tiles deals the tiles to them"
             )
             .into());
         }
