@@ -151,6 +151,33 @@ def _codes_argument(codes: Any):
     return np.ascontiguousarray(c, dtype=np.int8)
 
 
+def _rows(rows) -> Optional[Tuple[int, int]]:
+    if rows is None:
+        return None
+    try:
+        start, stop = rows
+    except (TypeError, ValueError):
+        raise TypeError(f"rows: expected (start, stop), got {rows!r}") from None
+    start = _int(start, "rows", 0)
+    stop = _int(stop, "rows", 0)
+    if stop <= start:
+        raise ValueError(f"rows: expected start < stop, got ({start}, {stop})")
+    return (start, stop)
+
+
+def _band_of(codes, rows: Tuple[int, int]):
+    """The pixel rows ``rows`` of an array of codes (axis 0 of (M, N, K), axis 1 of
+    (G, M, N, K))."""
+    axis = codes.ndim - 3
+    m = codes.shape[axis]
+    if rows[1] > m:
+        raise ValueError(
+            f"rows: rows {rows[0]}..{rows[1]} are not a band of the {m} pixel rows of the codes"
+        )
+    index = (slice(None),) * axis + (slice(rows[0], rows[1]),)
+    return np.ascontiguousarray(codes[index])
+
+
 class RdOperator(LinearOperator):
     """The random-demodulation lidar operator A of any architecture as a SciPy
     ``LinearOperator``.
@@ -185,6 +212,13 @@ class RdOperator(LinearOperator):
         One ADC per tile of A x B pixels (one code set).
     stream_codes : bool
         Seeded codes of one ADC: regenerate them on every application instead of holding them.
+    rows : (start, stop) or None
+        Only the pixel rows ``start .. stop-1``: the block A_r of the operator that maps those
+        rows' unknowns, (stop - start, N, K_s), to every measurement, so that the blocks of a
+        split of the rows sum to the whole (``A = [A_1 ... A_R]``, as ``pylops.HStack`` and
+        ``pylops_mpi.MPIHStack`` stack them; each MPI process then holds only its own block).
+        Seeded codes (a ``meta.json``) are generated for those rows only and a codes ``.npy``
+        file is read for those rows only: no whole-array codes anywhere. Not with ``tiles``.
 
     ``matvec``/``rmatvec``/``matmat``/``.H`` work as for any SciPy operator, so
     ``pylops.aslinearoperator(op)`` gives a PyLops operator. ``forward`` and ``adjoint`` also
@@ -203,20 +237,30 @@ class RdOperator(LinearOperator):
         debiased=False,
         tiles=None,
         stream_codes=False,
+        rows=None,
     ):
         dt = _real_dtype(dtype)
         p = _real_array(pulse, np.float64, "pulse")
         if p.ndim != 1:
             raise ValueError(f"pulse: expected a 1-D array (K_p,), got shape {p.shape}")
         ks = _int(depth_bins, "depth_bins", 1)
+        band = _rows(rows)
+        if band is not None and tiles is not None:
+            raise ValueError(
+                "rows: a band of rows of an array in tiles: pass the whole array with tiles"
+            )
+        c = _codes_argument(codes)
+        if band is not None and isinstance(c, np.ndarray):
+            c, band = _band_of(c, band), None
         self._core = _rdlidar._Operator(
             p,
-            _codes_argument(codes),
+            c,
             ks,
             dt == np.float64,
             bool(debiased),
             _tiles(tiles),
             bool(stream_codes),
+            band,
         )
         m, n, ks = self._core.geometry
         #: (M, N, K_s)

@@ -175,7 +175,7 @@ struct PyOperator {
 fn acquisition<T: Real>(
     pulse: Vec<f64>,
     codes: &Bound<'_, PyAny>,
-    depth_bins: usize,
+    (depth_bins, rows): (usize, Option<(usize, usize)>),
     tiles: Option<TileSize>,
     stream_codes: bool,
 ) -> PyResult<Acquisition> {
@@ -196,6 +196,10 @@ fn acquisition<T: Real>(
             InputNames::PYTHON,
         )
         .map_err(value_error)?;
+        let files = match rows {
+            Some((start, stop)) => files.with_rows(start..stop).map_err(value_error)?,
+            None => files,
+        };
         files
             .check_memory::<T>("RdOperator", 2, Use::Operator)
             .map_err(value_error)?;
@@ -277,7 +281,8 @@ fn apply<'py, T: Real + numpy::Element>(
 #[pymethods]
 impl PyOperator {
     #[new]
-    #[pyo3(signature = (pulse, codes, depth_bins, double, debiased, tiles=None, stream_codes=false))]
+    #[pyo3(signature = (pulse, codes, depth_bins, double, debiased, tiles=None, stream_codes=false, rows=None))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         pulse: PyReadonlyArray1<'_, f64>,
         codes: &Bound<'_, PyAny>,
@@ -286,6 +291,7 @@ impl PyOperator {
         debiased: bool,
         tiles: Option<(usize, usize)>,
         stream_codes: bool,
+        rows: Option<(usize, usize)>,
     ) -> PyResult<Self> {
         let p: Vec<f64> = pulse.as_array().iter().copied().collect();
         if depth_bins == 0 {
@@ -301,11 +307,11 @@ impl PyOperator {
             }
         };
         let (acq, op) = if double {
-            let acq = acquisition::<f64>(p, codes, depth_bins, tiles, stream_codes)?;
+            let acq = acquisition::<f64>(p, codes, (depth_bins, rows), tiles, stream_codes)?;
             let op = Op::F64(operator_of::<f64>(&acq, debiased)?);
             (acq, op)
         } else {
-            let acq = acquisition::<f32>(p, codes, depth_bins, tiles, stream_codes)?;
+            let acq = acquisition::<f32>(p, codes, (depth_bins, rows), tiles, stream_codes)?;
             let op = Op::F32(operator_of::<f32>(&acq, debiased)?);
             (acq, op)
         };

@@ -2,6 +2,7 @@
 //! array, or a `meta.json` describing them by a seed) described from their header, checked
 //! and planned before any data are read, then loaded.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
@@ -34,7 +35,9 @@ pub struct AcquisitionFiles {
     tiles: Option<TileSize>,
     streaming: Streaming,
     names: InputNames,
-    /// This process's band of rows, when the rows are split over processes.
+    /// The band of pixel rows to load, when not all of them.
+    band: Option<Range<usize>>,
+    /// This process's share, when the rows are split over processes.
     share: Option<Share>,
 }
 
@@ -225,8 +228,57 @@ impl AcquisitionFiles {
                 Streaming::Never
             },
             names,
+            band: None,
             share: None,
         })
+    }
+
+    /// Only the pixel rows `rows` of the codes: [`AcquisitionFiles::memory_plan`] is then the
+    /// band's, and [`AcquisitionFiles::load`] reads only those rows of the codes (of an `.npy`
+    /// file in C order, only those bytes; seeded codes are generated for those pixels only) and
+    /// gives the acquisition of the band: its grid is those rows, its operator the block A_r of
+    /// the whole operator that maps them to every measurement (as pylops-mpi's `MPIHStack`
+    /// stacks blocks).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`rows`) for an empty band or one beyond the grid, and for
+    /// a tiled acquisition (its tiles are reconstructed whole).
+    pub fn with_rows(mut self, rows: Range<usize>) -> Result<Self> {
+        let m = self.geometry.m;
+        if rows.is_empty() || rows.end > m {
+            return Err(Error::param(
+                "rows",
+                format!(
+                    "rows {}..{} are not a band of the {m} pixel rows of {}",
+                    rows.start,
+                    rows.end,
+                    self.codes.display()
+                ),
+            ));
+        }
+        if let Architecture::Tiles(t) = self.architecture {
+            return Err(Error::param(
+                "rows",
+                format!("a band of rows of an array in tiles of {t}: pass the whole array"),
+            ));
+        }
+        self.set_band(rows);
+        Ok(self)
+    }
+
+    /// Loads only `rows`, and decides on the band whether seeded codes are streamed.
+    fn set_band(&mut self, rows: Range<usize>) {
+        if let (Some(_), Streaming::Never) = (self.seeded, self.streaming) {
+            self.streamed = streams(
+                Streaming::Auto,
+                true,
+                self.architecture,
+                band_geometry(self.geometry, &rows),
+                self.samples(),
+            )
+            .unwrap_or(false);
+        }
+        self.band = Some(rows);
     }
 
     /// The codes split by pixel rows over the parts of `space` (the processes of an MPI job):
@@ -245,17 +297,7 @@ impl AcquisitionFiles {
             Architecture::Tiles(t) => Share::of_tiles(space, self.geometry, t)?,
             _ => Share::of(space, self.geometry)?,
         };
-        // Whether this process's seeded codes are streamed is decided on its band.
-        if let (Some(_), Streaming::Never) = (self.seeded, self.streaming) {
-            self.streamed = streams(
-                Streaming::Auto,
-                true,
-                self.architecture,
-                share.geometry(),
-                self.samples(),
-            )
-            .unwrap_or(false);
-        }
+        self.set_band(share.rows());
         self.share = Some(share);
         Ok(self)
     }
@@ -304,7 +346,10 @@ impl AcquisitionFiles {
     /// The memory a request on the loaded acquisition needs in `T` (see
     /// [`Acquisition::memory_plan`]), before anything is read.
     pub fn memory_plan<T: Real>(&self, scenes: u128, request: Use) -> MemoryPlan {
-        let geometry = self.share.as_ref().map_or(self.geometry, Share::geometry);
+        let geometry = self
+            .band
+            .as_ref()
+            .map_or(self.geometry, |rows| band_geometry(self.geometry, rows));
         let held = held(
             geometry,
             self.samples(),
@@ -378,8 +423,8 @@ impl AcquisitionFiles {
                 ))
             }
             Some(s) => CodeStore::Seeded(s),
-            None if self.share.is_some() => {
-                let rows = self.share.as_ref().map_or(0..0, Share::rows);
+            None if self.band.is_some() => {
+                let rows = self.band.clone().unwrap_or_default();
                 let (_, sets) = io::read_code_band(&self.codes, &expect, rows)?;
                 CodeStore::Held(sets.into_iter().map(Into::into).collect())
             }
@@ -392,34 +437,39 @@ impl AcquisitionFiles {
                 CodeStore::Held(vec![c.into()])
             }
         };
-        if let Some(share) = &self.share {
-            return self.load_share(share, pulse, codes);
-        }
-        let acq = Acquisition::new(self.geometry, pulse, codes, self.tiles, self.streaming)
-            .map_err(|e| file_error(&self.codes, e.to_string()))?;
+        let at_codes = |e: Error| file_error(&self.codes, e.to_string());
+        let acq = match &self.band {
+            Some(rows) => {
+                let codes = match codes {
+                    CodeStore::Seeded(s) => {
+                        let n = self.geometry.n;
+                        CodeStore::Seeded(s.band(rows.start * n..rows.end * n)?)
+                    }
+                    held => held,
+                };
+                let streaming = if self.streamed {
+                    Streaming::Always
+                } else {
+                    Streaming::Never
+                };
+                let g = band_geometry(self.geometry, rows);
+                let acq =
+                    Acquisition::new(g, pulse, codes, self.tiles, streaming).map_err(at_codes)?;
+                if let Some(share) = &self.share {
+                    return acq
+                        .band_of(share.clone(), self.architecture)
+                        .map_err(at_codes);
+                }
+                acq
+            }
+            None => Acquisition::new(self.geometry, pulse, codes, self.tiles, self.streaming)
+                .map_err(at_codes)?,
+        };
         Ok(if self.architecture == Architecture::MultiAdc(1) {
             acq.with_code_set_axis()
         } else {
             acq
         })
-    }
-
-    /// This process's share of the acquisition, from its band's `codes` (a seed: the whole's).
-    fn load_share(&self, share: &Share, pulse: Vec<f64>, codes: CodeStore) -> Result<Acquisition> {
-        let codes = match codes {
-            CodeStore::Seeded(s) => CodeStore::Seeded(s.band(share.pixels())?),
-            held => held,
-        };
-        let streaming = if self.streamed {
-            Streaming::Always
-        } else {
-            Streaming::Never
-        };
-        let at_codes = |e: Error| file_error(&self.codes, e.to_string());
-        let acq =
-            Acquisition::new(share.geometry(), pulse, codes, None, streaming).map_err(at_codes)?;
-        acq.band_of(share.clone(), self.architecture)
-            .map_err(at_codes)
     }
 
     /// Reads the measurements `meas` in the shape the architecture needs: (K,) for one ADC,
@@ -487,5 +537,13 @@ impl AcquisitionFiles {
         }
         let y = io::read_measurement_rows::<T>(meas, Some(&expect), Some(rows))?;
         Ok(y.into_raw_vec_and_offset().0)
+    }
+}
+
+/// The grid of the pixel rows `rows` of `whole`.
+fn band_geometry(whole: Geometry, rows: &Range<usize>) -> Geometry {
+    Geometry {
+        m: rows.len(),
+        ..whole
     }
 }
