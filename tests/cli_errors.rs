@@ -421,7 +421,13 @@ fn launched_as_several_processes_a_command_that_cannot_split_refuses_from_the_fi
         "--quiet",
     ];
     let e = as_process(0, 3, &simulate);
-    assert_one_line_error(&e, &["rdlidar simulate runs on one process", "3 processes"]);
+    assert_one_line_error(
+        &e,
+        &[
+            "rdlidar simulate without --codes-format seed runs on one process",
+            "3 processes",
+        ],
+    );
     // The other processes end quietly: the first reports for the job.
     let other = as_process(2, 3, &simulate);
     assert!(other.status.success() && other.stderr.is_empty() && other.stdout.is_empty());

@@ -247,6 +247,60 @@ fn forward_adjoint_dottest_and_reconstruct_under_mpirun_give_the_one_process_out
 }
 
 #[test]
+fn simulate_under_mpirun_generates_each_processs_rows_and_writes_the_one_process_files() {
+    let tmp = TempDir::new("mpi-cli-simulate");
+    let run = |ranks: usize, extra: &[&str]| -> std::path::PathBuf {
+        let dir = tmp.path(&format!("n{ranks}{}", extra.join("")));
+        let mut args = vec![
+            "simulate",
+            "--scene",
+            "transparent",
+            "--size",
+            "13x10x16",
+            "--pulse-len",
+            "300",
+            "--codes-format",
+            "seed",
+            "--snr-db",
+            "20",
+            "--out",
+            s(&dir),
+        ];
+        args.extend_from_slice(extra);
+        let line = ok(mpirun(ranks, &args), &format!("simulate -n {ranks}"));
+        if ranks > 1 {
+            assert!(
+                line.contains(&format!("simulated by {ranks} processes")),
+                "{line}"
+            );
+        }
+        dir
+    };
+    for extra in [&[][..], &["--adcs", "2"][..]] {
+        let one = run(1, extra);
+        for ranks in [2, 3] {
+            let many = run(ranks, extra);
+            for same in ["scene.npy", "pulse.npy", "meta.json"] {
+                let (a, b) = (
+                    std::fs::read(one.join(same)).unwrap(),
+                    std::fs::read(many.join(same)).unwrap(),
+                );
+                assert!(a == b, "-n {ranks} {extra:?}: {same} differs");
+            }
+            let d = rel_diff(
+                &load_f64(&one.join("meas.npy")),
+                &load_f64(&many.join("meas.npy")),
+            );
+            assert!(
+                d <= 1e-13,
+                "-n {ranks} {extra:?}: measurements differ by {d:e}"
+            );
+            assert!(!many.join("codes.npy").exists());
+        }
+    }
+}
+
+#[test]
 fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output() {
     let tmp = TempDir::new("mpi-cli-faults");
     let acq = simulate(
@@ -337,6 +391,25 @@ fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output()
             .chain(["--out".into(), s(&depth).to_string()])
             .collect(),
             vec!["rdlidar forward --tiles runs on one process"],
+        ),
+        // simulate splits only seeded codes.
+        (
+            2,
+            [
+                "simulate",
+                "--scene",
+                "paper",
+                "--size",
+                "4x4x4",
+                "--pulse-len",
+                "10",
+                "--out",
+            ]
+            .iter()
+            .map(|a| a.to_string())
+            .chain([s(&depth).to_string()])
+            .collect(),
+            vec!["rdlidar simulate without --codes-format seed runs on one process"],
         ),
         // A command that does not split its work.
         (

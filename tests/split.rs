@@ -1066,3 +1066,42 @@ fn the_tiles_of_an_acquisition_dealt_to_parts_are_reconstructed_as_on_one() {
         }
     }
 }
+
+#[test]
+fn a_simulation_split_over_parts_measures_what_one_process_measures() {
+    use rdlidar::lidar::{simulate, simulate_split, Architecture, SceneSpec, SimulationSpec};
+    let g = Geometry::new(13, 10, 16).unwrap();
+    for architecture in [Architecture::Single, Architecture::MultiAdc(2)] {
+        let spec = SimulationSpec {
+            scene: SceneSpec::Transparent,
+            architecture,
+            snr_db: Some(20.0),
+            seeded_codes: true,
+            ..SimulationSpec::new(g, 300, 7)
+        };
+        let whole = simulate::<f64>(&spec).unwrap();
+        for parts in [2, 3] {
+            for sim in in_spaces(parts, &|space| {
+                simulate_split::<f64>(&spec, &space).unwrap()
+            }) {
+                assert_eq!(sim.scene, whole.scene);
+                assert_eq!(sim.pulse.as_slice(), whole.pulse.as_slice());
+                let scale = whole.meas.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let worst = whole
+                    .meas
+                    .iter()
+                    .zip(&sim.meas)
+                    .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+                assert!(worst <= 1e-13 * scale, "{parts} parts: {worst:e}");
+                // Each part holds its own rows' codes only.
+                assert!(sim.code_sets[0].pixels() <= g.pixels().div_ceil(parts) + g.n);
+            }
+        }
+    }
+    let not_seeded = SimulationSpec::new(g, 300, 7);
+    for r in in_spaces(2, &|space| {
+        simulate_split::<f64>(&not_seeded, &space).map(|_| ())
+    }) {
+        assert!(r.unwrap_err().to_string().contains("seeded"));
+    }
+}

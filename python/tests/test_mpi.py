@@ -36,8 +36,6 @@ def _bands(m, parts):
 @pytest.mark.parametrize("adcs", [1, 2])
 def test_blocks_of_rows_stack_to_the_whole_operator(tmp_path, codes_format, adcs):
     fmt = "int8" if codes_format == "array" else codes_format
-    if fmt == "seed" and adcs > 1:
-        pytest.skip("seeded codes of several ADCs are generated whole by the simulator's meta")
     sim = rdlidar.simulate(
         size=(7, 5, 6), pulse_len=60, seed=3, adcs=adcs, codes_format=fmt, out=tmp_path / "run"
     )

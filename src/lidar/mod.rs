@@ -50,6 +50,6 @@ pub use scenes::{
 #[cfg(feature = "images")]
 pub(crate) use scenes::{bin_of_fraction, checked};
 pub use seeded::{SeededCodes, SEEDED_CODES_GENERATOR};
-pub use simulate::{simulate, SceneSpec, Seeds, Simulation, SimulationSpec};
+pub use simulate::{simulate, simulate_split, SceneSpec, Seeds, Simulation, SimulationSpec};
 pub use streamed::{StreamedOperator, STREAM_BLOCK_BYTES};
 pub use support::SupportOperator;

@@ -380,3 +380,99 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
     sim.meas = y;
     Ok(sim)
 }
+
+/// [`simulate`] by every part of `space` at once (the processes of an MPI job), with the pixel
+/// rows split over them ([`my_band`](crate::space::my_band)): each part generates the seeded
+/// codes of its own rows only and measures them, and the parts' measurements are summed (in
+/// `f64`), so that no part holds the whole array's codes. The scene, pulse, measurements and
+/// noise are the whole simulation's in every part, equal to [`simulate`]'s up to the order of
+/// the sums; `code_sets` holds this part's rows' codes only.
+///
+/// # Errors
+/// [`Error::InvalidParameter`]: codes that are not seeded (`codes`), an architecture other
+/// than one ADC or several code sets (`architecture`), more parts than pixel rows (`parts`);
+/// the errors of [`simulate`].
+pub fn simulate_split<T: Real>(
+    spec: &SimulationSpec,
+    space: &Arc<dyn crate::space::Space>,
+) -> Result<Simulation<T>> {
+    if space.parts() == 1 {
+        return simulate(spec);
+    }
+    let g = spec.geometry;
+    let seeded = spec.seeded()?.ok_or_else(|| {
+        Error::param(
+            "codes",
+            "a simulation split over processes generates seeded codes, each process its own \
+             rows': ask for codes described by a seed",
+        )
+    })?;
+    let arch = spec.architecture;
+    if !matches!(arch, Architecture::Single | Architecture::MultiAdc(_)) {
+        return Err(Error::param(
+            "architecture",
+            format!(
+                "a simulation split over processes has one ADC or several code sets, not {}",
+                arch.describe_suffix().trim_start_matches([',', ' '])
+            ),
+        ));
+    }
+    if space.parts() > g.m {
+        return Err(Error::param(
+            "parts",
+            format!(
+                "{} processes for the {} pixel rows of {g}: at most one process per row",
+                space.parts(),
+                g.m
+            ),
+        ));
+    }
+    let rows = crate::space::my_band(&**space, g.m);
+    let band = Geometry { m: rows.len(), ..g };
+    SimulationSpec {
+        geometry: band,
+        ..*spec
+    }
+    .memory_plan::<T>()?
+    .check(
+        &format!(
+            "simulating the rows {}..{} of {g} with K_p = {}",
+            rows.start, rows.end, spec.pulse_len
+        ),
+        "lower --size or --pulse-len, or use more processes",
+    )?;
+    let seeds = spec.seeds();
+    let scene = spec.scene.generate::<T>(g, seeds)?;
+    let pulse = Pulse::<T>::bernoulli(spec.pulse_len, seeds.pulse())?;
+    let mine = seeded.band(rows.start * g.n..rows.end * g.n)?;
+    let code_sets = (0..arch.code_sets())
+        .map(|set| mine.materialize(set).map(Arc::new))
+        .collect::<Result<Vec<_>>>()?;
+    let op: BoxedOperator<T> = match arch {
+        Architecture::MultiAdc(_) => multi_adc(band, pulse.as_slice(), code_sets.clone())?.boxed(),
+        _ => RdOperator::new(band, pulse.as_slice().to_vec(), Arc::clone(&code_sets[0]))?.boxed(),
+    };
+    let part = crate::operator::Part::new(op, Arc::clone(space));
+    let ks = g.ks;
+    let x = &scene.as_slice()[rows.start * g.n * ks..rows.end * g.n * ks];
+    let mut y = vec![T::zero(); part.nrows()];
+    part.apply(x, &mut y);
+    let mut sim = Simulation {
+        spec: *spec,
+        scene,
+        pulse,
+        code_sets,
+        active: None,
+        groups: None,
+        meas: Vec::new(),
+        noise: None,
+    };
+    if let Some(snr_db) = spec.snr_db {
+        let report = NoiseModel::none()
+            .then(NoiseStage::Gaussian { snr_db })
+            .apply(&mut y, seeds.noise())?;
+        sim.noise = Some(report);
+    }
+    sim.meas = y;
+    Ok(sim)
+}

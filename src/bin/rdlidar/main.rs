@@ -36,8 +36,9 @@ use rdlidar::lidar::TileSize;
 /// and a request needing more memory than is available is refused before allocating
 /// (RDLIDAR_MEMORY_LIMIT=BYTES lowers the budget); see docs/reliability.md.
 ///
-/// Built with the feature `mpi`, forward, adjoint, dottest and reconstruct run under
-/// `mpirun -n R` with the pixel rows split over the R processes (docs/scale.md).
+/// Built with the feature `mpi`, forward, adjoint, dottest, reconstruct and simulate
+/// --codes-format seed run under `mpirun -n R` with the pixel rows split over the R processes,
+/// and reconstruct --tiles deals the tiles to them (docs/scale.md).
 #[derive(Parser, Debug)]
 #[command(name = "rdlidar", version, about, long_about)]
 struct Cli {
@@ -172,6 +173,7 @@ impl Command {
             Command::Adjoint(a) => a.tiles.is_none(),
             Command::Dottest(a) => a.tiles.is_none(),
             Command::Reconstruct(_) => true,
+            Command::Simulate(a) => simulate::splits(a).is_ok(),
             _ => false,
         }
     }
@@ -207,6 +209,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         Command::Forward(a) => with_tiles(&a.tiles),
         Command::Adjoint(a) => with_tiles(&a.tiles),
         Command::Dottest(a) => with_tiles(&a.tiles),
+        Command::Simulate(a) => simulate::splits(a).err().unwrap_or(""),
         _ => "",
     };
     let name = format!("{}{label}", command.name());
@@ -223,7 +226,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
             experiment::run(Experiment::Compare, &a.common, preset, &globals)
         }
         Command::Selfcheck => selfcheck::run(&globals),
-        Command::Simulate(a) => simulate::run(&a, &globals).map(done),
+        Command::Simulate(a) => simulate::run(&a, &globals, &ranks).map(done),
         Command::Forward(a) => forward::run(&a, &globals, &ranks).map(done),
         Command::Adjoint(a) => adjoint::run(&a, &globals, &ranks).map(done),
         Command::Dottest(a) => dottest::run(&a, &globals, &ranks),

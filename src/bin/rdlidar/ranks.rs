@@ -71,7 +71,8 @@ impl Ranks {
             return Err(format!(
                 "rdlidar {command} runs on one process, but it was launched as {size} \
                  processes: under mpirun, forward, adjoint, dottest and reconstruct split the \
-                 pixel rows over the processes, and reconstruct --tiles deals the tiles to them"
+                 pixel rows over the processes (simulate too, with --codes-format seed), and \
+                 reconstruct --tiles deals the tiles to them"
             )
             .into());
         }
@@ -149,6 +150,16 @@ impl Ranks {
             }
             other => other.into(),
         })
+    }
+
+    /// The space of the processes, when there are several.
+    pub fn space(&self) -> Option<&Arc<dyn Space>> {
+        self.space.as_ref()
+    }
+
+    /// How many processes run the command.
+    pub fn processes(&self) -> usize {
+        self.space.as_ref().map_or(1, |s| s.parts())
     }
 
     /// Whether this is the process that prints and writes: the first (or the only) one.

@@ -9,13 +9,16 @@ use rdlidar::acquisition::{
 };
 use rdlidar::io;
 use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
-use rdlidar::lidar::{simulate, Geometry, SimulationSpec, TileSize, SEEDED_CODES_GENERATOR};
+use rdlidar::lidar::{
+    simulate, simulate_split, Geometry, SimulationSpec, TileSize, SEEDED_CODES_GENERATOR,
+};
 use rdlidar::Real;
 
 use crate::common::{
     npy_dtype, outln, parse_adcs, parse_pulse_len, parse_size, parse_tile, with_precision,
     CliResult, Globals, Precision,
 };
+use crate::ranks::Ranks;
 
 /// How `simulate` writes codes.npy.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -153,8 +156,19 @@ fn request_of(a: &SimulateArgs, seed: u64) -> SimulationRequest {
     }
 }
 
+/// Whether `simulate` with these flags splits the pixel rows over the processes of an MPI job
+/// (seeded codes of one ADC or of several code sets), or why not.
+pub fn splits(a: &SimulateArgs) -> Result<(), &'static str> {
+    match (a.codes_format, a.tiles, a.aperture) {
+        (CodesFormat::Seed, None, None) => Ok(()),
+        (CodesFormat::Seed, Some(_), _) => Err(" --tiles"),
+        (CodesFormat::Seed, _, Some(_)) => Err(" --aperture"),
+        _ => Err(" without --codes-format seed"),
+    }
+}
+
 /// Runs `simulate` (in f64 unless --precision says otherwise).
-pub fn run(a: &SimulateArgs, globals: &Globals) -> CliResult {
+pub fn run(a: &SimulateArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     let spec = request_of(a, globals.seed()).spec().map_err(|e| match e {
         rdlidar::Error::InvalidParameter { name, reason } => {
             let reason = [
@@ -181,17 +195,36 @@ pub fn run(a: &SimulateArgs, globals: &Globals) -> CliResult {
         &format!("its {}", SIMULATION_FILES.join(", ")),
     )?;
     let precision = globals.precision.unwrap_or(Precision::F64);
-    with_precision!(precision, simulate_into(a, &spec))
+    with_precision!(precision, simulate_into(a, &spec, ranks))
 }
 
-fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationSpec) -> CliResult {
+fn simulate_into<T: Real + WritableElement>(
+    a: &SimulateArgs,
+    spec: &SimulationSpec,
+    ranks: &Ranks,
+) -> CliResult {
     let g = spec.geometry;
     let kp = spec.pulse_len;
-    let sim = simulate::<T>(spec).map_err(|e| match e {
+    // Under mpirun, each process generates and measures its own rows' codes.
+    let sim = match ranks.space() {
+        Some(space) => simulate_split::<T>(spec, space),
+        None => simulate::<T>(spec),
+    }
+    .map_err(|e| match e {
+        rdlidar::Error::InvalidParameter {
+            name: "parts",
+            reason,
+        } => {
+            format!("mpirun -n {}: {reason}", ranks.processes())
+        }
         rdlidar::Error::InvalidParameter { name, reason } => format!("{}: {reason}", flag(name)),
         e @ rdlidar::Error::TooLarge { .. } => e.to_string(),
         other => format!("--scene {}: {other}", a.scene.name()),
-    })?;
+    });
+    let sim = ranks.agree(sim.map_err(Into::into))?;
+    if !ranks.is_first() {
+        return Ok(());
+    }
     let format: LibCodesFormat = a.codes_format.into();
     let meta = write_simulation(&a.out, &sim, format, a.force)?;
     let dt = npy_dtype::<T>();
@@ -232,6 +265,12 @@ fn simulate_into<T: Real + WritableElement>(a: &SimulateArgs, spec: &SimulationS
     );
     if let Some(note) = architecture_note(&meta, g) {
         outln!("architecture: {note}");
+    }
+    if ranks.processes() > 1 {
+        outln!(
+            "simulated by {} processes, each generating and measuring its own pixel rows' codes",
+            ranks.processes()
+        );
     }
     Ok(())
 }
