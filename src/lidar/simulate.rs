@@ -342,7 +342,7 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
             .map(Arc::new)
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut sim = Simulation {
+    let sim = Simulation {
         spec: *spec,
         scene,
         pulse,
@@ -352,7 +352,7 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
         meas: Vec::new(),
         noise: None,
     };
-    let mut y = match &sim.groups {
+    let y = match &sim.groups {
         // One tile at a time: only one tile's operator (and copy of its codes) is alive.
         Some(groups) => {
             let mut y = Vec::with_capacity(groups.len() * k);
@@ -371,14 +371,21 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
             y
         }
     };
-    if let Some(snr_db) = spec.snr_db {
-        let report = NoiseModel::none()
-            .then(NoiseStage::Gaussian { snr_db })
-            .apply(&mut y, seeds.noise())?;
-        sim.noise = Some(report);
+    sim.measured(y)
+}
+
+impl<T: Real> Simulation<T> {
+    /// The simulation with the noiseless measurements `y`, and the noise its spec asks for.
+    fn measured(mut self, mut y: Vec<T>) -> Result<Self> {
+        if let Some(snr_db) = self.spec.snr_db {
+            let report = NoiseModel::none()
+                .then(NoiseStage::Gaussian { snr_db })
+                .apply(&mut y, self.spec.seeds().noise())?;
+            self.noise = Some(report);
+        }
+        self.meas = y;
+        Ok(self)
     }
-    sim.meas = y;
-    Ok(sim)
 }
 
 /// [`simulate`] by every part of `space` at once (the processes of an MPI job), with the pixel
@@ -457,7 +464,7 @@ pub fn simulate_split<T: Real>(
     let x = &scene.as_slice()[rows.start * g.n * ks..rows.end * g.n * ks];
     let mut y = vec![T::zero(); part.nrows()];
     part.apply(x, &mut y);
-    let mut sim = Simulation {
+    let sim = Simulation {
         spec: *spec,
         scene,
         pulse,
@@ -467,12 +474,5 @@ pub fn simulate_split<T: Real>(
         meas: Vec::new(),
         noise: None,
     };
-    if let Some(snr_db) = spec.snr_db {
-        let report = NoiseModel::none()
-            .then(NoiseStage::Gaussian { snr_db })
-            .apply(&mut y, seeds.noise())?;
-        sim.noise = Some(report);
-    }
-    sim.meas = y;
-    Ok(sim)
+    sim.measured(y)
 }
