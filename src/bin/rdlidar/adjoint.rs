@@ -58,8 +58,8 @@ fn adjoint<T: Real + WritableElement>(a: &AdjointArgs, ranks: &Ranks) -> CliResu
     let out = &a.out;
     // Every process backprojects onto its own rows, then they agree on any failure.
     let local = (|| -> CliResult<_> {
-        let (acq, y) = a.files.load::<T>(
-            ranks,
+        let (acq, y) = ranks.load::<T>(
+            &a.files,
             (a.tiles, a.stream_codes),
             ("adjoint", 2, Use::Operator),
         )?;

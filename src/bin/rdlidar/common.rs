@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::ValueEnum;
-use rdlidar::acquisition::{count_of, Acquisition, Streaming, Use};
+use rdlidar::acquisition::{count_of, Acquisition, Streaming};
 use rdlidar::io::{self, NpyDtype};
 use rdlidar::lidar::{Architecture, Geometry, TileSize};
 use rdlidar::{limits, Real};
@@ -31,11 +31,24 @@ impl From<String> for Failure {
     }
 }
 
+/// Set in every process but the first of an MPI job: its lines are not printed.
+static SILENT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether this process prints nothing (a process other than the first of an MPI job).
+pub fn silent() -> bool {
+    SILENT.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// From now on this process prints nothing.
+pub fn silence() {
+    SILENT.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
 /// Writes one line to standard output. A broken pipe becomes [`Failure::BrokenPipe`], any other
 /// write error (a full device, a closed descriptor) a one-line failure; never a panic.
 pub fn write_stdout(line: std::fmt::Arguments<'_>) -> CliResult {
     use std::io::Write;
-    if crate::ranks::silent() {
+    if silent() {
         return Ok(());
     }
     let mut out = std::io::stdout().lock();
@@ -57,7 +70,7 @@ pub fn stdout_failure(e: std::io::Error) -> Failure {
 /// (nor panic, as `eprintln!` does when standard error is closed or full).
 pub fn write_stderr(line: std::fmt::Arguments<'_>) {
     use std::io::Write;
-    if crate::ranks::silent() {
+    if silent() {
         return;
     }
     let _ = writeln!(std::io::stderr().lock(), "{line}");
@@ -113,29 +126,6 @@ pub struct MeasurementFiles {
 }
 
 impl MeasurementFiles {
-    /// Reads the measurements in `T` and this process's acquisition (its rows, when the rows
-    /// are split over processes), after checking that `command`, holding `scenes` scenes, fits
-    /// in memory as `request` uses the operator. `tiles` and `stream_codes` are the flags.
-    pub fn load<T: Real>(
-        &self,
-        ranks: &crate::ranks::Ranks,
-        (tiles, stream_codes): (Option<TileSize>, bool),
-        (command, scenes, request): (&str, u128, Use),
-    ) -> CliResult<(Acquisition, Vec<T>)> {
-        let p = io::read_pulse::<f64>(&self.pulse)?;
-        let files = ranks.describe(
-            &self.codes,
-            (p.len(), self.depth_bins),
-            None,
-            tiles,
-            stream_codes,
-        )?;
-        let y = files.read_measurements::<T>(&self.meas)?;
-        files.check_memory::<T>(command, scenes, request)?;
-        let acq = files.load(p.into_inner())?;
-        Ok((acq, y))
-    }
-
     /// The three input files with their flags.
     pub fn inputs(&self) -> [Input<'_>; 3] {
         [

@@ -242,7 +242,7 @@ fn main() -> ExitCode {
         Ok(code) => code,
         // Under mpirun, the first process reports a failure that every process agreed on; the
         // others end quietly, so that the launcher does not end the job before it has.
-        Err(Failure::Message(_)) if ranks::silent() => ExitCode::SUCCESS,
+        Err(Failure::Message(_)) if common::silent() => ExitCode::SUCCESS,
         Err(Failure::Message(msg)) => {
             errln!("error: {msg}");
             ExitCode::FAILURE

@@ -5,24 +5,19 @@
 //! ends every process with one error line (process 0's) and status 1, never a wait.
 //! Alone, or under `mpirun -n 1`, a command runs as it always does.
 
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use std::path::Path;
 
 use rdlidar::acquisition::{AcquisitionFiles, InputNames};
+use rdlidar::io;
 use rdlidar::lidar::TileSize;
 use rdlidar::space::Space;
 
-use crate::common::{streaming, CliResult, Failure};
+use rdlidar::acquisition::{Acquisition, Use};
+use rdlidar::Real;
 
-/// Set in every process but the first of a job: its lines are not printed.
-static SILENT: AtomicBool = AtomicBool::new(false);
-
-/// Whether this process prints nothing (a process other than the first of an MPI job).
-pub fn silent() -> bool {
-    SILENT.load(Ordering::Relaxed)
-}
+use crate::common::{silence, streaming, CliResult, Failure, MeasurementFiles};
 
 /// The rank and size of the job this process was launched in by `mpirun`/`mpiexec` (OpenMPI's
 /// or a PMI launcher's variables), if any.
@@ -65,7 +60,7 @@ impl Ranks {
             return Ok(Ranks::alone());
         };
         if rank > 0 {
-            SILENT.store(true, Ordering::Relaxed);
+            silence();
         }
         if !splits {
             return Err(format!(
@@ -106,6 +101,29 @@ impl Ranks {
              MPICH, and libclang) to split the work over the processes"
         )
         .into())
+    }
+
+    /// Reads `files`' measurements in `T` and this process's acquisition (its rows, when the rows
+    /// are split over processes), after checking that `command`, holding `scenes` scenes, fits
+    /// in memory as `request` uses the operator. `tiles` and `stream_codes` are the flags.
+    pub fn load<T: Real>(
+        &self,
+        inputs: &MeasurementFiles,
+        (tiles, stream_codes): (Option<TileSize>, bool),
+        (command, scenes, request): (&str, u128, Use),
+    ) -> CliResult<(Acquisition, Vec<T>)> {
+        let p = io::read_pulse::<f64>(&inputs.pulse)?;
+        let files = self.describe(
+            &inputs.codes,
+            (p.len(), inputs.depth_bins),
+            None,
+            tiles,
+            stream_codes,
+        )?;
+        let y = files.read_measurements::<T>(&inputs.meas)?;
+        files.check_memory::<T>(command, scenes, request)?;
+        let acq = files.load(p.into_inner())?;
+        Ok((acq, y))
     }
 
     /// The codes `codes` described for a pulse of `pulse_len` samples and `depth_bins` bins

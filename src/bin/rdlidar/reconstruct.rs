@@ -172,8 +172,8 @@ type Inputs<T> = (Acquisition, Vec<T>, Option<Scene<T>>);
 /// in the first process, the true scene.
 fn read_inputs<T: Real>(a: &ReconstructArgs, ranks: &Ranks) -> CliResult<Inputs<T>> {
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
-    let (acq, y) = a.files.load::<T>(
-        ranks,
+    let (acq, y) = ranks.load::<T>(
+        &a.files,
         (a.tiles, a.stream_codes),
         ("reconstruct", 10, Use::Reconstruct),
     )?;
