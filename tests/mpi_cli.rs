@@ -3,7 +3,7 @@
 //! outputs (depth maps identical, scenes and measurements within round-off), for int8 codes,
 //! packed codes of two ADCs and seeded codes (streamed), and `reconstruct` of tiled arrays deals
 //! the tiles to the processes; bad inputs end every process with one error line from the first
-//! and status 1, and no output.
+//! and status 1, and no output; a process killed while solving ends the job with no output.
 //!
 //! Needs `mpirun` (Debian: openmpi-bin); as root, OpenMPI's run-as-root variables are set here.
 
@@ -528,4 +528,112 @@ fn reconstruct_deals_the_tiles_of_a_tiled_array_to_the_processes() {
             }
         }
     }
+}
+
+/// The process ids of the rank `rank` processes whose environment holds `mark`.
+fn ranks_marked(mark: &str, rank: usize) -> Vec<u32> {
+    let want = format!("OMPI_COMM_WORLD_RANK={rank}");
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|pid| {
+            let env = std::fs::read(format!("/proc/{pid}/environ")).unwrap_or_default();
+            let vars: Vec<&[u8]> = env.split(|&b| b == 0).collect();
+            vars.contains(&mark.as_bytes()) && vars.contains(&want.as_bytes())
+        })
+        .collect()
+}
+
+#[test]
+fn a_process_that_dies_ends_the_job_without_output() {
+    let tmp = TempDir::new("mpi-cli-dies");
+    let acq = simulate(
+        &tmp,
+        "a",
+        &[
+            "--size",
+            "60x60x40",
+            "--pulse-len",
+            "5000",
+            "--codes-format",
+            "packed",
+        ],
+        "codes.npy",
+    );
+    let (depth, scene) = (tmp.path("d.npy"), tmp.path("x.npy"));
+    let mark = format!("RDLIDAR_TEST_MARK={}", std::process::id());
+    let mut child = Command::new("mpirun")
+        .args([
+            "-q",
+            "-n",
+            "2",
+            env!("CARGO_BIN_EXE_rdlidar"),
+            "reconstruct",
+        ])
+        .args([
+            "--pulse",
+            &acq.file("pulse.npy"),
+            "--codes",
+            &acq.file("codes.npy"),
+        ])
+        .args([
+            "--meas",
+            &acq.file("meas.npy"),
+            "--depth-bins",
+            "40",
+            "--solver",
+            "fista",
+        ])
+        .args(["--max-iter", "100000", "--quiet", "--out-depth", s(&depth)])
+        .args(["--out-scene", s(&scene)])
+        .env("RDLIDAR_TEST_MARK", std::process::id().to_string())
+        .env("RAYON_NUM_THREADS", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mpirun runs");
+    // Wait for process 1 to be solving, then kill it.
+    let start = Instant::now();
+    let victim = loop {
+        if let Some(&pid) = ranks_marked(&mark, 1).first() {
+            break pid;
+        }
+        assert!(start.elapsed() < JOB_LIMIT, "process 1 never started");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the job ended before process 1 started"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the job ended before the kill"
+    );
+    let killed = Command::new("kill")
+        .args(["-9", &victim.to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let killed_at = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if killed_at.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("the job did not end within 60 s of a process's death");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(!status.success(), "the job of a dead process succeeded");
+    assert!(
+        ranks_marked(&mark, 0).is_empty(),
+        "process 0 outlived the job"
+    );
+    assert!(!depth.exists() && !scene.exists(), "an output was written");
+    assert_eq!(crate::cli_support::listing(&tmp.0), vec!["a".to_string()]);
 }
