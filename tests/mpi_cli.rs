@@ -19,23 +19,30 @@ use crate::cli_support::{assert_one_line_error, rdlidar, s, stderr, stdout, Temp
 /// How long one job may take before it is killed.
 const JOB_LIMIT: Duration = Duration::from_secs(120);
 
-/// Runs the binary under `mpirun -q -n ranks` (one rayon thread per process), killed after
+/// The binary under `mpirun -q -n ranks` (one rayon thread per process, as root and
+/// oversubscribed if need be), its output captured.
+fn mpirun_command(ranks: usize) -> Command {
+    let mut c = Command::new("mpirun");
+    c.args([
+        "-q",
+        "-n",
+        &ranks.to_string(),
+        env!("CARGO_BIN_EXE_rdlidar"),
+    ])
+    .env("RAYON_NUM_THREADS", "1")
+    .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+    .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    c
+}
+
+/// Runs the binary under `mpirun -q -n ranks` ([`mpirun_command`]), killed after
 /// [`JOB_LIMIT`].
 fn mpirun(ranks: usize, args: &[&str]) -> Output {
-    let mut child = Command::new("mpirun")
-        .args([
-            "-q",
-            "-n",
-            &ranks.to_string(),
-            env!("CARGO_BIN_EXE_rdlidar"),
-        ])
+    let mut child = mpirun_command(ranks)
         .args(args)
-        .env("RAYON_NUM_THREADS", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
         .spawn()
         .expect("mpirun (Debian: openmpi-bin) runs");
     let start = Instant::now();
@@ -562,13 +569,14 @@ fn a_process_that_dies_ends_the_job_without_output() {
     );
     let (depth, scene) = (tmp.path("d.npy"), tmp.path("x.npy"));
     let mark = format!("RDLIDAR_TEST_MARK={}", std::process::id());
-    let mut child = Command::new("mpirun")
+    let mut child = mpirun_command(2)
         .args([
-            "-q",
-            "-n",
-            "2",
-            env!("CARGO_BIN_EXE_rdlidar"),
             "reconstruct",
+            "--solver",
+            "fista",
+            "--max-iter",
+            "100000",
+            "--quiet",
         ])
         .args([
             "--pulse",
@@ -576,23 +584,9 @@ fn a_process_that_dies_ends_the_job_without_output() {
             "--codes",
             &acq.file("codes.npy"),
         ])
-        .args([
-            "--meas",
-            &acq.file("meas.npy"),
-            "--depth-bins",
-            "40",
-            "--solver",
-            "fista",
-        ])
-        .args(["--max-iter", "100000", "--quiet", "--out-depth", s(&depth)])
-        .args(["--out-scene", s(&scene)])
+        .args(["--meas", &acq.file("meas.npy"), "--depth-bins", "40"])
+        .args(["--out-depth", s(&depth), "--out-scene", s(&scene)])
         .env("RDLIDAR_TEST_MARK", std::process::id().to_string())
-        .env("RAYON_NUM_THREADS", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
         .spawn()
         .expect("mpirun runs");
     // Wait for process 1 to be solving, then kill it.
