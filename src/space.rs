@@ -247,6 +247,27 @@ pub fn whole_values(space: &dyn Space, local: Vec<f64>) -> Vec<f64> {
     }
 }
 
+/// Every part's text, in part order, on every part (for results that are not numbers, such as
+/// a sweep's rows). A collective: two gathers, one of the lengths, one of the bytes.
+pub fn gather_text(space: &dyn Space, local: &str) -> Vec<String> {
+    if space.parts() == 1 {
+        return vec![local.to_string()];
+    }
+    let lengths = space.gather(&[local.len() as f64]);
+    let sent: Vec<f64> = local.bytes().map(f64::from).collect();
+    let bytes: Vec<u8> = space.gather(&sent).into_iter().map(|b| b as u8).collect();
+    let mut at = 0;
+    lengths
+        .iter()
+        .map(|&len| {
+            let end = (at + len as usize).min(bytes.len());
+            let text = String::from_utf8_lossy(&bytes[at..end]).into_owned();
+            at = end;
+            text
+        })
+        .collect()
+}
+
 /// The rows of an image within `radius` rows of this part's rows: (those above, those below),
 /// each of `row_len` values, in image order, fewer at the image's edges. The image's rows are
 /// split into parts of whole consecutive rows, in part order; `local` holds this part's rows.

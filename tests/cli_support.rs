@@ -148,3 +148,22 @@ pub(crate) fn max_rel_diff(a: &Array1<f64>, b: &Array1<f64>) -> f64 {
         .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
         / scale
 }
+
+/// The lines of an experiment's `results.csv` with the `time_s` field removed: what two runs of
+/// one sweep share however their times differ.
+pub fn rows_without_times(csv: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(csv).unwrap_or_else(|e| panic!("{}: {e}", csv.display()));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let time = header
+        .iter()
+        .position(|h| *h == "time_s")
+        .expect("a time_s column");
+    std::iter::once(header.join(","))
+        .chain(lines.map(|l| {
+            let mut fields: Vec<&str> = l.split(',').collect();
+            fields.remove(time);
+            fields.join(",")
+        }))
+        .collect()
+}

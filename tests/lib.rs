@@ -21,6 +21,7 @@ mod cli_file_checks;
 mod cli_forward;
 mod cli_front_door;
 mod cli_reconstruct;
+mod cli_shards;
 mod cli_simulate;
 mod cli_support;
 mod cli_usage;
@@ -41,6 +42,8 @@ mod model_based;
 mod mpi;
 #[cfg(feature = "mpi")]
 mod mpi_cli;
+#[cfg(feature = "mpi")]
+mod mpi_sweeps;
 mod noise;
 mod norm;
 mod npy_fuzz;

@@ -40,7 +40,7 @@ fn mpirun_command(ranks: usize) -> Command {
 
 /// Runs the binary under `mpirun -q -n ranks` ([`mpirun_command`]), killed after
 /// [`JOB_LIMIT`].
-fn mpirun(ranks: usize, args: &[&str]) -> Output {
+pub(crate) fn mpirun(ranks: usize, args: &[&str]) -> Output {
     let mut child = mpirun_command(ranks)
         .args(args)
         .spawn()
@@ -56,7 +56,7 @@ fn mpirun(ranks: usize, args: &[&str]) -> Output {
     child.wait_with_output().unwrap()
 }
 
-fn ok(out: Output, what: &str) -> String {
+pub(crate) fn ok(out: Output, what: &str) -> String {
     assert!(
         out.status.success(),
         "{what}: {}\n{}",

@@ -6,14 +6,15 @@ use std::process::ExitCode;
 use rdlidar::lidar::Geometry;
 use rdlidar::recon::Method;
 use rdlidar::report::experiment::{
-    self, ConfigFile, Console, ExperimentConfig, ExperimentPatch, IterationBudgets, NoiseLevel,
-    SceneKind as ExpSceneKind,
+    self, ConfigFile, Console, ExperimentConfig, ExperimentObserver, ExperimentPatch,
+    IterationBudgets, NoiseLevel, SceneKind as ExpSceneKind, Shard, SweepShare,
 };
 
 use crate::common::{
     check_not_input, errln, outln, parse_positive, parse_size, set_threads, CliResult, Failure,
     Globals, Precision,
 };
+use crate::ranks::Ranks;
 
 /// The options of `demo` (and of the command with no subcommand) and `compare`.
 ///
@@ -82,6 +83,23 @@ pub struct CompareArgs {
     /// every solver and support-ls, written to out-research/.
     #[arg(long, conflicts_with_all = ["tiny", "quick"])]
     pub research: bool,
+    /// Run share K of N of the sweep's problems (K from 1; each problem is a simulation and
+    /// every solver on it, dealt by estimated work), e.g. as task K of a job array; --out then
+    /// holds that shard's runs, and `compare --merge` joins the shards' folders.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<Shard>,
+    /// Merge the output folders of every shard of one sweep (written by `compare --shard`)
+    /// into --out: the tables, summary and figures of the whole sweep. Takes no other option
+    /// but --out and --force.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["shard", "quick", "research"])]
+    pub merge: Vec<PathBuf>,
+}
+
+fn parse_shard(text: &str) -> Result<Shard, String> {
+    Shard::parse(text).map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { reason, .. } => reason,
+        other => other.to_string(),
+    })
 }
 
 /// Which preset an experiment starts from.
@@ -231,6 +249,18 @@ fn experiment_config(
     Ok((config, threads, quiet))
 }
 
+/// Checks that the output folder can be used and that no table would replace the config file.
+fn check_output(a: &ExperimentArgs, config: &ExperimentConfig) -> CliResult<()> {
+    rdlidar::io::check_output_dir(&config.out, a.force, "the results in it")?;
+    if let Some(file) = &a.config {
+        // With --force the tables replace files of the same name in the folder.
+        for name in TABLES {
+            check_not_input(&config.out.join(name), "--out", &[(file, "--config")])?;
+        }
+    }
+    Ok(())
+}
+
 /// The files of an experiment that a --config file could be.
 const TABLES: [&str; 5] = [
     "config.toml",
@@ -240,21 +270,78 @@ const TABLES: [&str; 5] = [
     "summary.md",
 ];
 
-/// `demo` (also the command with no subcommand) and `compare`.
+/// `compare --merge`: the shards' folders joined into --out.
+pub fn merge(a: &CompareArgs, globals: &Globals) -> CliResult<ExitCode> {
+    let only_out = ExperimentArgs {
+        out: a.common.out.clone(),
+        force: a.common.force,
+        ..ExperimentArgs::default()
+    };
+    if a.common != only_out || globals.seed.is_some() || globals.precision.is_some() {
+        return Err(
+            "compare --merge takes the sweep from the shards' folders: give only \
+                    --out and --force with it"
+                .to_string()
+                .into(),
+        );
+    }
+    let out = a
+        .common
+        .out
+        .clone()
+        .unwrap_or_else(|| ExperimentConfig::compare().out);
+    rdlidar::io::check_output_dir(&out, a.common.force, "the results in it")?;
+    let outcome =
+        experiment::merge_compare(&a.merge, &out, a.common.force).map_err(|e| match e {
+            rdlidar::Error::InvalidParameter {
+                name: "merge",
+                reason,
+            } => Failure::Message(format!("--merge: {reason}")),
+            other => other.into(),
+        })?;
+    outln!(
+        "merged {} shards: {} of {} runs{}; wrote {}: {}",
+        a.merge.len(),
+        outcome.rows.len(),
+        outcome.planned,
+        if outcome.interrupted {
+            " (a shard was interrupted)"
+        } else {
+            ""
+        },
+        out.display(),
+        file_names(&outcome.files)
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The files' names, comma-separated.
+fn file_names(files: &[PathBuf]) -> String {
+    let names: Vec<String> = files
+        .iter()
+        .map(|f| {
+            f.file_name()
+                .map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into())
+        })
+        .collect();
+    names.join(", ")
+}
+
+/// `demo` (also the command with no subcommand) and `compare`, on `shard` of the sweep, dealt to
+/// the processes of `ranks` (compare only).
 pub fn run(
     which: Experiment,
     a: &ExperimentArgs,
-    preset: Preset,
+    (preset, shard): (Preset, Shard),
     globals: &Globals,
+    ranks: &Ranks,
 ) -> CliResult<ExitCode> {
-    let (config, threads, quiet) = experiment_config(which, a, preset, globals)?;
-    rdlidar::io::check_output_dir(&config.out, a.force, "the results in it")?;
-    if let Some(file) = &a.config {
-        // With --force the tables replace files of the same name in the folder.
-        for name in TABLES {
-            check_not_input(&config.out.join(name), "--out", &[(file, "--config")])?;
-        }
-    }
+    let (config, threads, quiet) = ranks.agree(experiment_config(which, a, preset, globals))?;
+    ranks.agree(if ranks.is_first() {
+        check_output(a, &config)
+    } else {
+        Ok(())
+    })?;
     set_threads(threads, "threads")?;
     ctrlc::set_handler(move || {
         if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
@@ -271,9 +358,22 @@ pub fn run(
         .iter()
         .map(|l| experiment::noise_text(*l))
         .collect();
+    let shard_runs = SweepShare {
+        shard,
+        space: &rdlidar::space::WHOLE,
+    }
+    .cases(&config)
+    .len()
+        * config.solvers.len();
+    let dealt = match (shard.is_whole(), ranks.processes()) {
+        (true, 1) => String::new(),
+        (false, 1) => format!(", {shard_runs} of them in shard {shard}"),
+        (true, r) => format!(", dealt to {r} processes"),
+        (false, r) => format!(", {shard_runs} of them in shard {shard}, dealt to {r} processes"),
+    };
     outln!(
         "rdlidar {}: {} scene {} (critical K_p {}), K_p {}, {}, {} seed(s) from {}, {}, {} \
-         threads; {} runs",
+         threads; {} runs{dealt}",
         which.name(),
         config.scene_names(),
         config.size,
@@ -294,24 +394,39 @@ pub fn run(
             .map_or_else(|| "up to 200".to_string(), |n| n.to_string())
     );
     let mut console = Console::new(quiet).stopping_on_closed_stdout(&STOP);
+    let mut nothing = ();
+    let observer: &mut dyn ExperimentObserver = if ranks.is_first() {
+        &mut console
+    } else {
+        &mut nothing
+    };
+    let space = ranks
+        .space()
+        .map_or(&rdlidar::space::WHOLE as &dyn rdlidar::space::Space, |s| {
+            &**s
+        });
+    let share = SweepShare { shard, space };
     let outcome = match which {
-        Experiment::Demo => experiment::run_demo(&config, a.force, &mut console, &STOP),
-        Experiment::Compare => experiment::run_compare(&config, a.force, &mut console, &STOP),
+        Experiment::Demo => experiment::run_demo(&config, a.force, observer, &STOP),
+        Experiment::Compare => {
+            experiment::run_compare_shared(&config, (a.force, &share), observer, &STOP)
+        }
     };
     console.finish();
-    let outcome = outcome?;
+    let outcome = outcome.map_err(|e| match e {
+        rdlidar::Error::InvalidParameter {
+            name: "parts",
+            reason,
+        } => Failure::Message(reason),
+        other => other.into(),
+    })?;
+    if !ranks.is_first() {
+        return Ok(ExitCode::SUCCESS);
+    }
     if console.stdout_closed() {
         // The reader of the table has gone: the finished runs are written; end as a broken pipe.
         return Err(Failure::BrokenPipe);
     }
-    let names: Vec<String> = outcome
-        .files
-        .iter()
-        .map(|f| {
-            f.file_name()
-                .map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into())
-        })
-        .collect();
     let failed = outcome.rows.iter().filter(|r| r.error.is_some()).count();
     outln!(
         "{} of {} runs finished{} in {:.1} s (total {:.1} s with tables and figures); wrote {}: {}",
@@ -325,7 +440,7 @@ pub fn run(
         outcome.elapsed.as_secs_f64(),
         outcome.total.as_secs_f64(),
         config.out.display(),
-        names.join(", ")
+        file_names(&outcome.files)
     );
     if outcome.interrupted {
         errln!(

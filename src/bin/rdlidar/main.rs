@@ -21,6 +21,7 @@ use common::{errln, parse_threads, set_threads, CliResult, Failure, Globals, Pre
 use experiment::{CompareArgs, Experiment, ExperimentArgs, Preset};
 use ranks::Ranks;
 use rdlidar::lidar::TileSize;
+use rdlidar::report::experiment::Shard;
 
 /// Compressive time-of-flight lidar by random demodulation.
 ///
@@ -173,6 +174,7 @@ impl Command {
             Command::Adjoint(a) => a.tiles.is_none(),
             Command::Dottest(a) => a.tiles.is_none(),
             Command::Reconstruct(_) => true,
+            Command::Compare(a) => a.merge.is_empty(),
             Command::Simulate(a) => simulate::splits(a).is_ok(),
             _ => false,
         }
@@ -187,8 +189,14 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         quiet: cli.quiet,
     };
     let Some(command) = cli.command else {
-        Ranks::start("demo", false)?;
-        return experiment::run(Experiment::Demo, &cli.demo, Preset::Default, &globals);
+        let alone = Ranks::start("demo", false)?;
+        return experiment::run(
+            Experiment::Demo,
+            &cli.demo,
+            (Preset::Default, Shard::WHOLE),
+            &globals,
+            &alone,
+        );
     };
     if cli.demo != ExperimentArgs::default() {
         return Err(
@@ -216,14 +224,28 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
     let ranks = Ranks::start(&name, command.splits())?;
     let done = |()| ExitCode::SUCCESS;
     match command {
-        Command::Demo(a) => experiment::run(Experiment::Demo, &a, Preset::Default, &globals),
+        Command::Demo(a) => experiment::run(
+            Experiment::Demo,
+            &a,
+            (Preset::Default, Shard::WHOLE),
+            &globals,
+            &ranks,
+        ),
+        Command::Compare(a) if !a.merge.is_empty() => experiment::merge(&a, &globals),
         Command::Compare(a) => {
             let preset = match (a.quick, a.research) {
                 (true, _) => Preset::Quick,
                 (_, true) => Preset::Research,
                 _ => Preset::Default,
             };
-            experiment::run(Experiment::Compare, &a.common, preset, &globals)
+            let shard = a.shard.unwrap_or(Shard::WHOLE);
+            experiment::run(
+                Experiment::Compare,
+                &a.common,
+                (preset, shard),
+                &globals,
+                &ranks,
+            )
         }
         Command::Selfcheck => selfcheck::run(&globals),
         Command::Simulate(a) => simulate::run(&a, &globals, &ranks).map(done),

@@ -1,5 +1,6 @@
 //! The processes of an MPI job. Under `mpirun -n R` (a binary built with the feature `mpi`),
-//! `forward`, `adjoint`, `dottest` and `reconstruct` split the pixel rows over the R processes:
+//! `forward`, `adjoint`, `dottest` and `reconstruct` split the pixel rows over the R processes
+//! (`compare` deals its problems to them instead, see `experiment.rs`):
 //! every process reads its rows of the codes and computes on them, process 0 prints and writes
 //! the outputs, and the processes agree on every failure before going on, so that a bad input
 //! ends every process with one error line (process 0's) and status 1, never a wait.
@@ -66,8 +67,8 @@ impl Ranks {
             return Err(format!(
                 "rdlidar {command} runs on one process, but it was launched as {size} \
                  processes: under mpirun, forward, adjoint, dottest and reconstruct split the \
-                 pixel rows over the processes (simulate too, with --codes-format seed), and \
-                 reconstruct --tiles deals the tiles to them"
+                 pixel rows over the processes (simulate too, with --codes-format seed), \
+                 reconstruct --tiles deals the tiles to them, and compare its problems"
             )
             .into());
         }

@@ -22,7 +22,9 @@ const SCALE: f64 = 100.0;
 /// On a terminal, progress is an indicatif bar with the run under way and the estimated time
 /// left (the table's rows are printed above it). When stderr is not a terminal, each problem's
 /// simulation and each run's start are logged as plain lines instead, so that logs stay
-/// readable. `quiet` hides both; the table is printed in every case.
+/// readable. `quiet` hides both; the table is printed in every case. In a sweep shared by
+/// several processes, the first process's console prints its own rows as they finish and the
+/// other processes' rows once they are gathered.
 #[derive(Debug)]
 pub struct Console {
     quiet: bool,
@@ -30,6 +32,8 @@ pub struct Console {
     lines: bool,
     columns: Vec<Column>,
     done: f64,
+    /// The rows printed so far.
+    printed: Vec<super::Row>,
     started: Instant,
     /// Set when a write to stdout failed because its reader has gone.
     closed: AtomicBool,
@@ -46,6 +50,7 @@ impl Console {
             lines: !quiet && !std::io::stderr().is_terminal(),
             columns: Vec::new(),
             done: 0.0,
+            printed: Vec::new(),
             started: Instant::now(),
             closed: AtomicBool::new(false),
             stop: None,
@@ -167,6 +172,20 @@ impl ExperimentObserver for Console {
                     b.set_position((self.done * SCALE) as u64);
                 }
                 self.print(&markdown_row(row, &self.columns));
+                self.printed.push((*row).clone());
+            }
+            Event::Gathered { processes, rows } => {
+                self.finish();
+                let others: Vec<&super::Row> =
+                    rows.iter().filter(|r| !self.printed.contains(r)).collect();
+                let from = match processes - 1 {
+                    1 => "the other process".to_string(),
+                    n => format!("the other {n} processes"),
+                };
+                self.log(&format!("{} rows of {from}:", others.len()));
+                for row in others {
+                    self.print(&markdown_row(row, &self.columns));
+                }
             }
             Event::Interrupted { finished, runs } => {
                 self.finish();

@@ -42,7 +42,9 @@
 
 mod config;
 mod console;
+mod deal;
 mod figures;
+mod merge;
 mod presets;
 mod staging;
 mod sweep;
@@ -53,7 +55,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub use config::{
     noise_text, parse_noise_level, parse_noise_levels, parse_pulse_lens, parse_scenes,
@@ -61,9 +63,11 @@ pub use config::{
     NoiseLevel, Precision, SceneKind, DEFAULT_SOLVERS, MAX_POWER_ITERATIONS, MAX_SEEDS,
 };
 pub use console::Console;
+pub use deal::{deal, in_sweep_order, Shard, SweepShare};
 pub use figures::{
     check_depth_figure, depth_figure, error_vs_time, pareto_chart, phase_chart, ERROR_FLOOR,
 };
+pub use merge::merge_compare;
 pub use staging::{abandon_staged_and_exit, StagedDir};
 pub use sweep::{CaseDepths, Sweep};
 pub use table::{
@@ -116,7 +120,7 @@ impl ExperimentConfig {
 ///
 /// Quality fields are `None` when the solver failed (then `error` says why); `iterations`,
 /// `termination` and the apply counts are `None` for the backprojections, which do not iterate.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Row {
     /// Scene kind.
     pub scene: String,
@@ -239,6 +243,14 @@ pub enum Event<'a> {
         /// Its estimated work (the units of [`Event::Planned`]).
         work: f64,
     },
+    /// The rows of every process were gathered (a sweep shared by several processes), in the
+    /// order one process runs them.
+    Gathered {
+        /// Processes that ran the sweep.
+        processes: usize,
+        /// Every row.
+        rows: &'a [Row],
+    },
     /// The sweep stopped before its end (the stop flag was raised).
     Interrupted {
         /// Runs finished.
@@ -299,6 +311,9 @@ pub struct Outcome {
 struct ResultsJson<'a> {
     experiment: &'a str,
     crate_version: &'a str,
+    /// The share of the sweep, `k/n`, when the folder holds one shard's runs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    shard: Option<String>,
     interrupted: bool,
     planned_runs: usize,
     finished_runs: usize,
@@ -307,15 +322,25 @@ struct ResultsJson<'a> {
     rows: &'a [Row],
 }
 
+/// What the tables of an experiment are written for.
+struct Tables<'a> {
+    /// `demo` or `compare`.
+    experiment: &'a str,
+    /// The columns of `results.md`.
+    columns: &'a [Column],
+    /// The share of the sweep, when a folder holds one shard's runs.
+    shard: Option<Shard>,
+}
+
 /// The tables common to both experiments: results.csv, results.json, results.md, config.toml.
 fn write_tables(
-    experiment: &str,
+    tables: &Tables<'_>,
     config: &ExperimentConfig,
     sweep: &Sweep,
-    columns: &[Column],
     dir: &Path,
     files: &mut Vec<PathBuf>,
 ) -> Result<()> {
+    let experiment = tables.experiment;
     let mut csv = csv_header();
     for r in &sweep.rows {
         csv.push_str(&csv_line(r));
@@ -323,6 +348,7 @@ fn write_tables(
     let json = serde_json::to_string_pretty(&ResultsJson {
         experiment,
         crate_version: env!("CARGO_PKG_VERSION"),
+        shard: tables.shard.map(|s| s.to_string()),
         interrupted: sweep.interrupted,
         planned_runs: sweep.planned,
         finished_runs: sweep.rows.len(),
@@ -332,7 +358,7 @@ fn write_tables(
     })
     .map_err(|e| Error::param("results", format!("cannot write JSON: {e}")))?
         + "\n";
-    let md = markdown_table(&sweep.rows, columns);
+    let md = markdown_table(&sweep.rows, tables.columns);
     let toml = config.to_toml(experiment)?;
     for (name, text) in [
         ("results.csv", csv),
@@ -406,7 +432,7 @@ pub fn run_demo(
         columns: &DEMO_COLUMNS,
         keep_depths: true,
     };
-    run.execute(config, force, observer, stop, |sweep, dir, files| {
+    let figures = |sweep: &Sweep, dir: &Path, files: &mut Vec<PathBuf>| -> Result<()> {
         let several = config.seeds > 1 || config.snr_db.len() > 1;
         for d in &sweep.depths {
             let scene = config.for_scene(d.case.scene);
@@ -440,7 +466,14 @@ pub fn run_demo(
             files.push(path);
         }
         Ok(())
-    })
+    };
+    run.execute(
+        config,
+        (force, &SweepShare::WHOLE),
+        observer,
+        stop,
+        &figures,
+    )
 }
 
 /// `""` for a one-scene experiment, else the scene's name and `_`: the start of its files' names.
@@ -497,49 +530,86 @@ pub fn run_compare(
     observer: &mut dyn ExperimentObserver,
     stop: &AtomicBool,
 ) -> Result<Outcome> {
-    let run = Run {
-        name: "compare",
-        columns: &COMPARE_COLUMNS,
-        keep_depths: false,
-    };
-    run.execute(config, force, observer, stop, |sweep, dir, files| {
-        let summary: Vec<String> = config
-            .scenes
-            .iter()
-            .map(|&s| {
-                let rows: Vec<Row> = sweep
-                    .rows
-                    .iter()
-                    .filter(|r| r.scene == s.name())
-                    .cloned()
-                    .collect();
-                summary_markdown(&config.for_scene(s), &rows)
-            })
-            .collect();
-        let path = dir.join("summary.md");
-        crate::io::write_bytes_atomic(&path, summary.join("\n").as_bytes())?;
+    run_compare_shared(config, (force, &SweepShare::WHOLE), observer, stop)
+}
+
+/// [`run_compare`] on `share`'s problems: one [`Shard`] of the sweep (the folder then holds
+/// that shard's runs, to be merged with the others' by [`merge_compare`]), dealt again over the
+/// processes of `share.space` (each runs whole problems; every row is gathered, and the first
+/// process writes the folder as one process would, run times apart). The problems are dealt
+/// by their estimated work (see [`deal`]).
+///
+/// Every process of `share.space` calls it with the same arguments; the processes agree on a
+/// failure (an output folder that cannot be used, a failed simulation), which every process
+/// returns. The processes but the first write nothing and return every row and no files.
+///
+/// # Errors
+/// As [`run_compare`]; [`Error::InvalidParameter`] (`parts`) for another process's failure.
+pub fn run_compare_shared(
+    config: &ExperimentConfig,
+    (force, share): (bool, &SweepShare<'_>),
+    observer: &mut dyn ExperimentObserver,
+    stop: &AtomicBool,
+) -> Result<Outcome> {
+    COMPARE.execute(
+        config,
+        (force, share),
+        observer,
+        stop,
+        &|sweep, dir, files| compare_files(config, sweep, dir, files),
+    )
+}
+
+/// The compare experiment's tables and columns.
+const COMPARE: Run = Run {
+    name: "compare",
+    columns: &COMPARE_COLUMNS,
+    keep_depths: false,
+};
+
+/// The compare experiment's own files: `summary.md`, the Pareto and phase charts.
+fn compare_files(
+    config: &ExperimentConfig,
+    sweep: &Sweep,
+    dir: &Path,
+    files: &mut Vec<PathBuf>,
+) -> Result<()> {
+    let summary: Vec<String> = config
+        .scenes
+        .iter()
+        .map(|&s| {
+            let rows: Vec<Row> = sweep
+                .rows
+                .iter()
+                .filter(|r| r.scene == s.name())
+                .cloned()
+                .collect();
+            summary_markdown(&config.for_scene(s), &rows)
+        })
+        .collect();
+    let path = dir.join("summary.md");
+    crate::io::write_bytes_atomic(&path, summary.join("\n").as_bytes())?;
+    files.push(path);
+    for (scene, rows) in per_scene(config, &sweep.rows) {
+        let kind = scene.scenes[0];
+        let path = dir.join(format!("pareto{}.png", scene_suffix(config, kind)));
+        pareto_chart(&scene, &rows)?.save_png(&path)?;
         files.push(path);
-        for (scene, rows) in per_scene(config, &sweep.rows) {
-            let kind = scene.scenes[0];
-            let path = dir.join(format!("pareto{}.png", scene_suffix(config, kind)));
-            pareto_chart(&scene, &rows)?.save_png(&path)?;
-            files.push(path);
-            for &level in &config.snr_db {
-                let rows: Vec<Row> = rows.iter().filter(|r| r.snr_db == level).cloned().collect();
-                if rows.is_empty() {
-                    continue;
-                }
-                let noise = match level {
-                    None => "noise-free".to_string(),
-                    Some(s) => format!("{s}db"),
-                };
-                let path = dir.join(format!("phase_{}{noise}.png", scene_prefix(config, kind)));
-                phase_chart(&scene, level, &rows)?.save_png(&path)?;
-                files.push(path);
+        for &level in &config.snr_db {
+            let rows: Vec<Row> = rows.iter().filter(|r| r.snr_db == level).cloned().collect();
+            if rows.is_empty() {
+                continue;
             }
+            let noise = match level {
+                None => "noise-free".to_string(),
+                Some(s) => format!("{s}db"),
+            };
+            let path = dir.join(format!("phase_{}{noise}.png", scene_prefix(config, kind)));
+            phase_chart(&scene, level, &rows)?.save_png(&path)?;
+            files.push(path);
         }
-        Ok(())
-    })
+    }
+    Ok(())
 }
 
 /// What the two experiments share: the sweep with rows streamed to partial files, the tables,
@@ -551,42 +621,108 @@ struct Run {
     keep_depths: bool,
 }
 
+/// Writes an experiment's own files (figures, summaries) for a finished sweep into a folder,
+/// adding their paths to the list.
+type Figures<'a> = dyn Fn(&Sweep, &Path, &mut Vec<PathBuf>) -> Result<()> + 'a;
+
 impl Run {
+    /// Runs `share`'s problems of `config` and, on the first process, writes every process's
+    /// rows, the tables and the experiment's files. The other processes of an MPI job return
+    /// every row and no files.
     fn execute(
         &self,
         config: &ExperimentConfig,
-        force: bool,
+        (force, share): (bool, &SweepShare<'_>),
         observer: &mut dyn ExperimentObserver,
         stop: &AtomicBool,
-        figures: impl FnOnce(&Sweep, &Path, &mut Vec<PathBuf>) -> Result<()>,
+        figures: &Figures<'_>,
     ) -> Result<Outcome> {
         let start = Instant::now();
         config.validate()?;
         if self.keep_depths {
             figures::check_depth_figure(config)?;
         }
-        let staged = StagedDir::create(&config.out, force)?;
-        let filled = (|| -> Result<(Sweep, Vec<PathBuf>)> {
-            let mut partial = PartialFiles::create(staged.dir())?;
-            let mut on_row = |r: &Row| partial.append(r);
-            let sweep = match config.precision {
-                Precision::F32 => sweep::sweep::<f32>(config, self, observer, stop, &mut on_row)?,
-                Precision::F64 => sweep::sweep::<f64>(config, self, observer, stop, &mut on_row)?,
+        let staged = share.agree(if share.writes() {
+            StagedDir::create(&config.out, force).map(Some)
+        } else {
+            Ok(None)
+        })?;
+        let local = (|| -> Result<(Sweep, Option<PartialFiles>)> {
+            let mut partial = match &staged {
+                Some(s) => Some(PartialFiles::create(s.dir())?),
+                None => None,
             };
-            let mut files = Vec::new();
-            write_tables(
-                self.name,
-                config,
-                &sweep,
-                self.columns,
-                staged.dir(),
-                &mut files,
-            )?;
-            figures(&sweep, staged.dir(), &mut files)?;
-            partial.remove();
-            Ok((sweep, files))
+            let mut on_row = |r: &Row| partial.as_mut().map_or(Ok(()), |p| p.append(r));
+            let cases = share.cases(config);
+            let sweep = match config.precision {
+                Precision::F32 => {
+                    sweep::sweep::<f32>(config, &cases, self, observer, stop, &mut on_row)?
+                }
+                Precision::F64 => {
+                    sweep::sweep::<f64>(config, &cases, self, observer, stop, &mut on_row)?
+                }
+            };
+            Ok((sweep, partial))
         })();
-        let (sweep, files) = filled.map_err(|e| staged.explain(e))?;
+        let explain = |e: Error| match &staged {
+            Some(s) => s.explain(e),
+            None => e,
+        };
+        let (mut sweep, partial) = share.agree(local).map_err(explain)?;
+        if !share.is_whole() {
+            let planned = crate::space::count(share.space, sweep.planned);
+            let seconds = crate::space::max(share.space, sweep.elapsed.as_secs_f64());
+            sweep.elapsed = Duration::from_secs_f64(seconds.max(0.0));
+            let rows = std::mem::take(&mut sweep.rows);
+            let (rows, interrupted) = share.gather(config, rows, sweep.interrupted)?;
+            sweep.rows = rows;
+            sweep.interrupted = interrupted;
+            sweep.planned = planned;
+            observer.event(&Event::Gathered {
+                processes: share.space.parts(),
+                rows: &sweep.rows,
+            });
+        }
+        let Some(staged) = staged else {
+            return Ok(Outcome {
+                rows: sweep.rows,
+                interrupted: sweep.interrupted,
+                planned: sweep.planned,
+                files: Vec::new(),
+                elapsed: sweep.elapsed,
+                total: start.elapsed(),
+            });
+        };
+        if let Some(p) = partial {
+            p.remove();
+        }
+        let shard = Some(share.shard).filter(|s| !s.is_whole());
+        self.publish(config, staged, sweep, shard, figures, start)
+    }
+
+    /// Writes the tables of `sweep` and the experiment's files into `staged` and moves them into
+    /// the output folder.
+    fn publish(
+        &self,
+        config: &ExperimentConfig,
+        staged: StagedDir,
+        sweep: Sweep,
+        shard: Option<Shard>,
+        figures: &Figures<'_>,
+        start: Instant,
+    ) -> Result<Outcome> {
+        let filled = (|| -> Result<Vec<PathBuf>> {
+            let mut files = Vec::new();
+            let tables = Tables {
+                experiment: self.name,
+                columns: self.columns,
+                shard,
+            };
+            write_tables(&tables, config, &sweep, staged.dir(), &mut files)?;
+            figures(&sweep, staged.dir(), &mut files)?;
+            Ok(files)
+        })();
+        let files = filled.map_err(|e| staged.explain(e))?;
         staged.commit()?;
         let files = files
             .iter()

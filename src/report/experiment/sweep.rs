@@ -154,22 +154,22 @@ pub struct Sweep {
     pub elapsed: Duration,
 }
 
-/// Runs the sweep of `config` in precision `T`, calling `on_row` with each row as it finishes;
-/// stops between runs once `stop` is set.
+/// Runs `cases` (the problems of `config`, or this process's share of them) in precision `T`,
+/// calling `on_row` with each row as it finishes; stops between runs once `stop` is set.
 ///
 /// # Errors
 /// Errors of the simulation and of `on_row`. A solver's own failure is recorded in its row
 /// instead.
 pub(super) fn sweep<T: Real>(
     config: &ExperimentConfig,
+    cases: &[Case],
     run: &Run,
     observer: &mut dyn ExperimentObserver,
     stop: &AtomicBool,
     on_row: &mut dyn FnMut(&Row) -> Result<()>,
 ) -> Result<Sweep> {
     let start = Instant::now();
-    let cases = config.cases();
-    let runs = config.runs();
+    let runs = cases.len() * config.solvers.len();
     let work_of = |m: Method, kp: usize| {
         let budget = config.max_iter.get(m);
         estimated_work(m, budget, kp)
@@ -192,7 +192,7 @@ pub(super) fn sweep<T: Real>(
         planned: runs,
         elapsed: Duration::ZERO,
     };
-    'cases: for case in &cases {
+    'cases: for case in cases {
         if stop.load(Ordering::SeqCst) {
             sweep.interrupted = true;
             break;
