@@ -282,3 +282,102 @@ fn io_a_band_of_rows_of_any_codes_file_is_those_rows_of_the_whole() {
         .to_string();
     assert!(e.contains("(1, 4, 2, 0)"), "{e}");
 }
+
+#[test]
+fn io_a_band_of_whole_tile_rows_is_the_diagonal_block_of_its_tiles() {
+    use rdlidar::acquisition::{AcquisitionFiles, InputNames, Streaming};
+    use rdlidar::lidar::TileSize;
+    let tmp = TempDir::new("io-tile-band");
+    let (m, n, ks, kp) = (7, 5, 4, 40);
+    let k = kp + ks - 1;
+    let tile = TileSize { m: 3, n: 4 };
+    for format in ["int8", "seed"] {
+        let dir = tmp.path(format);
+        let out = crate::cli_support::rdlidar(&[
+            "simulate",
+            "--scene",
+            "paper",
+            "--size",
+            "7x5x4",
+            "--pulse-len",
+            "40",
+            "--tiles",
+            "3x4",
+            "--codes-format",
+            format,
+            "--out",
+            s(&dir),
+        ]);
+        assert!(out.status.success(), "{}", crate::cli_support::stderr(&out));
+        let codes = dir.join(if format == "seed" {
+            "meta.json"
+        } else {
+            "codes.npy"
+        });
+        let pulse: Array1<f64> = read_npy(dir.join("pulse.npy")).unwrap();
+        let describe = || {
+            AcquisitionFiles::describe(
+                &codes,
+                kp,
+                ks,
+                None,
+                Some(tile),
+                Streaming::Auto,
+                InputNames::COMMAND_LINE,
+            )
+            .unwrap()
+        };
+        let whole = describe()
+            .load(pulse.to_vec())
+            .unwrap()
+            .operator::<f64>()
+            .unwrap();
+        // Two tiles per row of tiles: rows 3..6 hold tiles 2 and 3, rows 6..7 tiles 4 and 5.
+        for (rows, tiles) in [(3..6, 2..4), (6..7, 4..6), (0..7, 0..6), (0..3, 0..2)] {
+            let band = describe().with_rows(rows.clone()).unwrap();
+            let op = band
+                .load(pulse.to_vec())
+                .unwrap()
+                .operator::<f64>()
+                .unwrap();
+            let cols = rows.len() * n * ks;
+            assert_eq!(
+                (op.nrows(), op.ncols()),
+                (tiles.len() * k, cols),
+                "{format}"
+            );
+            let x: Vec<f64> = (0..cols).map(|i| ((i * 7 + 3) % 11) as f64 - 5.0).collect();
+            let mut x_whole = vec![0.0; m * n * ks];
+            x_whole[rows.start * n * ks..rows.end * n * ks].copy_from_slice(&x);
+            let (mut y, mut y_whole) = (vec![0.0; op.nrows()], vec![0.0; whole.nrows()]);
+            op.apply(&x, &mut y);
+            whole.apply(&x_whole, &mut y_whole);
+            let mine = tiles.start * k..tiles.end * k;
+            assert_eq!(y, y_whole[mine.clone()], "{format}, rows {rows:?}");
+            assert!(
+                y_whole[..mine.start]
+                    .iter()
+                    .chain(&y_whole[mine.end..])
+                    .all(|v| *v == 0.0),
+                "{format}, rows {rows:?}: other tiles measured the band"
+            );
+            let mut back = vec![0.0; cols];
+            let mut back_whole = vec![0.0; m * n * ks];
+            let mut y_in = vec![0.0; whole.nrows()];
+            y_in[mine].copy_from_slice(&y);
+            op.apply_adjoint(&y, &mut back);
+            whole.apply_adjoint(&y_in, &mut back_whole);
+            assert_eq!(back, back_whole[rows.start * n * ks..rows.end * n * ks]);
+        }
+        for bad in [1..3, 0..4, 3..5] {
+            let e = describe().with_rows(bad.clone()).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!(
+                    "rows {}..{} cut through the tiles of 3x4",
+                    bad.start, bad.end
+                )),
+                "{e}"
+            );
+        }
+    }
+}

@@ -178,6 +178,17 @@ def _band_of(codes, rows: Tuple[int, int]):
     return np.ascontiguousarray(codes[index])
 
 
+def _check_whole_tile_rows(rows: Tuple[int, int], tile: Tuple[int, int], m: int) -> None:
+    """A band of an array in tiles of A x B pixels holds whole rows of tiles."""
+    a = tile[0]
+    if rows[0] % a != 0 or (rows[1] % a != 0 and rows[1] != m):
+        raise ValueError(
+            f"rows: rows {rows[0]}..{rows[1]} cut through the tiles of {a}x{tile[1]}: a band "
+            f"of an array in tiles holds whole rows of tiles (start and stop multiples of {a}, "
+            f"or stop = {m})"
+        )
+
+
 class RdOperator(LinearOperator):
     """The random-demodulation lidar operator A of any architecture as a SciPy
     ``LinearOperator``.
@@ -218,7 +229,11 @@ class RdOperator(LinearOperator):
         split of the rows sum to the whole (``A = [A_1 ... A_R]``, as ``pylops.HStack`` and
         ``pylops_mpi.MPIHStack`` stack them; each MPI process then holds only its own block).
         Seeded codes (a ``meta.json``) are generated for those rows only and a codes ``.npy``
-        file is read for those rows only: no whole-array codes anywhere. Not with ``tiles``.
+        file is read for those rows only: no whole-array codes anywhere. With ``tiles``, a
+        band holds whole rows of tiles (start and stop multiples of A, or stop = M) and is the
+        block of its tiles: the band's unknowns to its tiles' measurements (consecutive rows of
+        the (T, K) measurements), so that the blocks of the bands sit on the diagonal of the
+        whole operator (``pylops.BlockDiag``, ``pylops_mpi.MPIBlockDiag``).
 
     ``matvec``/``rmatvec``/``matmat``/``.H`` work as for any SciPy operator, so
     ``pylops.aslinearoperator(op)`` gives a PyLops operator. ``forward`` and ``adjoint`` also
@@ -245,12 +260,11 @@ class RdOperator(LinearOperator):
             raise ValueError(f"pulse: expected a 1-D array (K_p,), got shape {p.shape}")
         ks = _int(depth_bins, "depth_bins", 1)
         band = _rows(rows)
-        if band is not None and tiles is not None:
-            raise ValueError(
-                "rows: a band of rows of an array in tiles: pass the whole array with tiles"
-            )
+        tile = _tiles(tiles)
         c = _codes_argument(codes)
         if band is not None and isinstance(c, np.ndarray):
+            if tile is not None:
+                _check_whole_tile_rows(band, tile, c.shape[c.ndim - 3])
             c, band = _band_of(c, band), None
         self._core = _rdlidar._Operator(
             p,
@@ -258,7 +272,7 @@ class RdOperator(LinearOperator):
             ks,
             dt == np.float64,
             bool(debiased),
-            _tiles(tiles),
+            tile,
             bool(stream_codes),
             band,
         )

@@ -238,11 +238,15 @@ impl AcquisitionFiles {
     /// file in C order, only those bytes; seeded codes are generated for those pixels only) and
     /// gives the acquisition of the band: its grid is those rows, its operator the block A_r of
     /// the whole operator that maps them to every measurement (as pylops-mpi's `MPIHStack`
-    /// stacks blocks).
+    /// stacks blocks). Of an array in tiles, a band holds whole rows of tiles and is itself an
+    /// array in tiles: its operator is the block of those tiles, mapping the band's unknowns to
+    /// its tiles' measurements (consecutive rows of the whole array's (T, K)), so that the
+    /// bands' blocks sit on the diagonal of the whole operator (as pylops-mpi's `MPIBlockDiag`
+    /// places them).
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] (`rows`) for an empty band or one beyond the grid, and for
-    /// a tiled acquisition (its tiles are reconstructed whole).
+    /// a band of an array in tiles that cuts through its tiles.
     pub fn with_rows(mut self, rows: Range<usize>) -> Result<Self> {
         let m = self.geometry.m;
         if rows.is_empty() || rows.end > m {
@@ -257,10 +261,20 @@ impl AcquisitionFiles {
             ));
         }
         if let Architecture::Tiles(t) = self.architecture {
-            return Err(Error::param(
-                "rows",
-                format!("a band of rows of an array in tiles of {t}: pass the whole array"),
-            ));
+            if rows.start % t.m != 0 || (rows.end % t.m != 0 && rows.end != m) {
+                return Err(Error::param(
+                    "rows",
+                    format!(
+                        "rows {}..{} cut through the tiles of {t} of {}: a band of an array in \
+                         tiles holds whole rows of tiles (start and stop multiples of {}, or \
+                         stop = {m})",
+                        rows.start,
+                        rows.end,
+                        self.codes.display(),
+                        t.m
+                    ),
+                ));
+            }
         }
         self.set_band(rows);
         Ok(self)
