@@ -381,3 +381,48 @@ fn io_a_band_of_whole_tile_rows_is_the_diagonal_block_of_its_tiles() {
         }
     }
 }
+
+#[test]
+fn io_a_band_of_rows_of_a_scene_file_is_those_rows_of_the_whole() {
+    use ndarray::ShapeBuilder;
+    use rdlidar::io::{read_scene, read_scene_rows};
+    let tmp = TempDir::new("io-scene-band");
+    let (m, n, ks) = (5, 3, 4);
+    let values = Array3::from_shape_fn((m, n, ks), |(i, j, k)| (i * 100 + j * 10 + k) as f64);
+    write_npy(tmp.path("c.npy"), &values).unwrap();
+    write_npy(tmp.path("c32.npy"), &values.mapv(|v| v as f32)).unwrap();
+    let mut fortran = Array3::<f64>::zeros((m, n, ks).f());
+    fortran.assign(&values);
+    write_npy(tmp.path("f.npy"), &fortran).unwrap();
+    for name in ["c.npy", "c32.npy", "f.npy"] {
+        let path = tmp.path(name);
+        let whole = read_scene::<f64>(&path).unwrap();
+        for rows in [0..1, 1..4, 4..5, 0..5] {
+            let (grid, band) = read_scene_rows::<f64>(&path, rows.clone()).unwrap();
+            assert_eq!(grid, (m, n, ks), "{name}");
+            assert_eq!(
+                band.as_slice(),
+                &whole.as_slice()[rows.start * n * ks..rows.end * n * ks],
+                "{name}, rows {rows:?}"
+            );
+        }
+        for bad in [2..2, 3..6] {
+            let e = read_scene_rows::<f64>(&path, bad.clone())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(name) && e.contains(&format!("rows {}..{}", bad.start, bad.end)),
+                "{e}"
+            );
+        }
+    }
+    // A bad value is named by its index in the whole file; other rows' values are not read.
+    let mut bad = values.clone();
+    bad[[3, 2, 1]] = f64::NAN;
+    write_npy(tmp.path("nan.npy"), &bad).unwrap();
+    let e = read_scene_rows::<f64>(tmp.path("nan.npy"), 2..5)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("NaN") && e.contains("(3, 2, 1)"), "{e}");
+    assert!(read_scene_rows::<f64>(tmp.path("nan.npy"), 0..3).is_ok());
+}

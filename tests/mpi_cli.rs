@@ -346,7 +346,31 @@ fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output()
     std::fs::write(&truncated, &bytes[..bytes.len() - 7]).unwrap();
     let wrong_truth = tmp.path("truth.npy");
     std::fs::copy(acq.dir.join("pulse.npy"), &wrong_truth).unwrap();
+    // A NaN in process 1's rows of a scene: process 1 alone reads those rows.
+    let nan_scene = tmp.path("nan.npy");
+    let mut x: ndarray::Array3<f64> = read_npy(acq.dir.join("scene.npy")).unwrap();
+    x[[4, 1, 2]] = f64::NAN;
+    ndarray_npy::write_npy(&nan_scene, &x).unwrap();
+    let forward_nan: Vec<String> = [
+        "forward",
+        "--pulse",
+        &acq.file("pulse.npy"),
+        "--codes",
+        &acq.file("codes.npy"),
+        "--scene",
+        s(&nan_scene),
+        "--out",
+        s(&depth),
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .collect();
     let cases: Vec<(usize, Vec<String>, Vec<&str>)> = vec![
+        (
+            2,
+            forward_nan,
+            vec!["process 1: ", "nan.npy", "NaN at index (4, 1, 2)"],
+        ),
         // Measurements of another K: every process finds it.
         (3, reconstruct(&[], "9"), vec!["meas.npy", "K_p + K_s − 1"]),
         // A truncated codes file.
@@ -438,7 +462,7 @@ fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output()
         );
         let leftovers: Vec<String> = crate::cli_support::listing(&tmp.0)
             .into_iter()
-            .filter(|f| f != "a" && f != "truncated.npy" && f != "truth.npy")
+            .filter(|f| !["a", "truncated.npy", "truth.npy", "nan.npy"].contains(&f.as_str()))
             .collect();
         assert!(leftovers.is_empty(), "{argv:?}: left {leftovers:?}");
     }

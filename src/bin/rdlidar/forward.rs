@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
 use rdlidar::io;
-use rdlidar::lidar::TileSize;
+use rdlidar::lidar::{Scene, TileSize};
 use rdlidar::Real;
 
 use rdlidar::acquisition::{pulse_in, Use};
@@ -71,12 +71,11 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs, ranks: &Ranks) -> CliResu
     // Every process reads its inputs; they agree on any failure before computing together.
     let prepared = (|| -> CliResult<_> {
         let p = io::read_pulse::<f64>(&a.pulse)?;
-        let x = io::read_scene::<T>(&a.scene)?;
-        let g = x.geometry();
+        let ((m, n, ks), x) = read_my_scene::<T>(&a.scene, ranks)?;
         let files = ranks.describe(
             &a.codes,
-            (p.len(), g.ks),
-            Some((g.m, g.n)),
+            (p.len(), ks),
+            Some((m, n)),
             a.tiles,
             a.stream_codes,
         )?;
@@ -87,12 +86,8 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs, ranks: &Ranks) -> CliResu
         Ok((x, acq, op))
     })();
     let (x, acq, op) = ranks.agree(prepared)?;
-    let ks = x.geometry().ks;
-    let x = acq
-        .share()
-        .map_or(x.as_slice(), |s| s.rows_of(x.as_slice(), ks));
     let mut y = vec![T::zero(); op.nrows()];
-    op.apply(x, &mut y);
+    op.apply(x.as_slice(), &mut y);
     // The measurements are the same in every process.
     check_finite_result(&y, "measurements", &a.scene, "--scene")?;
     if !ranks.is_first() {
@@ -123,4 +118,27 @@ fn forward<T: Real + WritableElement>(a: &ForwardArgs, ranks: &Ranks) -> CliResu
         }
     }
     Ok(())
+}
+
+/// The scene file's grid (M, N, K_s) and this process's rows of the scene: all of them alone,
+/// its band of rows when the rows are split over processes (only those bytes are read).
+fn read_my_scene<T: Real>(
+    path: &std::path::Path,
+    ranks: &Ranks,
+) -> CliResult<((usize, usize, usize), Scene<T>)> {
+    let whole = |x: Scene<T>| {
+        let g = x.geometry();
+        ((g.m, g.n, g.ks), x)
+    };
+    let Some(space) = ranks.space() else {
+        return Ok(whole(io::read_scene(path)?));
+    };
+    let shape = io::read_header(path)?.shape;
+    let m = shape.first().copied().unwrap_or(0);
+    if shape.len() != 3 || m < space.parts() {
+        // The scene's own error, or the split's (more processes than rows), as one process.
+        return Ok(whole(io::read_scene(path)?));
+    }
+    let rows = rdlidar::space::my_band(&**space, m);
+    Ok(io::read_scene_rows(path, rows)?)
 }

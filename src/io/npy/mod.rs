@@ -47,7 +47,7 @@ pub use header::{escape_all, MAX_HEADER_BYTES, MAX_NESTING};
 
 pub use read::{
     read_code_band, read_code_sets, read_codes, read_depth, read_measurement_rows,
-    read_measurements, read_pulse, read_scene, ShapeExpectation,
+    read_measurements, read_pulse, read_scene, read_scene_rows, ShapeExpectation,
 };
 pub use write::{
     stage_array, stage_code_sets, stage_codes, stage_masked_codes, stage_packed_code_sets,
@@ -471,12 +471,20 @@ fn wrong_dtype(path: &Path, role: &str, found: &NpyDtype, accepted: &str) -> Err
 }
 
 /// Converts floating-point data to `T`, naming the first NaN or infinite value (and values that
-/// overflow `T`).
+/// overflow `T`) by its index in the file, of which `a` starts at index `first` of axis 0.
 fn to_real<T: Real, S: Copy + Into<f64>>(
     path: &Path,
     role: &str,
     a: ArrayD<S>,
+    first: usize,
 ) -> Result<ArrayD<T>> {
+    let in_file = |i: &[usize]| {
+        let mut i = i.to_vec();
+        if let Some(row) = i.first_mut() {
+            *row += first;
+        }
+        index_text(&i)
+    };
     if let Some((i, v)) = first_bad(&a, |v| v.into().is_finite()) {
         let v: f64 = v.into();
         let what = if v.is_nan() {
@@ -486,7 +494,7 @@ fn to_real<T: Real, S: Copy + Into<f64>>(
         };
         return Err(file_error(
             path,
-            format!("{role} holds {what} at index {}", index_text(&i)),
+            format!("{role} holds {what} at index {}", in_file(&i)),
         ));
     }
     let out = a.mapv(|v| T::of_f64(v.into()));
@@ -496,7 +504,7 @@ fn to_real<T: Real, S: Copy + Into<f64>>(
             path,
             format!(
                 "{role} value {v:e} at index {} overflows {}",
-                index_text(&i),
+                in_file(&i),
                 T::NAME
             ),
         ));
@@ -513,7 +521,7 @@ fn to_real<T: Real, S: Copy + Into<f64>>(
             format!(
                 "{role} value {v:e} at index {} underflows {} (it would read as 0); use \
                  --precision f64",
-                index_text(&i),
+                in_file(&i),
                 T::NAME
             ),
         ));
@@ -523,6 +531,16 @@ fn to_real<T: Real, S: Copy + Into<f64>>(
 
 /// Reads a floating-point array of `ndim` dimensions as `T`.
 fn read_real<T: Real>(path: &Path, role: &str, ndim: usize, axes: &str) -> Result<ArrayD<T>> {
+    read_real_rows(path, (role, ndim, axes), None).map(|(_, a)| a)
+}
+
+/// [`read_real`] of the slice `rows` of axis 0 only (all of it for `None`), reading only those
+/// bytes of a C-order file; also the file's shape.
+fn read_real_rows<T: Real>(
+    path: &Path,
+    (role, ndim, axes): (&str, usize, &str),
+    rows: Option<Range<usize>>,
+) -> Result<(Vec<usize>, ArrayD<T>)> {
     let opened = open_npy(path)?;
     let h = opened.header.clone();
     let accept = |found: &NpyDtype| wrong_dtype(path, role, found, "float32 or float64");
@@ -530,11 +548,36 @@ fn read_real<T: Real>(path: &Path, role: &str, ndim: usize, axes: &str) -> Resul
         return Err(accept(&h.dtype));
     }
     check_ndim(path, role, &h, ndim, axes)?;
-    match h.dtype {
-        NpyDtype::Float32 => to_real(path, role, read_data::<f32>(path, opened)?),
-        NpyDtype::Float64 => to_real(path, role, read_data::<f64>(path, opened)?),
-        ref other => Err(accept(other)),
+    let m = h.shape.first().copied().unwrap_or(0);
+    let rows = rows.unwrap_or(0..m);
+    if rows.is_empty() || rows.end > m {
+        return Err(file_error(
+            path,
+            format!(
+                "{role} of shape {} has {m} rows: rows {}..{} are not a band of them",
+                shape_text(&h.shape),
+                rows.start,
+                rows.end
+            ),
+        ));
     }
+    let first = rows.start;
+    let a = match h.dtype {
+        NpyDtype::Float32 => to_real(
+            path,
+            role,
+            read_data_rows::<f32>(path, opened, 0, rows)?,
+            first,
+        ),
+        NpyDtype::Float64 => to_real(
+            path,
+            role,
+            read_data_rows::<f64>(path, opened, 0, rows)?,
+            first,
+        ),
+        ref other => Err(accept(other)),
+    }?;
+    Ok((h.shape, a))
 }
 
 fn into_dim<T, D: Dimension>(path: &Path, a: ArrayD<T>) -> Result<ndarray::Array<T, D>> {

@@ -12,7 +12,7 @@ use crate::real::Real;
 use super::super::file_error;
 use super::{
     check_ndim, first_bad, index_text, into_dim, open_npy, read_data, read_data_rows, read_real,
-    shape_text, wrong_dtype, NpyDtype,
+    read_real_rows, shape_text, wrong_dtype, NpyDtype,
 };
 
 /// Reads a scene: a float32 or float64 array of shape (M, N, K_s), converted to `T`.
@@ -25,6 +25,24 @@ pub fn read_scene<T: Real>(path: impl AsRef<Path>) -> Result<Scene<T>> {
     let path = path.as_ref();
     let a = into_dim::<T, Ix3>(path, read_real(path, "a scene", 3, "(M, N, K_s)")?)?;
     Scene::new(a).map_err(|e| file_error(path, e.to_string()))
+}
+
+/// Reads the pixel rows `rows` of a scene file (as [`read_scene`] reads the whole): from a C-order
+/// file only those rows' bytes. Returns the whole scene's grid (M, N, K_s) and the band's scene
+/// (rows.len(), N, K_s).
+///
+/// # Errors
+/// As [`read_scene`] (a bad value named by its index in the whole file), and [`Error::File`]
+/// for a band that is empty or beyond the scene's rows.
+pub fn read_scene_rows<T: Real>(
+    path: impl AsRef<Path>,
+    rows: Range<usize>,
+) -> Result<((usize, usize, usize), Scene<T>)> {
+    let path = path.as_ref();
+    let (shape, a) = read_real_rows(path, ("a scene", 3, "(M, N, K_s)"), Some(rows))?;
+    let a = into_dim::<T, Ix3>(path, a)?;
+    let scene = Scene::new(a).map_err(|e| file_error(path, e.to_string()))?;
+    Ok(((shape[0], shape[1], shape[2]), scene))
 }
 
 /// Reads a pulse: a float32 or float64 vector of length K_p, converted to `T`, nonnegative and not

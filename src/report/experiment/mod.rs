@@ -479,7 +479,7 @@ pub fn run_compare(
 /// returns. The processes but the first write nothing and return every row and no files.
 ///
 /// # Errors
-/// As [`run_compare`]; [`Error::InvalidParameter`] (`parts`) for another process's failure.
+/// As [`run_compare`]; [`Error::InvalidParameter`](crate::Error::InvalidParameter) (`parts`) for another process's failure.
 pub fn run_compare_shared(
     config: &ExperimentConfig,
     (force, share): (bool, &SweepShare<'_>),
