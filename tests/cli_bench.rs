@@ -54,3 +54,114 @@ fn bench_text_reports_memory_isa_and_threads() {
         assert!(text.contains(needle), "{needle} missing from\n{text}");
     }
 }
+
+/// `rdlidar ARGS` with `RDLIDAR_ISA` set to `isa`.
+fn with_isa(isa: &str, args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_rdlidar"))
+        .env("RDLIDAR_ISA", isa)
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+#[test]
+fn rdlidar_isa_caps_the_kernels_and_every_path_gives_the_same_products() {
+    let bench = [
+        "bench",
+        "--size",
+        "4x5x6",
+        "--pulse-len",
+        "50",
+        "--repeats",
+        "1",
+        "--json",
+    ];
+    let isa_of = |isa: &str| -> String {
+        let out = with_isa(isa, &bench);
+        assert!(out.status.success(), "{isa}: {}", stderr(&out));
+        let v: serde_json::Value = serde_json::from_str(stdout(&out).trim()).unwrap();
+        v["isa"].as_str().unwrap().to_string()
+    };
+    let best = isa_of("native");
+    let order = ["generic", "avx2+fma", "avx512"];
+    let rank = |name: &str| order.iter().position(|o| *o == name).unwrap();
+    assert_eq!(isa_of(""), best);
+    assert_eq!(isa_of("generic"), "generic");
+    // A cap above what the CPU has gives the best it has.
+    assert_eq!(rank(&isa_of("avx2")), rank(&best).min(1));
+    assert_eq!(isa_of(" AVX512 "), best);
+    // The same forward and adjoint products on every path (f64; the sums' order differs).
+    let tmp = crate::cli_support::TempDir::new("isa-paths");
+    let sim = tmp.path("sim");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "9x7x12",
+        "--pulse-len",
+        "90",
+        "--out",
+        crate::cli_support::s(&sim),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let file = |name: &str| sim.join(name).display().to_string();
+    let mut outputs: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
+    for isa in ["generic", "avx2", "avx512"] {
+        let (y, x) = (
+            tmp.path(&format!("y-{isa}.npy")),
+            tmp.path(&format!("x-{isa}.npy")),
+        );
+        let (ys, xs) = (y.display().to_string(), x.display().to_string());
+        let fwd = with_isa(
+            isa,
+            &[
+                "--precision",
+                "f64",
+                "forward",
+                "--pulse",
+                &file("pulse.npy"),
+                "--codes",
+                &file("codes.npy"),
+                "--scene",
+                &file("scene.npy"),
+                "--out",
+                &ys,
+            ],
+        );
+        assert!(fwd.status.success(), "{isa}: {}", stderr(&fwd));
+        let adj = with_isa(
+            isa,
+            &[
+                "--precision",
+                "f64",
+                "adjoint",
+                "--pulse",
+                &file("pulse.npy"),
+                "--codes",
+                &file("codes.npy"),
+                "--meas",
+                &ys,
+                "--depth-bins",
+                "12",
+                "--out",
+                &xs,
+            ],
+        );
+        assert!(adj.status.success(), "{isa}: {}", stderr(&adj));
+        let y: ndarray::Array1<f64> = ndarray_npy::read_npy(&y).unwrap();
+        let x: ndarray::Array3<f64> = ndarray_npy::read_npy(&x).unwrap();
+        outputs.push((y.to_vec(), x.iter().copied().collect()));
+    }
+    let close = |a: &[f64], b: &[f64]| {
+        let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        a.iter().zip(b).all(|(u, v)| (u - v).abs() <= 1e-12 * scale)
+    };
+    for (i, (y, x)) in outputs.iter().enumerate().skip(1) {
+        assert!(close(&outputs[0].0, y), "forward of path {i}");
+        assert!(close(&outputs[0].1, x), "adjoint of path {i}");
+    }
+    // A value that names no instruction set: one line naming the variable.
+    let out = with_isa("sse9", &bench);
+    crate::cli_support::assert_one_line_error(&out, &["RDLIDAR_ISA", "sse9", "generic"]);
+}

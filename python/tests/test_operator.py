@@ -182,3 +182,39 @@ def rdlidar_norm2(op):
         lam = np.linalg.norm(w)
         v = w / lam
     return lam
+
+
+def test_rdlidar_isa_caps_the_kernels_of_new_operators():
+    """RDLIDAR_ISA, read when an operator is built: generic gives the generic kernels and the
+    same products; a value that names no instruction set is refused, naming the variable."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(
+        """
+        import numpy as np, rdlidar
+        rng = np.random.default_rng(0)
+        codes = np.where(rng.random((3, 4, 40)) < 0.5, 1, -1).astype(np.int8)
+        op = rdlidar.RdOperator(rng.random(33) + 0.1, codes, 8, dtype=np.float64)
+        x = np.linspace(-1.0, 1.0, op.shape[1])
+        print(op.isa, repr(float((op @ x) @ np.arange(op.shape[0]))))
+        """
+    )
+
+    def run(isa):
+        env = dict(__import__("os").environ, RDLIDAR_ISA=isa)
+        return subprocess.run(
+            [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120
+        )
+
+    generic, native = run("generic"), run("native")
+    assert generic.returncode == 0 and native.returncode == 0, generic.stderr + native.stderr
+    g_isa, g_value = generic.stdout.split()
+    n_isa, n_value = native.stdout.split()
+    assert g_isa == "generic"
+    assert n_isa in ("generic", "avx2+fma", "avx512")
+    assert abs(float(g_value) - float(n_value)) <= 1e-12 * abs(float(n_value))
+    bad = run("sse9")
+    assert bad.returncode != 0
+    assert "RDLIDAR_ISA" in bad.stderr and "sse9" in bad.stderr

@@ -10,13 +10,19 @@
 //! group and sample; the rest (the row y[k]·p[k − j], the reduction of the buckets to per-pixel
 //! sums every [`FLUSH`] samples) is shared by the groups of a block or done once per window.
 
+use crate::error::{Error, Result};
 use crate::real::Real;
 
 /// A chunk of eight lanes.
 pub(crate) type Lane<T> = [T; 8];
 
-/// Instruction sets the kernels are compiled for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The environment variable that caps the instruction set of the fused operator's kernels:
+/// `generic`, `avx2` or `avx512` (or `native`, the default: the best this CPU has). A set the CPU
+/// lacks gives the best one below it, so that one machine can measure every path.
+pub const ISA_VAR: &str = "RDLIDAR_ISA";
+
+/// Instruction sets the kernels are compiled for, in increasing order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub(crate) enum Isa {
     Generic,
     #[cfg(target_arch = "x86_64")]
@@ -26,7 +32,8 @@ pub(crate) enum Isa {
 }
 
 impl Isa {
-    pub(crate) fn detect() -> Isa {
+    /// The best instruction set of this CPU.
+    fn best() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx512f")
@@ -42,6 +49,45 @@ impl Isa {
             }
         }
         Isa::Generic
+    }
+
+    /// The instruction set the kernels run with: the best of this CPU, capped by
+    /// [`ISA_VAR`].
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`RDLIDAR_ISA`) for a value that names no instruction set.
+    pub(crate) fn chosen() -> Result<Isa> {
+        let best = Isa::best();
+        let Some(value) = std::env::var_os(ISA_VAR) else {
+            return Ok(best);
+        };
+        let text = value.to_string_lossy().trim().to_ascii_lowercase();
+        let cap = match text.as_str() {
+            "" | "native" => return Ok(best),
+            "generic" => Isa::Generic,
+            #[cfg(target_arch = "x86_64")]
+            "avx2" | "avx2+fma" => Isa::Avx2,
+            #[cfg(target_arch = "x86_64")]
+            "avx512" => Isa::Avx512,
+            #[cfg(not(target_arch = "x86_64"))]
+            "avx2" | "avx2+fma" | "avx512" => Isa::Generic,
+            _ => {
+                return Err(Error::param(
+                    "RDLIDAR_ISA",
+                    format!(
+                        "`{}` names no instruction set of the kernels: use generic, avx2, \
+                         avx512 or native",
+                        value.to_string_lossy().escape_debug()
+                    ),
+                ))
+            }
+        };
+        Ok(best.min(cap))
+    }
+
+    /// [`Isa::chosen`], or the best of this CPU for a value that names none.
+    pub(crate) fn detect() -> Isa {
+        Isa::chosen().unwrap_or_else(|_| Isa::best())
     }
 
     pub(crate) fn name(self) -> &'static str {
@@ -413,7 +459,7 @@ macro_rules! multiversion {
                     $inner::<$t $(, $c)?>($($arg),*)
                 }
                 match isa {
-                    // SAFETY: `Isa::detect` returned these variants only after checking that the
+                    // SAFETY: `Isa::chosen` returns these variants only after checking that the
                     // CPU supports every feature the function is compiled with.
                     Isa::Avx512 => return unsafe { avx512::<$t $(, $c)?>($($arg),*) },
                     Isa::Avx2 => return unsafe { avx2::<$t $(, $c)?>($($arg),*) },

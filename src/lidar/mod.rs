@@ -36,10 +36,12 @@ pub use noise::{
 pub use pulse::{zero_mean, Pulse};
 
 /// The instruction set the fused operator's kernels run with on this machine (`"avx512"`,
-/// `"avx2+fma"` or `"generic"`), as [`RdOperator::isa`] reports it.
+/// `"avx2+fma"` or `"generic"`), as [`RdOperator::isa`] reports it: the best the CPU has, capped
+/// by the environment variable [`ISA_VAR`] (`RDLIDAR_ISA`).
 pub fn kernel_isa() -> &'static str {
     kernels::Isa::detect().name()
 }
+pub use kernels::ISA_VAR;
 pub use rdop::{composed_operator, ForwardPath, RdOperator};
 pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};
 pub use scene::{DepthMap, Scene, NO_RETURN, UNOBSERVED};

@@ -160,8 +160,9 @@ impl<T: Real> RdOperator<T> {
     ///
     /// # Errors
     /// [`Error::ShapeMismatch`] if the codes do not have `M·N` pixels and `K_p + K_s − 1`
-    /// samples; [`Error::InvalidParameter`] for an empty pulse; [`Error::NonFinite`] for a NaN or
-    /// infinite pulse value.
+    /// samples; [`Error::InvalidParameter`] for an empty pulse, or naming `RDLIDAR_ISA` when that
+    /// environment variable names no instruction set ([`ISA_VAR`](crate::lidar::ISA_VAR));
+    /// [`Error::NonFinite`] for a NaN or infinite pulse value.
     pub fn new(geom: Geometry, pulse: Vec<T>, codes: Arc<Codes>) -> Result<Self> {
         if pulse.is_empty() {
             return Err(Error::param("pulse", "must have at least one sample"));
@@ -213,7 +214,7 @@ impl<T: Real> RdOperator<T> {
             block_groups,
             adj_block_groups,
             path: ForwardPath::Auto,
-            isa: Isa::detect(),
+            isa: Isa::chosen()?,
             pool: Pool(Mutex::new(Vec::new())),
             lags: OnceLock::new(),
             twin: OnceLock::new(),
