@@ -665,7 +665,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                         base0: self.pad + self.pulse.len() - 1 + j0,
                     };
                     resize(&mut out, groups.len() * 8 * nch, [0.0; 8]);
-                    adjoint_slab(self.isa, nch, &slab, &mut out);
+                    adjoint_slab(self.isa.for_adjoint(), nch, &slab, &mut out);
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
                     for (i, o) in out.chunks_exact(nch).take(pixels).enumerate() {
                         for jj in 0..(8 * nch).min(ks - j0) {
