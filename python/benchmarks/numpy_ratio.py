@@ -1,0 +1,137 @@
+"""rdlidar's forward and adjoint products against numpy's GEMM on the same problem, in one run.
+
+    env -u OPENBLAS_CORETYPE -u OPENBLAS_L2_SIZE \\
+        python python/benchmarks/numpy_ratio.py [--rdlidar PATH] [--size 100x100x40]
+        [--pulse-lens 10000,30000] [--repeats 5]
+
+For each precision (f32, f64) and pulse length K_p, with S the (M N, K) matrix of +-1 codes,
+X the (M N, K_s) scene and p the pulse:
+
+- numpy forward: Z = S^T X (a GEMM, 2 M N K K_s flops), then y[k] = sum_j Z[k, j] p[k - j];
+- numpy adjoint: W[k, j] = y[k] p[k - j], then X~ = S W (a GEMM of the same size);
+- rdlidar: ``rdlidar bench --json`` at the same size and precision (the dense forward and the
+  adjoint), with ``RDLIDAR_ISA`` as set in the environment;
+
+median of --repeats timed calls after a warm-up each. Prints the BLAS that numpy ran (from
+threadpoolctl: OpenBLAS's kernel, e.g. SkylakeX or Haswell) and a markdown table of the times
+and the ratios numpy / rdlidar. Machines that force ``OPENBLAS_CORETYPE=Haswell`` slow numpy on
+AVX-512: unset it (and ``OPENBLAS_L2_SIZE``) for this command only, as above.
+"""
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import time
+
+import numpy as np
+
+
+def median_time(f, repeats):
+    f()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def blas_kernel():
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return "unknown (pip install threadpoolctl to see it)"
+    blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
+    if not blas:
+        return "none found"
+    i = blas[0]
+    return (
+        f"{i.get('internal_api')} {i.get('version')}, kernel {i.get('architecture')}, "
+        f"{i.get('num_threads')} threads"
+    )
+
+
+def numpy_times(m, n, ks, kp, dtype, repeats, rng):
+    k = kp + ks - 1
+    s = np.where(rng.random((m * n, k)) < 0.5, -1.0, 1.0).astype(dtype)
+    x = rng.random((m * n, ks)).astype(dtype)
+    p = (rng.random(kp) < 0.5).astype(dtype)
+    y = np.empty(k, dtype=dtype)
+
+    def forward():
+        z = s.T @ x
+        y[:] = 0
+        for j in range(ks):
+            y[j : j + kp] += z[j : j + kp, j] * p
+
+    def adjoint():
+        w = np.zeros((k, ks), dtype=dtype)
+        for j in range(ks):
+            w[j : j + kp, j] = y[j : j + kp] * p
+        return s @ w
+
+    forward()
+    return median_time(forward, repeats), median_time(adjoint, repeats)
+
+
+def rdlidar_times(binary, size, kp, precision, repeats):
+    out = subprocess.run(
+        [
+            binary,
+            "--precision",
+            precision,
+            "bench",
+            "--size",
+            size,
+            "--pulse-len",
+            str(kp),
+            "--repeats",
+            str(repeats),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    v = json.loads(out.stdout)
+    return v["forward"]["median_s"], v["adjoint"]["median_s"], v["isa"], v["threads"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rdlidar", default=os.environ.get("RDLIDAR_BIN") or shutil.which("rdlidar"))
+    ap.add_argument("--size", default="100x100x40")
+    ap.add_argument("--pulse-lens", default="10000,30000")
+    ap.add_argument("--repeats", type=int, default=5)
+    a = ap.parse_args()
+    if not a.rdlidar:
+        raise SystemExit("give --rdlidar PATH (or RDLIDAR_BIN): the rdlidar binary to time")
+    m, n, ks = (int(v) for v in a.size.lower().split("x"))
+    kps = [int(v) for v in a.pulse_lens.split(",")]
+    rng = np.random.default_rng(0)
+    print(f"numpy {np.__version__}: {blas_kernel()}")
+    print(f"OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '(unset)')}")
+    rows = []
+    for precision, dtype in (("f32", np.float32), ("f64", np.float64)):
+        for kp in kps:
+            nf, na = numpy_times(m, n, ks, kp, dtype, a.repeats, rng)
+            rf, ra, isa, threads = rdlidar_times(a.rdlidar, a.size, kp, precision, a.repeats)
+            rows.append((precision, kp, isa, threads, rf, nf, ra, na))
+    print()
+    print(
+        f"| {a.size} | K_p | rdlidar ISA, threads | forward rdlidar | numpy | ratio "
+        "| adjoint rdlidar | numpy | ratio |"
+    )
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|")
+    for precision, kp, isa, threads, rf, nf, ra, na in rows:
+        print(
+            f"| {precision} | {kp} | {isa}, {threads} | {rf * 1e3:.1f} ms | {nf * 1e3:.1f} ms "
+            f"| {nf / rf:.2f}x | {ra * 1e3:.1f} ms | {na * 1e3:.1f} ms | {na / ra:.2f}x |"
+        )
+
+
+if __name__ == "__main__":
+    main()
