@@ -117,8 +117,10 @@ def main():
     rows = []
     for precision, dtype in (("f32", np.float32), ("f64", np.float64)):
         for kp in kps:
-            nf, na = numpy_times(m, n, ks, kp, dtype, a.repeats, rng)
+            # rdlidar first: OpenBLAS's threads keep spinning for a while after numpy's last
+            # GEMM and would slow the subprocess's first timings.
             rf, ra, isa, threads = rdlidar_times(a.rdlidar, a.size, kp, precision, a.repeats)
+            nf, na = numpy_times(m, n, ks, kp, dtype, a.repeats, rng)
             rows.append((precision, kp, isa, threads, rf, nf, ra, na))
     print()
     print(
