@@ -7,6 +7,7 @@
 mod architectures;
 mod cancel;
 mod codes;
+mod composed;
 mod geometry;
 mod kernels;
 mod measurement;
@@ -41,8 +42,9 @@ pub use pulse::{zero_mean, Pulse};
 pub fn kernel_isa() -> &'static str {
     kernels::Isa::detect().name()
 }
+pub use composed::composed_operator;
 pub use kernels::ISA_VAR;
-pub use rdop::{composed_operator, ForwardPath, RdOperator};
+pub use rdop::{ForwardPath, RdOperator};
 pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};
 pub use scene::{DepthMap, Scene, NO_RETURN, UNOBSERVED};
 pub use scenes::{

@@ -1,15 +1,12 @@
-//! The fused random-demodulation operator A = Σ·S·P, and the same operator composed from the
-//! generic algebra (the reference).
+//! The fused random-demodulation operator A = Σ·S·P (the same operator composed from the generic
+//! algebra, the reference, is in `composed.rs`).
 
 use std::sync::{Arc, Mutex, OnceLock};
 
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::operator::{
-    BoxedOperator, ConvMethod, ConvMode, Convolve1D, Diagonal, HStack, Identity, LinearOperator,
-    OperatorExt,
-};
+use crate::operator::LinearOperator;
 use crate::real::Real;
 
 use super::codes::Codes;
@@ -690,35 +687,4 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
             self.codes.alphabet()
         )
     }
-}
-
-/// A = Σ·S·P built from the generic operators: P convolves every pixel's depth column with the
-/// pulse (full mode), S multiplies by the codes (a diagonal of M·N·K entries), Σ sums over
-/// pixels. Meant as the reference for small problems: it stores the codes as `T` values.
-///
-/// # Errors
-/// As [`RdOperator::new`].
-pub fn composed_operator<T: Real>(
-    geom: Geometry,
-    pulse: &[T],
-    codes: &Codes,
-) -> Result<BoxedOperator<T>> {
-    // Validate exactly as the fused operator does.
-    RdOperator::new(geom, pulse.to_vec(), Arc::new(codes.clone()))?;
-    let (npix, k) = (geom.pixels(), codes.len());
-    let p = Convolve1D::new(
-        npix,
-        geom.ks,
-        pulse.to_vec(),
-        ConvMode::Full,
-        ConvMethod::Auto,
-    )?;
-    let s_diag: Vec<T> = codes
-        .to_dense()
-        .iter()
-        .map(|&v| T::of_f64(v as f64))
-        .collect();
-    let s = Diagonal::new(s_diag)?;
-    let sum = HStack::new((0..npix).map(|_| Identity::<T>::new(k)).collect())?;
-    Ok(sum.compose(s.compose(p)?)?.boxed())
 }

@@ -202,7 +202,7 @@ fn sweep_position(config: &ExperimentConfig, cases: &[Case], row: &Row) -> (usiz
 /// Sorts `rows` into the order a one-process run of `config` gives them.
 pub fn in_sweep_order(config: &ExperimentConfig, rows: &mut [Row]) {
     let cases = config.cases();
-    rows.sort_by_key(|r| sweep_position(config, &cases, r));
+    rows.sort_by_cached_key(|r| sweep_position(config, &cases, r));
 }
 
 /// Whether `rows` hold a run twice (two rows of one problem and solver).
