@@ -2,13 +2,12 @@
 //! time.
 //!
 //! The kernels work on a *slab* of `8·NCH` consecutive depth bins (NCH ≤ 8, so at most 64 bins
-//! at a time) and on a *block* of 8-pixel groups whose tables (forward) or buckets (adjoint) fit
-//! in the L2 cache. Values are held as `[T; 8]` chunks so that the compiler keeps them in vector
-//! registers.
-//!
-//! The adjoint ([`adjoint_slab`]) is bound by the read-modify-write of one random bucket row per
-//! group and sample; the rest (the row y[k]·p[k − j], the reduction of the buckets to per-pixel
-//! sums every [`FLUSH`] samples) is shared by the groups of a block or done once per window.
+//! at a time). The forward ([`forward_block`]) tabulates the signed subset sums of a block of
+//! 8-pixel groups (across the pixels) and adds one row per group and sample; the adjoint
+//! ([`adjoint_chunk`]) tabulates the signed subset sums of the rows of a chunk of octets (eight
+//! samples each, along the samples) and adds one row per pixel and octet. Both only read their
+//! tables, which stay in the L2 cache. Values are held as `[T; 8]` chunks so that the compiler
+//! keeps them in vector registers.
 
 use crate::error::{Error, Result};
 use crate::real::Real;
@@ -83,19 +82,6 @@ impl Isa {
             }
         };
         Ok(best.min(cap))
-    }
-
-    /// The variant of the adjoint's bucket kernel ([`adjoint_slab`]) to run under this set: the
-    /// AVX2 one on AVX-512 machines. Its read-modify-write of one random bucket row per group
-    /// and sample gains nothing from 512-bit registers: on an AVX-512 Xeon the AVX2 variant
-    /// measured 1.15–1.24 times faster (100×100×40, K_p = 10000 and 30000, f32 and f64,
-    /// `rdlidar bench`), the forward product unchanged.
-    pub(crate) fn for_adjoint(self) -> Isa {
-        match self {
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => Isa::Avx2,
-            other => other,
-        }
     }
 
     /// [`Isa::chosen`], or the best of this CPU for a value that names none.
@@ -231,150 +217,150 @@ fn fwd_block<T: Real, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>
     }
 }
 
-/// One adjoint bucket: a slab's `NCH` lanes, aligned to 32 bytes so that no 256-bit half of a
-/// lane straddles two cache lines (the allocator alone guarantees only the element's alignment,
-/// and a split access costs about twice as much in this update-bound loop).
-#[derive(Clone, Copy)]
-#[repr(C, align(32))]
-struct Row<T, const NCH: usize>([Lane<T>; NCH]);
-
-/// Bytes of one adjoint bucket of `nch` chunks of `T` (see [`adjoint_slab`]).
-pub(crate) fn adj_row_bytes<T>(nch: usize) -> usize {
-    (8 * nch * std::mem::size_of::<T>()).next_multiple_of(32)
-}
-
-/// Everything the adjoint needs for one block of groups and one depth slab.
-pub(crate) struct AdjSlab<'a, T> {
-    /// The code bytes, K per stream: the +1 bytes of each group (binary codes), or the +1 and the
-    /// −1 bytes of each group in turn (ternary codes).
-    pub streams: &'a [&'a [u8]],
-    /// Whether the streams come in (+1, −1) pairs.
-    pub ternary: bool,
+/// Everything the adjoint needs for one chunk of octets (eight consecutive samples each) on one
+/// depth slab, for the groups of one task.
+pub(crate) struct AdjChunk<'a, T> {
+    /// The +1 code bytes of each group, K each.
+    pub plus: &'a [&'a [u8]],
+    /// The −1 code bytes (ternary codes only).
+    pub minus: Option<&'a [&'a [u8]]>,
     /// Measurements.
     pub y: &'a [T],
     /// As in [`FwdBlock`].
     pub prev: &'a [T],
     /// As in [`FwdBlock`].
     pub base0: usize,
+    /// The chunk: samples `8·octets.start .. 8·octets.end` (those past K count as zero).
+    pub octets: std::ops::Range<usize>,
 }
 
-/// Samples accumulated in the working precision before the buckets are reduced and added to
-/// `f64` sums: about 64 additions per bucket.
-pub(crate) const FLUSH: usize = 16384;
-
-/// For k in `k0..k1`: bucket[s][code_s(k)] += y[k]·p[k−j] for every stream s.
+/// Transposes an 8×8 bit matrix held as a `u64` (bit i of byte t, i.e. bit 8t + i, goes to bit
+/// 8i + t): from one byte per sample with a bit per pixel to one byte per pixel with a bit per
+/// sample.
 #[inline(always)]
-fn adj_accumulate<T: Real, const NCH: usize>(
-    a: &AdjSlab<'_, T>,
-    k0: usize,
-    k1: usize,
-    buckets: &mut [Row<T, NCH>],
-) {
-    // Fixed-size tables: a code byte indexes them without a bounds check.
-    let mut tabs: Vec<(&[u8], &mut [Row<T, NCH>; 256])> = a
-        .streams
-        .iter()
-        .zip(buckets.chunks_exact_mut(256))
-        .map(|(s, b)| (&s[k0..k1], b.try_into().expect("256 buckets")))
-        .collect();
-    for (i, &yk) in a.y[k0..k1].iter().enumerate() {
-        if yk == T::zero() {
-            continue;
-        }
-        let w0 = a.base0 - (k0 + i);
-        let w: [Lane<T>; NCH] = std::array::from_fn(|c| scale8(yk, lane_at(a.prev, w0 + 8 * c)));
-        for (codes, tab) in tabs.iter_mut() {
-            let row = &mut tab[codes[i] as usize].0;
-            for c in 0..NCH {
-                row[c] = add8(row[c], w[c]);
-            }
-        }
-    }
+pub(crate) fn transpose8(mut x: u64) -> u64 {
+    let t = (x ^ (x >> 7)) & 0x00AA_00AA_00AA_00AA;
+    x ^= t ^ (t << 7);
+    let t = (x ^ (x >> 14)) & 0x0000_CCCC_0000_CCCC;
+    x ^= t ^ (t << 14);
+    let t = (x ^ (x >> 28)) & 0x0000_0000_F0F0_F0F0;
+    x ^ t ^ (t << 28)
 }
 
-/// Per-bit marginals of one stream's 256 buckets U[b]: adds S_i = Σ_{b: bit i set} U[b] to
-/// `sums[i]` (i < 8) and Σ_b U[b] to `sums[8]`, in `f64`, then clears the buckets.
-///
-/// Successive halving: the upper half of the rows (bit 7 set) is summed into S_7 and folded onto
-/// the lower half, which leaves the 128 buckets of the remaining seven bits; and so on down to
-/// bit 0. That is 2·255 row additions instead of 256·(1 + popcount) for the direct sums, and each
-/// result is a sum over a balanced tree of buckets.
+/// A group's code bytes for the eight samples of octet `o` (zero past the end), transposed:
+/// byte i holds pixel i's codes, bit t for sample 8·o + t.
 #[inline(always)]
-fn adj_marginals<T: Real, const NCH: usize>(
-    rows: &mut [Row<T, NCH>],
-    sums: &mut [[Lane<f64>; NCH]; 9],
-) {
+fn octet_bits(codes: &[u8], o: usize) -> u64 {
+    let k = 8 * o;
+    let word = match codes.get(k..k + 8) {
+        Some(b) => u64::from_le_bytes(b.try_into().expect("8 bytes")),
+        None => {
+            let mut b = [0u8; 8];
+            let rest = &codes[k.min(codes.len())..];
+            b[..rest.len()].copy_from_slice(rest);
+            u64::from_le_bytes(b)
+        }
+    };
+    transpose8(word)
+}
+
+/// Lanes between the tables of successive octets of a chunk: 256 rows and one cache line, so
+/// that the same row of successive tables does not fall in the same cache set (a table of
+/// 256·NCH lanes is a multiple of 4 KiB).
+/// Octets per chunk of the adjoint.
+pub(crate) const ADJ_OCTETS: usize = 8;
+
+pub(crate) fn octet_stride<T>(nch: usize) -> usize {
+    256 * nch + (64 / std::mem::size_of::<Lane<T>>()).max(1)
+}
+
+/// The tables of a chunk: for octet o and byte b, Σ_t ±w_t (binary codes: + where bit t of b is
+/// set, − elsewhere) or Σ_{t ∈ b} w_t (ternary codes), where w_t = y[k]·p[k − j], k = 8·o + t,
+/// is the row every pixel's backprojection adds with its code's sign at sample k. Each table is
+/// built by doubling: 255 row additions from its first row.
+#[inline(always)]
+fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>]) {
     let zero = [T::zero(); 8];
-    let mut n = rows.len();
-    for bit in (0..8).rev() {
-        let half = n / 2;
-        let (lo, hi) = rows[..n].split_at_mut(half);
-        // Four interleaved partial sums, for instruction-level parallelism and a shorter chain.
-        let mut acc = [[zero; NCH]; 4];
-        for (lc, hc) in lo.chunks_mut(4).zip(hi.chunks(4)) {
-            for ((l, h), a) in lc.iter_mut().zip(hc).zip(acc.iter_mut()) {
-                for ((lv, hv), av) in l.0.iter_mut().zip(&h.0).zip(a.iter_mut()) {
-                    *av = add8(*av, *hv);
-                    *lv = add8(*lv, *hv);
+    let binary = a.minus.is_none();
+    let k = a.y.len();
+    for (oi, o) in a.octets.clone().enumerate() {
+        let mut w = [[zero; NCH]; 8];
+        let mut first = [zero; NCH];
+        for (t, wt) in w.iter_mut().enumerate() {
+            let kk = 8 * o + t;
+            if kk >= k || a.y[kk] == T::zero() {
+                continue;
+            }
+            let w0 = a.base0 - kk;
+            for c in 0..NCH {
+                wt[c] = scale8(a.y[kk], lane_at(a.prev, w0 + 8 * c));
+                if binary {
+                    first[c] = sub8(first[c], wt[c]);
+                    wt[c] = add8(wt[c], wt[c]);
                 }
             }
         }
-        let s: [Lane<T>; NCH] =
-            std::array::from_fn(|c| add8(add8(acc[0][c], acc[1][c]), add8(acc[2][c], acc[3][c])));
-        widen_add(&mut sums[bit], &s);
-        n = half;
-    }
-    widen_add(&mut sums[8], &rows[0].0);
-    rows.fill(Row([zero; NCH]));
-}
-
-/// dst += src, widened to `f64`.
-#[inline(always)]
-fn widen_add<T: Real, const NCH: usize>(dst: &mut [Lane<f64>; NCH], src: &[Lane<T>; NCH]) {
-    for (d, s) in dst.iter_mut().zip(src) {
-        for (dv, sv) in d.iter_mut().zip(s) {
-            *dv += sv.as_f64();
+        let t = &mut tables[oi * octet_stride::<T>(NCH)..][..256 * NCH];
+        t[..NCH].copy_from_slice(&first);
+        for b in 1..256usize {
+            let from = (b & (b - 1)) * NCH;
+            let wt = &w[b.trailing_zeros() as usize];
+            for c in 0..NCH {
+                t[b * NCH + c] = add8(t[from + c], wt[c]);
+            }
         }
     }
 }
 
-/// The adjoint of one block of groups on a slab of `8·NCH` bins: `out[(g·8 + i)·NCH + c]` is the
-/// backprojection of pixel i of group g on chunk c, in `f64`.
-///
-/// For every sample, the row w = y[k]·p[k − j] is added to one of 256 buckets per stream,
-/// selected by the stream's code byte. Every [`FLUSH`] samples the buckets are reduced to their
-/// per-bit marginals S_i and total U in `T` (see [`adj_marginals`]) and these are added up in
-/// `f64`. Pixel i of a group then gets 2·S_i − U (binary codes: +1 where its bit is set, −1
-/// elsewhere) or S_i⁺ − S_i⁻ (ternary codes).
+/// The adjoint of a chunk of octets for the groups of a task, added to `out[(g·8 + i)·NCH + c]`
+/// (pixel i of group g, chunk c, in `f64`): the chunk's tables are built once
+/// ([`adj_tables`]), then each pixel sums one table row per octet, the one its code byte along
+/// the samples selects (two for ternary codes: its +1 row minus its −1 row). Only reads: the
+/// tables are shared by every pixel, and the sum stays in registers.
 #[inline(always)]
-fn adj_slab<T: Real, const NCH: usize>(a: &AdjSlab<'_, T>, out: &mut [Lane<f64>]) {
-    let ns = a.streams.len();
-    let mut buckets = vec![Row([[T::zero(); 8]; NCH]); ns * 256];
-    let mut sums = vec![[[[0.0f64; 8]; NCH]; 9]; ns];
-    let k = a.y.len();
-    let mut k0 = 0;
-    while k0 < k {
-        let k1 = (k0 + FLUSH).min(k);
-        adj_accumulate::<T, NCH>(a, k0, k1, &mut buckets);
-        for (rows, s) in buckets.chunks_exact_mut(256).zip(sums.iter_mut()) {
-            adj_marginals(rows, s);
+fn adj_chunk<T: Real, const NCH: usize>(
+    a: &AdjChunk<'_, T>,
+    tables: &mut [Lane<T>],
+    out: &mut [Lane<T>],
+) {
+    adj_tables::<T, NCH>(a, tables);
+    let zero = [T::zero(); 8];
+    let row = |o: usize, b: u64| -> &[Lane<T>; NCH] {
+        let r = o * octet_stride::<T>(NCH) + (b & 0xFF) as usize * NCH;
+        tables[r..r + NCH].try_into().expect("NCH lanes")
+    };
+    let mut bp = [0u64; ADJ_OCTETS];
+    let mut bm = [0u64; ADJ_OCTETS];
+    let o0 = a.octets.start;
+    for (g, og) in out.chunks_exact_mut(8 * NCH).enumerate() {
+        for (oi, b) in bp.iter_mut().enumerate() {
+            *b = octet_bits(a.plus[g], o0 + oi);
         }
-        k0 = k1;
-    }
-    let per_group = if a.ternary { 2 } else { 1 };
-    for (sg, og) in sums
-        .chunks_exact(per_group)
-        .zip(out.chunks_exact_mut(8 * NCH))
-    {
+        if let Some(minus) = a.minus {
+            for (oi, b) in bm.iter_mut().enumerate() {
+                *b = octet_bits(minus[g], o0 + oi);
+            }
+        }
         for (i, oi) in og.chunks_exact_mut(NCH).enumerate() {
-            for (c, o) in oi.iter_mut().enumerate() {
-                for l in 0..8 {
-                    o[l] = if a.ternary {
-                        sg[0][i][c][l] - sg[1][i][c][l]
-                    } else {
-                        2.0 * sg[0][i][c][l] - sg[0][8][c][l]
-                    };
+            let shift = 8 * i;
+            let mut acc = [zero; NCH];
+            if a.minus.is_none() {
+                for (o, &b) in bp.iter().enumerate() {
+                    let r = row(o, b >> shift);
+                    for c in 0..NCH {
+                        acc[c] = add8(acc[c], r[c]);
+                    }
                 }
+            } else {
+                for (o, (&p, &m)) in bp.iter().zip(&bm).enumerate() {
+                    let (rp, rm) = (row(o, p >> shift), row(o, m >> shift));
+                    for c in 0..NCH {
+                        acc[c] = add8(acc[c], sub8(rp[c], rm[c]));
+                    }
+                }
+            }
+            for (d, s) in oi.iter_mut().zip(&acc) {
+                *d = add8(*d, *s);
             }
         }
     }
@@ -486,7 +472,7 @@ macro_rules! multiversion {
 }
 
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
-multiversion!(fn adj_slab_isa<T, const NCH: usize>(a: &AdjSlab<'_, T>, out: &mut [Lane<f64>]) => adj_slab);
+multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>]) => adj_chunk);
 multiversion!(pub(crate) fn sparse_entry_isa<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
 multiversion!(pub(crate) fn signed_copy_isa<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
 multiversion!(pub(crate) fn lane_dot_isa<T>(a: &[T], b: &[T], out: &mut f64) => lane_dot);
@@ -511,23 +497,119 @@ pub(crate) fn forward_block<T: Real>(
     }
 }
 
-/// Runs the adjoint kernel ([`adj_slab`]) for a block of groups and a slab of `8·nch` bins:
-/// `out` receives `8·nch` lanes per group.
-pub(crate) fn adjoint_slab<T: Real>(
+/// Runs the adjoint's chunk kernel ([`adj_chunk`]) for a slab of `8·nch` bins.
+pub(crate) fn adjoint_chunk<T: Real>(
     isa: Isa,
     nch: usize,
-    a: &AdjSlab<'_, T>,
-    out: &mut [Lane<f64>],
+    a: &AdjChunk<'_, T>,
+    tables: &mut [Lane<T>],
+    out: &mut [Lane<T>],
 ) {
     match nch {
-        1 => adj_slab_isa::<T, 1>(isa, a, out),
-        2 => adj_slab_isa::<T, 2>(isa, a, out),
-        3 => adj_slab_isa::<T, 3>(isa, a, out),
-        4 => adj_slab_isa::<T, 4>(isa, a, out),
-        5 => adj_slab_isa::<T, 5>(isa, a, out),
-        6 => adj_slab_isa::<T, 6>(isa, a, out),
-        7 => adj_slab_isa::<T, 7>(isa, a, out),
-        8 => adj_slab_isa::<T, 8>(isa, a, out),
+        1 => adj_chunk_isa::<T, 1>(isa, a, tables, out),
+        2 => adj_chunk_isa::<T, 2>(isa, a, tables, out),
+        3 => adj_chunk_isa::<T, 3>(isa, a, tables, out),
+        4 => adj_chunk_isa::<T, 4>(isa, a, tables, out),
+        5 => adj_chunk_isa::<T, 5>(isa, a, tables, out),
+        6 => adj_chunk_isa::<T, 6>(isa, a, tables, out),
+        7 => adj_chunk_isa::<T, 7>(isa, a, tables, out),
+        8 => adj_chunk_isa::<T, 8>(isa, a, tables, out),
         _ => unreachable!("slabs have 1 to 8 chunks"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn transpose8_swaps_samples_and_pixels() {
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        for _ in 0..200 {
+            let x: u64 = rng.random();
+            let t = transpose8(x);
+            for s in 0..8 {
+                for p in 0..8 {
+                    assert_eq!((x >> (8 * s + p)) & 1, (t >> (8 * p + s)) & 1);
+                }
+            }
+            assert_eq!(transpose8(t), x);
+        }
+    }
+
+    /// The chunk kernel against the direct sum Σ_k s_i(k)·y[k]·p[k − j] on every instruction
+    /// set, binary and ternary codes, with a K that is not a multiple of eight (the last octets
+    /// run past the end) and two chunks.
+    #[test]
+    fn adjoint_chunk_matches_the_direct_sum() {
+        const NCH: usize = 2;
+        let mut rng = ChaCha8Rng::seed_from_u64(27);
+        let (groups, k) = (3usize, 8 * ADJ_OCTETS + 13);
+        let kp = k + 1 - 8 * NCH;
+        let y: Vec<f64> = (0..k).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let pulse: Vec<f64> = (0..kp)
+            .map(|_| f64::from(rng.random_range(0..2u8)))
+            .collect();
+        // prev as the operator lays it out: p[k − j] = prev[base0 − k + j], zero outside.
+        let pad = 8 * NCH;
+        let mut prev = vec![0.0; pad + kp + 8 * NCH];
+        for (t, &v) in pulse.iter().rev().enumerate() {
+            prev[pad + t] = v;
+        }
+        let base0 = pad + kp - 1;
+        let plus: Vec<Vec<u8>> = (0..groups)
+            .map(|_| (0..k).map(|_| rng.random()).collect())
+            .collect();
+        let minus: Vec<Vec<u8>> = plus
+            .iter()
+            .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
+            .collect();
+        let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
+        let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+        let mut isas = vec![Isa::Generic, Isa::best()];
+        isas.dedup();
+        for ternary in [false, true] {
+            let sign = |g: usize, i: usize, kk: usize| -> f64 {
+                let p = f64::from((plus[g][kk] >> i) & 1);
+                if ternary {
+                    p - f64::from((minus[g][kk] >> i) & 1)
+                } else {
+                    2.0 * p - 1.0
+                }
+            };
+            for &isa in &isas {
+                let mut tables = vec![[0.0; 8]; ADJ_OCTETS * octet_stride::<f64>(NCH)];
+                let mut out = vec![[0.0; 8]; groups * 8 * NCH];
+                let octets = k.div_ceil(8);
+                for o0 in (0..octets).step_by(ADJ_OCTETS) {
+                    let a = AdjChunk {
+                        plus: &plus_refs,
+                        minus: ternary.then_some(minus_refs.as_slice()),
+                        y: &y,
+                        prev: &prev,
+                        base0,
+                        octets: o0..o0 + ADJ_OCTETS,
+                    };
+                    adjoint_chunk(isa, NCH, &a, &mut tables, &mut out);
+                }
+                for g in 0..groups {
+                    for i in 0..8 {
+                        for j in 0..8 * NCH {
+                            let want: f64 = (0..k)
+                                .filter(|&kk| kk >= j && kk - j < kp)
+                                .map(|kk| sign(g, i, kk) * y[kk] * pulse[kk - j])
+                                .sum();
+                            let got = out[(g * 8 + i) * NCH + j / 8][j % 8];
+                            assert!(
+                                (got - want).abs() < 1e-12 * (1.0 + want.abs()),
+                                "{isa:?} ternary {ternary}: pixel {g}/{i} bin {j}: {got} vs {want}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 }

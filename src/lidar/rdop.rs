@@ -12,17 +12,21 @@ use crate::real::Real;
 use super::codes::Codes;
 use super::geometry::Geometry;
 use super::kernels::{
-    adj_row_bytes, adjoint_slab, forward_block, sparse_entry_isa, AdjSlab, FwdBlock, Isa, Lane,
+    adjoint_chunk, forward_block, octet_stride, sparse_entry_isa, AdjChunk, FwdBlock, Isa, Lane,
+    ADJ_OCTETS,
 };
 
 /// Largest slab of depth bins a kernel handles at once (8 lanes × 8 chunks).
 const SLAB: usize = 64;
-/// Cache budget (bytes) for the tables or buckets of one block of groups.
+/// Cache budget (bytes) for the forward's tables of one block of groups.
 const BLOCK_BYTES: usize = 512 * 1024;
-/// The same for the adjoint's buckets. They are updated in place, row by row at random, so a
-/// smaller working set than the forward's pays; below about four groups (f32, 40 bins) the work
-/// per sample is shared by too few groups.
-const ADJ_BLOCK_BYTES: usize = 160 * 1024;
+/// Cache budget (bytes) for the adjoint's per-pixel partial sums of one block of groups: they
+/// are updated once per chunk of samples, so they should stay in the L2 cache beside the chunk's
+/// tables.
+const ADJ_BLOCK_BYTES: usize = 1024 * 1024;
+/// Chunks of [`ADJ_OCTETS`] octets whose adjoint partial sums are accumulated in `T` before they
+/// are added to `f64` sums: 128 table rows (1024 samples) per sum.
+const ADJ_FLUSH_CHUNKS: usize = 16;
 /// Blocks whose lane partial sums are accumulated in `T` before a flush to `f64`.
 const FLUSH_BLOCKS: usize = 8;
 
@@ -38,10 +42,10 @@ fn depth_slabs(ks: usize) -> Vec<(usize, usize)> {
     slabs
 }
 
-/// Groups of eight pixels per adjoint block: as many as have their buckets (`planes` × 256 rows
-/// of `max_nch` chunks) within `budget` bytes, between 1 and 64.
-fn adjoint_groups_per_block<T: Real>(budget: usize, max_nch: usize, planes: usize) -> usize {
-    (budget / (planes * 256 * adj_row_bytes::<T>(max_nch))).clamp(1, 64)
+/// Groups of eight pixels per adjoint block: as many as have their partial sums (eight pixels
+/// of `max_nch` chunks each) within `budget` bytes, at least one.
+fn adjoint_groups_per_block<T: Real>(budget: usize, max_nch: usize) -> usize {
+    (budget / (8 * max_nch * std::mem::size_of::<Lane<T>>())).max(1)
 }
 
 /// Groups of eight pixels whose 256-row tables of `max_nch` chunks fit in `budget` bytes
@@ -68,6 +72,9 @@ struct Work<T> {
     y64: Vec<f64>,
     part: Vec<Lane<T>>,
     lanes: Vec<Lane<T>>,
+    adj_tables: Vec<Lane<T>>,
+    adj_part: Vec<Lane<T>>,
+    adj_out: Vec<Lane<f64>>,
 }
 
 struct Pool<T>(Mutex<Vec<Work<T>>>);
@@ -111,12 +118,13 @@ fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
 /// stored. Scenes with few nonzeros take a sparse path costing O(nnz·K_p)
 /// (see [`ForwardPath`]).
 ///
-/// **Adjoint.** The transpose of the same scheme: for every sample the row `y[k]·p[k − j]` is added
-/// into one of 256 buckets per group, selected by the group's code byte. Every 16 384 samples the
-/// buckets are reduced to their per-bit sums by successive halving (510 row additions per group)
-/// and these are added up in `f64`; each pixel's backprojection is then 2·S_i − Σ_b U(b) (its
-/// bit's sum against the total; S_i⁺ − S_i⁻ for ternary codes). The buckets of a block of groups
-/// (160 kB) stay in the L2 cache, rows aligned to the lanes.
+/// **Adjoint.** The same tables, built along the samples instead of across the pixels: for a
+/// chunk of eight octets (64 samples), the 256 signed subset sums of each octet's eight rows
+/// `y[k]·p[k − j]` are tabulated once, and every pixel adds one row per octet, the one its own
+/// code byte along those eight samples selects (the packed codes are transposed 8 × 8 bits at a
+/// time; a +1 row minus a −1 row for ternary codes). The kernel only reads the shared tables and
+/// keeps the pixel's sum in registers; the partial sums of a block of pixels (1 MB) stay in the L2
+/// cache and are added to `f64` sums every 1024 samples.
 ///
 /// Blocks are processed in parallel with rayon; the kernels are compiled for AVX-512, AVX2+FMA and
 /// generic x86-64 and chosen at run time.
@@ -199,8 +207,7 @@ impl<T: Real> RdOperator<T> {
         }
         let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
         let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
-        let planes = if codes.minus_plane().is_some() { 2 } else { 1 };
-        let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch, planes);
+        let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch);
         Ok(RdOperator {
             geom,
             codes,
@@ -340,8 +347,8 @@ impl<T: Real> RdOperator<T> {
     /// with a pulse of `pulse_len` samples, codes of `alphabet` and `threads` worker threads,
     /// computed without building it: the packed codes (⌈M·N/8⌉·K bytes per bit plane), the
     /// pulse twice (as given and reversed, padded), and per thread the forward's `f64`
-    /// accumulator and lane partial sums of K samples, one block of its lookup tables, and one
-    /// block of the adjoint's buckets.
+    /// accumulator and lane partial sums of K samples, one block of its lookup tables, and the
+    /// adjoint's tables of one chunk of samples and partial sums of one block of pixels.
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] if `pulse_len` or `threads` is zero, or if the count does not
@@ -386,13 +393,16 @@ impl<T: Real> RdOperator<T> {
             .and_then(|v| v.checked_mul(size))
             .ok_or_else(overflow)?;
         let tables = block_groups * 256 * max_nch * 8 * size;
-        let buckets = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch, planes)
-            * planes
-            * 256
-            * adj_row_bytes::<T>(max_nch);
+        // The adjoint's block: a chunk's tables, and the block's partial sums in `T` and `f64`.
+        let adjoint = ADJ_OCTETS * octet_stride::<T>(max_nch) * 8 * size
+            + adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch)
+                * 8
+                * max_nch
+                * 8
+                * (size + 8);
         let per_task = k
             .checked_mul(8 + 8 * size)
-            .and_then(|v| v.checked_add(tables + buckets))
+            .and_then(|v| v.checked_add(tables + adjoint))
             .ok_or_else(overflow)?;
         threads
             .checked_mul(per_task)
@@ -641,35 +651,59 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
 
     fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
         let (ks, npix) = (self.geom.ks, self.geom.pixels());
-        let ternary = self.codes.minus_plane().is_some();
-        let bg = self.adj_block_groups;
-        x.par_chunks_mut(bg * 8 * ks)
+        let groups = self.codes.groups();
+        // Blocks of at most `adj_block_groups` groups, as many as a multiple of the threads and
+        // of equal size, so that every thread gets the same work.
+        let threads = rayon::current_num_threads().max(1);
+        let blocks = groups
+            .div_ceil(self.adj_block_groups)
+            .next_multiple_of(threads)
+            .min(groups)
+            .max(1);
+        let per = groups.div_ceil(blocks);
+        let octets = self.codes.len().div_ceil(8);
+        x.par_chunks_mut(per * 8 * ks)
             .enumerate()
             .for_each(|(b, xb)| {
-                let groups = b * bg..((b + 1) * bg).min(self.codes.groups());
+                let groups = b * per..((b + 1) * per).min(groups);
                 let (plus, minus) = self.group_codes(groups.clone());
-                let streams: Vec<&[u8]> = match &minus {
-                    None => plus,
-                    Some(minus) => plus.iter().zip(minus).flat_map(|(&p, &m)| [p, m]).collect(),
-                };
-                let mut out = Vec::new();
+                let mut w = self.pool.take();
                 for &(j0, nch) in &self.slabs {
-                    let slab = AdjSlab {
-                        streams: &streams,
-                        ternary,
-                        y,
-                        prev: &self.prev,
-                        base0: self.pad + self.pulse.len() - 1 + j0,
-                    };
-                    resize(&mut out, groups.len() * 8 * nch, [0.0; 8]);
-                    adjoint_slab(self.isa.for_adjoint(), nch, &slab, &mut out);
+                    resize(
+                        &mut w.adj_tables,
+                        ADJ_OCTETS * octet_stride::<T>(nch),
+                        [T::zero(); 8],
+                    );
+                    resize(&mut w.adj_part, groups.len() * 8 * nch, [T::zero(); 8]);
+                    resize(&mut w.adj_out, groups.len() * 8 * nch, [0.0; 8]);
+                    for (c, o0) in (0..octets).step_by(ADJ_OCTETS).enumerate() {
+                        let chunk = AdjChunk {
+                            plus: &plus,
+                            minus: minus.as_deref(),
+                            y,
+                            prev: &self.prev,
+                            base0: self.pad + self.pulse.len() - 1 + j0,
+                            octets: o0..o0 + ADJ_OCTETS,
+                        };
+                        adjoint_chunk(self.isa, nch, &chunk, &mut w.adj_tables, &mut w.adj_part);
+                        if c % ADJ_FLUSH_CHUNKS == ADJ_FLUSH_CHUNKS - 1 || o0 + ADJ_OCTETS >= octets
+                        {
+                            for (d, s) in w.adj_out.iter_mut().zip(w.adj_part.iter_mut()) {
+                                for (dv, sv) in d.iter_mut().zip(s.iter()) {
+                                    *dv += sv.as_f64();
+                                }
+                                *s = [T::zero(); 8];
+                            }
+                        }
+                    }
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
-                    for (i, o) in out.chunks_exact(nch).take(pixels).enumerate() {
+                    for (i, o) in w.adj_out.chunks_exact(nch).take(pixels).enumerate() {
                         for jj in 0..(8 * nch).min(ks - j0) {
                             xb[i * ks + j0 + jj] = T::of_f64(o[jj / 8][jj % 8]);
                         }
                     }
                 }
+                self.pool.give(w);
             });
     }
 

@@ -22,9 +22,9 @@ use super::{
 pub const FORWARD_TOL_EPS: f64 = 4.0;
 
 /// Tolerance of ‖A₃₂*y − A₆₄*y‖/‖A₆₄*y‖, in units of the `f32` epsilon. Each adjoint entry is a
-/// sum over K_p samples; the kernel adds at most 16 384 of them in `f32` buckets (one bucket per
-/// code byte) before it flushes the buckets to `f64`, so the gap does not grow with K (measured
-/// 1.0ε to 1.8ε from K = 10⁴ to 10⁷), whereas a plain `f32` sum drifts like ε·√(K/2) (the
+/// sum over K_p samples; the kernel adds at most 128 table rows (1024 samples) in `f32` before
+/// it flushes the sum to `f64`, so the gap does not grow with K (measured 0.7ε to 1.1ε from
+/// K = 10⁴ to 10⁷), whereas a plain `f32` sum drifts like ε·√(K/2) (the
 /// `naive_f32` value: 3ε to 16ε at K = 10⁴, 140ε to 400ε at 10⁷). The tolerance catches that
 /// drift from K = 10⁵ on.
 pub const ADJOINT_TOL_EPS: f64 = 8.0;
