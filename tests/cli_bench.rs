@@ -25,6 +25,30 @@ fn bench_json_has_the_three_timings() {
         assert!(v[key]["min_s"].as_f64() <= v[key]["median_s"].as_f64());
     }
     assert!(v["memory_bytes"].as_u64().unwrap() > 0);
+    // The rates are the work over the median time, and the limits are positive.
+    for key in ["forward", "adjoint"] {
+        let t = v[key]["median_s"].as_f64().unwrap();
+        for (work, rate) in [
+            ("additions", "additions_per_s"),
+            ("table_bytes", "table_bytes_per_s"),
+        ] {
+            let w = v["work"][key][work].as_f64().unwrap();
+            let r = v["rates"][key][rate].as_f64().unwrap();
+            assert!(
+                w > 0.0 && (r * t - w).abs() <= 1e-9 * w,
+                "{key}.{rate} in {v}"
+            );
+        }
+    }
+    for level in ["l1", "l2"] {
+        let l = &v["limits"][level];
+        assert!(l["bytes_per_s"].as_f64().unwrap() > 0.0, "{level} in {v}");
+        assert_eq!(
+            l["row_bytes"].as_u64(),
+            Some(32),
+            "{level}: one chunk of 8 f32 at K_s 6"
+        );
+    }
 }
 
 #[test]

@@ -275,3 +275,56 @@ proptest! {
         prop_assert!(op.restrict_columns(vec![g.voxels()]).is_err());
     }
 }
+
+/// The work model counts one table row per group and sample (forward) and per pixel and octet
+/// (adjoint), two for ternary codes, plus the tables built; rows are padded to whole chunks of
+/// eight values.
+#[test]
+fn work_counts_the_table_rows_of_each_kernel() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        // 20 pixels: 3 groups; K_s = 6 bins in one chunk of 8; K = 50 + 5 = 55: 7 octets.
+        let g = Geometry::new(4, 5, 6).unwrap();
+        let pulse = Pulse::<f32>::bernoulli(50, 0).unwrap().into_inner();
+        for (codes, planes) in [
+            (Codes::random_binary(20, 55, 1).unwrap(), 1.0),
+            (Codes::random_ternary(20, 55, 0.3, 1).unwrap(), 2.0),
+        ] {
+            let op = RdOperator::new(g, pulse.clone(), Arc::new(codes)).unwrap();
+            let w = op.work();
+            let (groups, k, octets, ks) = (3.0, 55.0, 7.0, 6.0);
+            assert_eq!(
+                w.forward.additions,
+                planes * groups * k * ks + groups * 256.0 * ks
+            );
+            assert_eq!(w.forward.table_bytes, planes * groups * k * 8.0 * 4.0);
+            // One block of pixels with one thread: the octets' tables are built once.
+            assert_eq!(
+                w.adjoint.additions,
+                planes * 8.0 * groups * octets * ks + octets * 256.0 * ks
+            );
+            assert_eq!(
+                w.adjoint.table_bytes,
+                planes * 8.0 * groups * octets * 8.0 * 4.0
+            );
+            assert_eq!(w.forward.additions_per_s(0.5), 2.0 * w.forward.additions);
+        }
+    });
+}
+
+#[test]
+fn the_gather_limit_is_measured_and_refuses_impossible_rows() {
+    let l = rdlidar::lidar::gather_limit::<f64>(5, 32 * 1024, 2).unwrap();
+    assert_eq!(l.row_bytes, 5 * 8 * 8);
+    assert!(l.table_bytes <= 32 * 1024 && l.table_bytes > 16 * 1024);
+    assert!(l.rows_per_s.is_finite() && l.rows_per_s > 0.0);
+    assert!((l.bytes_per_s - l.rows_per_s * 320.0).abs() <= 1e-9 * l.bytes_per_s);
+    assert!((l.additions_per_s - l.rows_per_s * 40.0).abs() <= 1e-9 * l.additions_per_s);
+    for (nch, repeats, name) in [(0, 1, "nch"), (9, 1, "nch"), (2, 0, "repeats")] {
+        let e = rdlidar::lidar::gather_limit::<f32>(nch, 4096, repeats).unwrap_err();
+        assert!(e.to_string().contains(name), "{e}");
+    }
+}

@@ -13,8 +13,10 @@ X the (M N, K_s) scene and p the pulse:
   adjoint), with ``RDLIDAR_ISA`` as set in the environment;
 
 median of --repeats timed calls after a warm-up each. Prints the BLAS that numpy ran (from
-threadpoolctl: OpenBLAS's kernel, e.g. SkylakeX or Haswell) and a markdown table of the times
-and the ratios numpy / rdlidar. Machines that force ``OPENBLAS_CORETYPE=Haswell`` slow numpy on
+threadpoolctl: OpenBLAS's kernel, e.g. SkylakeX or Haswell), a markdown table of the times and
+the ratios numpy / rdlidar, and a second table of rdlidar's additions and table bytes per
+second against what the caches deliver to the same access pattern (``rdlidar bench``'s
+"limits"). Machines that force ``OPENBLAS_CORETYPE=Haswell`` slow numpy on
 AVX-512: unset it (and ``OPENBLAS_L2_SIZE``) for this command only, as above.
 """
 
@@ -96,8 +98,7 @@ def rdlidar_times(binary, size, kp, precision, repeats):
         text=True,
         check=True,
     )
-    v = json.loads(out.stdout)
-    return v["forward"]["median_s"], v["adjoint"]["median_s"], v["isa"], v["threads"]
+    return json.loads(out.stdout)
 
 
 def main():
@@ -119,19 +120,38 @@ def main():
         for kp in kps:
             # rdlidar first: OpenBLAS's threads keep spinning for a while after numpy's last
             # GEMM and would slow the subprocess's first timings.
-            rf, ra, isa, threads = rdlidar_times(a.rdlidar, a.size, kp, precision, a.repeats)
+            v = rdlidar_times(a.rdlidar, a.size, kp, precision, a.repeats)
             nf, na = numpy_times(m, n, ks, kp, dtype, a.repeats, rng)
-            rows.append((precision, kp, isa, threads, rf, nf, ra, na))
+            rows.append((precision, kp, v, nf, na))
     print()
     print(
         f"| {a.size} | K_p | rdlidar ISA, threads | forward rdlidar | numpy | ratio "
         "| adjoint rdlidar | numpy | ratio |"
     )
     print("|---|---:|---|---:|---:|---:|---:|---:|---:|")
-    for precision, kp, isa, threads, rf, nf, ra, na in rows:
+    for precision, kp, v, nf, na in rows:
+        rf, ra = v["forward"]["median_s"], v["adjoint"]["median_s"]
         print(
-            f"| {precision} | {kp} | {isa}, {threads} | {rf * 1e3:.1f} ms | {nf * 1e3:.1f} ms "
-            f"| {nf / rf:.2f}x | {ra * 1e3:.1f} ms | {na * 1e3:.1f} ms | {na / ra:.2f}x |"
+            f"| {precision} | {kp} | {v['isa']}, {v['threads']} | {rf * 1e3:.1f} ms "
+            f"| {nf * 1e3:.1f} ms | {nf / rf:.2f}x | {ra * 1e3:.1f} ms | {na * 1e3:.1f} ms "
+            f"| {na / ra:.2f}x |"
+        )
+    # The same run's rates against what the caches deliver to the kernels' access pattern
+    # (random table rows summed, from L1 and from L2; `rdlidar bench` measures both).
+    print()
+    print(
+        "| rdlidar | K_p | forward Gadd/s | GB/s | adjoint Gadd/s | GB/s "
+        "| L1 limit GB/s | L2 limit GB/s | forward / L2 | adjoint / L2 |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for precision, kp, v, _, _ in rows:
+        f, d = v["rates"]["forward"], v["rates"]["adjoint"]
+        l1, l2 = v["limits"]["l1"]["bytes_per_s"], v["limits"]["l2"]["bytes_per_s"]
+        print(
+            f"| {precision} | {kp} | {f['additions_per_s'] / 1e9:.1f} "
+            f"| {f['table_bytes_per_s'] / 1e9:.1f} | {d['additions_per_s'] / 1e9:.1f} "
+            f"| {d['table_bytes_per_s'] / 1e9:.1f} | {l1 / 1e9:.1f} | {l2 / 1e9:.1f} "
+            f"| {f['table_bytes_per_s'] / l2:.2f} | {d['table_bytes_per_s'] / l2:.2f} |"
         )
 
 

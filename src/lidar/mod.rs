@@ -8,6 +8,7 @@ mod architectures;
 mod cancel;
 mod codes;
 mod composed;
+mod footprint;
 mod geometry;
 mod kernels;
 mod measurement;
@@ -43,6 +44,7 @@ pub fn kernel_isa() -> &'static str {
     kernels::Isa::detect().name()
 }
 pub use composed::composed_operator;
+pub use footprint::{gather_limit, GatherLimit, KernelWork, OperatorWork};
 pub use kernels::ISA_VAR;
 pub use rdop::{ForwardPath, RdOperator};
 pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};

@@ -19,11 +19,11 @@ use super::kernels::{
 /// Largest slab of depth bins a kernel handles at once (8 lanes × 8 chunks).
 const SLAB: usize = 64;
 /// Cache budget (bytes) for the forward's tables of one block of groups.
-const BLOCK_BYTES: usize = 512 * 1024;
+pub(super) const BLOCK_BYTES: usize = 512 * 1024;
 /// Cache budget (bytes) for the adjoint's per-pixel partial sums of one block of groups: they
 /// are updated once per chunk of samples, so they should stay in the L2 cache beside the chunk's
 /// tables.
-const ADJ_BLOCK_BYTES: usize = 1024 * 1024;
+pub(super) const ADJ_BLOCK_BYTES: usize = 1024 * 1024;
 /// Chunks of [`ADJ_OCTETS`] octets whose adjoint partial sums are accumulated in `T` before they
 /// are added to `f64` sums: 128 table rows (1024 samples) per sum.
 const ADJ_FLUSH_CHUNKS: usize = 16;
@@ -31,7 +31,7 @@ const ADJ_FLUSH_CHUNKS: usize = 16;
 const FLUSH_BLOCKS: usize = 8;
 
 /// The depth slabs of K_s bins: (first bin, chunks of eight bins), at most [`SLAB`] bins each.
-fn depth_slabs(ks: usize) -> Vec<(usize, usize)> {
+pub(super) fn depth_slabs(ks: usize) -> Vec<(usize, usize)> {
     let mut slabs = Vec::new();
     let mut j0 = 0;
     while j0 < ks {
@@ -44,13 +44,13 @@ fn depth_slabs(ks: usize) -> Vec<(usize, usize)> {
 
 /// Groups of eight pixels per adjoint block: as many as have their partial sums (eight pixels
 /// of `max_nch` chunks each) within `budget` bytes, at least one.
-fn adjoint_groups_per_block<T: Real>(budget: usize, max_nch: usize) -> usize {
+pub(super) fn adjoint_groups_per_block<T: Real>(budget: usize, max_nch: usize) -> usize {
     (budget / (8 * max_nch * std::mem::size_of::<Lane<T>>())).max(1)
 }
 
 /// Groups of eight pixels whose 256-row tables of `max_nch` chunks fit in `budget` bytes
 /// (between 1 and 64).
-fn groups_per_block<T: Real>(budget: usize, max_nch: usize) -> usize {
+pub(super) fn groups_per_block<T: Real>(budget: usize, max_nch: usize) -> usize {
     let table_bytes = 256 * 8 * max_nch * std::mem::size_of::<T>();
     (budget / table_bytes).clamp(1, 64)
 }
@@ -334,81 +334,22 @@ impl<T: Real> RdOperator<T> {
         self.isa.name()
     }
 
-    /// Bytes held by the operator: codes, pulse and the working buffers of one application per
-    /// thread (of the current rayon pool).
-    pub fn memory_bytes(&self) -> usize {
-        let threads = rayon::current_num_threads();
-        // The operator exists, so its own sizes fit; only an absurd thread count could overflow.
-        Self::estimated_memory_bytes(self.geom, self.pulse.len(), self.codes.alphabet(), threads)
-            .unwrap_or(usize::MAX)
+    /// Groups of eight pixels per block of the adjoint (the same count for every block, the
+    /// blocks a multiple of the threads of the current rayon pool).
+    pub(crate) fn adjoint_block_groups(&self) -> usize {
+        let groups = self.codes.groups();
+        let threads = rayon::current_num_threads().max(1);
+        let blocks = groups
+            .div_ceil(self.adj_block_groups)
+            .next_multiple_of(threads)
+            .min(groups)
+            .max(1);
+        groups.div_ceil(blocks)
     }
 
-    /// The bytes [`memory_bytes`](Self::memory_bytes) would report for an operator on `geom`
-    /// with a pulse of `pulse_len` samples, codes of `alphabet` and `threads` worker threads,
-    /// computed without building it: the packed codes (⌈M·N/8⌉·K bytes per bit plane), the
-    /// pulse twice (as given and reversed, padded), and per thread the forward's `f64`
-    /// accumulator and lane partial sums of K samples, one block of its lookup tables, and the
-    /// adjoint's tables of one chunk of samples and partial sums of one block of pixels.
-    ///
-    /// # Errors
-    /// [`Error::InvalidParameter`] if `pulse_len` or `threads` is zero, or if the count does not
-    /// fit in `usize`.
-    pub fn estimated_memory_bytes(
-        geom: Geometry,
-        pulse_len: usize,
-        alphabet: super::codes::CodeAlphabet,
-        threads: usize,
-    ) -> Result<usize> {
-        if pulse_len == 0 {
-            return Err(Error::param("pulse_len", "must be at least 1"));
-        }
-        if threads == 0 {
-            return Err(Error::param("threads", "must be at least 1"));
-        }
-        let overflow = || {
-            Error::param(
-                "pulse_len",
-                format!("the operator's memory for {geom} and K_p = {pulse_len} overflows usize"),
-            )
-        };
-        let size = std::mem::size_of::<T>();
-        let slabs = depth_slabs(geom.ks);
-        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch);
-        let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
-        let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
-        let planes = match alphabet {
-            super::codes::CodeAlphabet::Binary => 1,
-            super::codes::CodeAlphabet::Ternary => 2,
-        };
-        let k = pulse_len.checked_add(geom.ks - 1).ok_or_else(overflow)?;
-        let codes = geom
-            .pixels()
-            .div_ceil(8)
-            .checked_mul(k)
-            .and_then(|v| v.checked_mul(planes))
-            .ok_or_else(overflow)?;
-        let pulses = pulse_len
-            .checked_mul(2)
-            .and_then(|v| v.checked_add(geom.ks + ks_pad))
-            .and_then(|v| v.checked_mul(size))
-            .ok_or_else(overflow)?;
-        let tables = block_groups * 256 * max_nch * 8 * size;
-        // The adjoint's block: a chunk's tables, and the block's partial sums in `T` and `f64`.
-        let adjoint = ADJ_OCTETS * octet_stride::<T>(max_nch) * 8 * size
-            + adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch)
-                * 8
-                * max_nch
-                * 8
-                * (size + 8);
-        let per_task = k
-            .checked_mul(8 + 8 * size)
-            .and_then(|v| v.checked_add(tables + adjoint))
-            .ok_or_else(overflow)?;
-        threads
-            .checked_mul(per_task)
-            .and_then(|v| v.checked_add(codes))
-            .and_then(|v| v.checked_add(pulses))
-            .ok_or_else(overflow)
+    /// The depth slabs: (first bin, chunks of eight bins).
+    pub(crate) fn slabs(&self) -> &[(usize, usize)] {
+        &self.slabs
     }
 
     fn block_range(&self, b: usize) -> std::ops::Range<usize> {
@@ -652,15 +593,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
     fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
         let (ks, npix) = (self.geom.ks, self.geom.pixels());
         let groups = self.codes.groups();
-        // Blocks of at most `adj_block_groups` groups, as many as a multiple of the threads and
-        // of equal size, so that every thread gets the same work.
-        let threads = rayon::current_num_threads().max(1);
-        let blocks = groups
-            .div_ceil(self.adj_block_groups)
-            .next_multiple_of(threads)
-            .min(groups)
-            .max(1);
-        let per = groups.div_ceil(blocks);
+        let per = self.adjoint_block_groups();
         let octets = self.codes.len().div_ceil(8);
         x.par_chunks_mut(per * 8 * ks)
             .enumerate()

@@ -2,7 +2,10 @@
 
 use std::sync::Arc;
 
-use rdlidar::lidar::{paper_scene, CodeAlphabet, Codes, Geometry, Pulse, RdOperator, Seeds};
+use rdlidar::lidar::{
+    gather_limit, paper_scene, CodeAlphabet, Codes, GatherLimit, Geometry, OperatorWork, Pulse,
+    RdOperator, Seeds,
+};
 use rdlidar::limits::MemoryPlan;
 use rdlidar::report::timing::{time_operator, Timing};
 use rdlidar::Real;
@@ -21,8 +24,13 @@ use crate::common::{
 /// dense table path over all pixels, "adjoint" the backprojection, "sparse forward" the
 /// forward product over the nonzero voxels of the scene only.
 ///
+/// Each dense kernel's rate is also given as table additions and table bytes read per second,
+/// beside what this machine delivers to the same access pattern: random rows of the same width
+/// summed from a table in L1 (32 kB) and in L2 (512 kB) per thread ("limits").
+///
 /// --json prints {"forward": {"median_s": .., "min_s": ..}, "adjoint": {..},
-/// "sparse_forward": {..}, ...} on one line instead of the table.
+/// "sparse_forward": {..}, "work": .., "rates": .., "limits": .., ...} on one line instead of
+/// the table.
 ///
 /// Example: `rdlidar bench --size 100x100x40 --pulse-len 30000 --precision f32 --json`
 #[derive(clap::Args, Debug)]
@@ -57,6 +65,33 @@ struct BenchReport {
     threads: usize,
     isa: &'static str,
     memory_bytes: usize,
+    /// Additions and table bytes of one application of each dense kernel.
+    work: OperatorWork,
+    /// Rates of each dense kernel at its median time.
+    rates: Rates,
+    /// What the caches deliver to the kernels' access pattern on this machine.
+    limits: Limits,
+}
+
+/// Additions and table bytes per second of the dense kernels.
+#[derive(Debug, Serialize)]
+struct Rates {
+    forward: Rate,
+    adjoint: Rate,
+}
+
+#[derive(Debug, Serialize)]
+struct Rate {
+    additions_per_s: f64,
+    table_bytes_per_s: f64,
+}
+
+/// Random rows of the kernels' width summed from a table in L1 (32 kB) and in L2 (512 kB, the
+/// forward's block of tables) per thread.
+#[derive(Debug, Serialize)]
+struct Limits {
+    l1: GatherLimit,
+    l2: GatherLimit,
 }
 
 /// Runs `bench` (f32 unless --precision says otherwise).
@@ -96,6 +131,16 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
     let codes = Codes::random_binary(g.pixels(), k, seeds.code_set(0))?;
     let op = RdOperator::new(g, pulse.into_inner(), Arc::new(codes))?;
     let t = time_operator(&op, scene.as_slice(), repeats);
+    let work = op.work();
+    let rate = |w: rdlidar::lidar::KernelWork, seconds: f64| Rate {
+        additions_per_s: w.additions_per_s(seconds),
+        table_bytes_per_s: w.table_bytes_per_s(seconds),
+    };
+    let nch = g.ks.min(64).div_ceil(8);
+    let limits = Limits {
+        l1: gather_limit::<T>(nch, 32 * 1024, repeats)?,
+        l2: gather_limit::<T>(nch, 512 * 1024, repeats)?,
+    };
     let report = BenchReport {
         forward: t.forward,
         adjoint: t.adjoint,
@@ -110,6 +155,12 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
         threads: rayon::current_num_threads(),
         isa: op.isa(),
         memory_bytes: op.memory_bytes(),
+        rates: Rates {
+            forward: rate(work.forward, t.forward.median_s),
+            adjoint: rate(work.adjoint, t.adjoint.median_s),
+        },
+        work,
+        limits,
     };
     if a.json {
         let text = serde_json::to_string(&report)
@@ -142,26 +193,48 @@ fn print_table(report: &BenchReport, g: Geometry) -> CliResult {
         report.repeats
     );
     outln!(
-        "{:<16} {:>12} {:>12} {:>22}",
+        "{:<16} {:>12} {:>12} {:>12} {:>14} {:>12}",
         "operation",
         "median (s)",
         "min (s)",
-        "GEMM-equiv. GFLOP/s"
+        "GEMM GFLOP/s",
+        "Gadditions/s",
+        "table GB/s"
     );
-    for (name, t, dense) in [
-        ("forward", report.forward, true),
-        ("adjoint", report.adjoint, true),
-        ("sparse forward", report.sparse_forward, false),
-    ] {
-        let rate = if dense && t.median_s > 0.0 {
-            format!("{:.1}", flops / t.median_s / 1e9)
-        } else {
-            "-".to_string()
+    let rates = [
+        Some(&report.rates.forward),
+        Some(&report.rates.adjoint),
+        None,
+    ];
+    for ((name, t), r) in [
+        ("forward", report.forward),
+        ("adjoint", report.adjoint),
+        ("sparse forward", report.sparse_forward),
+    ]
+    .into_iter()
+    .zip(rates)
+    {
+        let (gemm, adds, bytes) = match r {
+            Some(r) if t.median_s > 0.0 => (
+                format!("{:.1}", flops / t.median_s / 1e9),
+                format!("{:.1}", r.additions_per_s / 1e9),
+                format!("{:.1}", r.table_bytes_per_s / 1e9),
+            ),
+            _ => ("-".into(), "-".into(), "-".into()),
         };
         outln!(
-            "{name:<16} {:>12.6} {:>12.6} {rate:>22}",
+            "{name:<16} {:>12.6} {:>12.6} {gemm:>12} {adds:>14} {bytes:>12}",
             t.median_s,
             t.min_s
+        );
+    }
+    for (name, l) in [("L1", &report.limits.l1), ("L2", &report.limits.l2)] {
+        outln!(
+            "limit: random {}-byte rows from a {} kB table in {name} per thread: {:.1} Gadditions/s, {:.1} GB/s",
+            l.row_bytes,
+            l.table_bytes / 1024,
+            l.additions_per_s / 1e9,
+            l.bytes_per_s / 1e9
         );
     }
     Ok(())

@@ -1,0 +1,243 @@
+//! What one application of [`RdOperator`] holds and does: the bytes of its codes and working
+//! buffers, the additions and table bytes of its dense kernels, and what this machine's caches
+//! deliver to a kernel of that access pattern (the limit the kernels are measured against).
+
+use std::time::Instant;
+
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::real::Real;
+
+use super::codes::CodeAlphabet;
+use super::geometry::Geometry;
+use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
+use super::rdop::{
+    adjoint_groups_per_block, depth_slabs, groups_per_block, RdOperator, ADJ_BLOCK_BYTES,
+    BLOCK_BYTES,
+};
+
+/// The work of one application of a dense kernel.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct KernelWork {
+    /// Additions of table values: one per depth bin of every row looked up, and one per value
+    /// of every table built.
+    pub additions: f64,
+    /// Bytes of table rows read by the lookups (rows padded to whole chunks of eight values).
+    pub table_bytes: f64,
+}
+
+impl KernelWork {
+    /// Additions per second for an application taking `seconds`.
+    pub fn additions_per_s(&self, seconds: f64) -> f64 {
+        self.additions / seconds
+    }
+
+    /// Table bytes read per second for an application taking `seconds`.
+    pub fn table_bytes_per_s(&self, seconds: f64) -> f64 {
+        self.table_bytes / seconds
+    }
+}
+
+/// The work of [`RdOperator`]'s dense forward and adjoint.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct OperatorWork {
+    /// The dense forward: one row of a group's table per group and sample (two for ternary
+    /// codes), 256 rows tabulated per group.
+    pub forward: KernelWork,
+    /// The adjoint: one row of an octet's table per pixel and octet of samples (two for ternary
+    /// codes), 256 rows tabulated per octet and block of pixels.
+    pub adjoint: KernelWork,
+}
+
+impl<T: Real> RdOperator<T> {
+    /// Bytes held by the operator: codes, pulse and the working buffers of one application per
+    /// thread (of the current rayon pool).
+    pub fn memory_bytes(&self) -> usize {
+        let threads = rayon::current_num_threads();
+        // The operator exists, so its own sizes fit; only an absurd thread count could overflow.
+        Self::estimated_memory_bytes(
+            self.geometry(),
+            self.pulse().len(),
+            self.codes().alphabet(),
+            threads,
+        )
+        .unwrap_or(usize::MAX)
+    }
+
+    /// The bytes [`memory_bytes`](Self::memory_bytes) would report for an operator on `geom`
+    /// with a pulse of `pulse_len` samples, codes of `alphabet` and `threads` worker threads,
+    /// computed without building it: the packed codes (⌈M·N/8⌉·K bytes per bit plane), the
+    /// pulse twice (as given and reversed, padded), and per thread the forward's `f64`
+    /// accumulator and lane partial sums of K samples, one block of its lookup tables, and the
+    /// adjoint's tables of one chunk of samples and partial sums of one block of pixels.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] if `pulse_len` or `threads` is zero, or if the count does not
+    /// fit in `usize`.
+    pub fn estimated_memory_bytes(
+        geom: Geometry,
+        pulse_len: usize,
+        alphabet: CodeAlphabet,
+        threads: usize,
+    ) -> Result<usize> {
+        if pulse_len == 0 {
+            return Err(Error::param("pulse_len", "must be at least 1"));
+        }
+        if threads == 0 {
+            return Err(Error::param("threads", "must be at least 1"));
+        }
+        let overflow = || {
+            Error::param(
+                "pulse_len",
+                format!("the operator's memory for {geom} and K_p = {pulse_len} overflows usize"),
+            )
+        };
+        let size = std::mem::size_of::<T>();
+        let slabs = depth_slabs(geom.ks);
+        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch);
+        let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
+        let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
+        let planes = match alphabet {
+            CodeAlphabet::Binary => 1,
+            CodeAlphabet::Ternary => 2,
+        };
+        let k = pulse_len.checked_add(geom.ks - 1).ok_or_else(overflow)?;
+        let codes = geom
+            .pixels()
+            .div_ceil(8)
+            .checked_mul(k)
+            .and_then(|v| v.checked_mul(planes))
+            .ok_or_else(overflow)?;
+        let pulses = pulse_len
+            .checked_mul(2)
+            .and_then(|v| v.checked_add(geom.ks + ks_pad))
+            .and_then(|v| v.checked_mul(size))
+            .ok_or_else(overflow)?;
+        let tables = block_groups * 256 * max_nch * 8 * size;
+        // The adjoint's block: a chunk's tables, and the block's partial sums in `T` and `f64`.
+        let adjoint = ADJ_OCTETS * octet_stride::<T>(max_nch) * 8 * size
+            + adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch)
+                * 8
+                * max_nch
+                * 8
+                * (size + 8);
+        let per_task = k
+            .checked_mul(8 + 8 * size)
+            .and_then(|v| v.checked_add(tables + adjoint))
+            .ok_or_else(overflow)?;
+        threads
+            .checked_mul(per_task)
+            .and_then(|v| v.checked_add(codes))
+            .and_then(|v| v.checked_add(pulses))
+            .ok_or_else(overflow)
+    }
+
+    /// The additions and table bytes of one dense forward and one adjoint (with the threads of
+    /// the current rayon pool, which set the adjoint's blocks).
+    pub fn work(&self) -> OperatorWork {
+        let g = self.geometry();
+        let (ks, size) = (g.ks as f64, std::mem::size_of::<T>() as f64);
+        let ks_pad = self.slabs().iter().map(|s| 8 * s.1).sum::<usize>() as f64;
+        let planes = match self.codes().alphabet() {
+            CodeAlphabet::Binary => 1.0,
+            CodeAlphabet::Ternary => 2.0,
+        };
+        let groups = self.codes().groups() as f64;
+        let k = self.codes().len() as f64;
+        let octets = self.codes().len().div_ceil(8) as f64;
+        let blocks = self.codes().groups().div_ceil(self.adjoint_block_groups()) as f64;
+        let forward_lookups = groups * k * planes;
+        let adjoint_lookups = 8.0 * groups * octets * planes;
+        OperatorWork {
+            forward: KernelWork {
+                additions: forward_lookups * ks + groups * 256.0 * ks,
+                table_bytes: forward_lookups * ks_pad * size,
+            },
+            adjoint: KernelWork {
+                additions: adjoint_lookups * ks + blocks * octets * 256.0 * ks,
+                table_bytes: adjoint_lookups * ks_pad * size,
+            },
+        }
+    }
+}
+
+/// What a cache level delivers to the table kernels' access pattern: rows of `8·nch` values of
+/// `T` read at random from a table of `table_bytes` (one per thread of the current rayon pool)
+/// and summed, with the kernels' instruction set.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct GatherLimit {
+    /// Bytes of each thread's table.
+    pub table_bytes: usize,
+    /// Bytes of one row.
+    pub row_bytes: usize,
+    /// Rows read per second, all threads together (the median of the timed runs).
+    pub rows_per_s: f64,
+    /// Bytes read per second, all threads together.
+    pub bytes_per_s: f64,
+    /// Values added per second, all threads together.
+    pub additions_per_s: f64,
+}
+
+/// Measures [`GatherLimit`] for rows of `nch` chunks of eight values (1 … 8) in tables of about
+/// `table_bytes` per thread, `repeats` timed runs of 2²⁰ rows per thread after a warm-up.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`nch`, `repeats`) for a chunk count outside 1 … 8 or no runs,
+/// and for `RDLIDAR_ISA` as [`RdOperator::new`].
+pub fn gather_limit<T: Real>(
+    nch: usize,
+    table_bytes: usize,
+    repeats: usize,
+) -> Result<GatherLimit> {
+    if !(1..=8).contains(&nch) {
+        return Err(Error::param("nch", format!("{nch} is not between 1 and 8")));
+    }
+    if repeats == 0 {
+        return Err(Error::param("repeats", "must be at least 1"));
+    }
+    let isa = Isa::chosen()?;
+    let row_bytes = nch * std::mem::size_of::<Lane<T>>();
+    let rows = (table_bytes / row_bytes).clamp(2, 1 << 16);
+    const READS: usize = 1 << 20;
+    let threads = rayon::current_num_threads().max(1);
+    let setup: Vec<(Vec<Lane<T>>, Vec<u16>)> = (0..threads)
+        .map(|t| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(t as u64);
+            let table = (0..rows * nch)
+                .map(|_| std::array::from_fn(|_| T::of_f64(rng.random_range(-1.0..1.0))))
+                .collect();
+            let index = (0..READS)
+                .map(|_| rng.random_range(0..rows) as u16)
+                .collect();
+            (table, index)
+        })
+        .collect();
+    let run = || {
+        let t0 = Instant::now();
+        let sums: Vec<f64> = setup
+            .par_iter()
+            .map(|(table, index)| {
+                let mut out = vec![[T::zero(); 8]; nch];
+                gather_rows(isa, nch, table, index, &mut out);
+                out.iter().flatten().map(|v| v.as_f64()).sum()
+            })
+            .collect();
+        std::hint::black_box(sums);
+        t0.elapsed().as_secs_f64()
+    };
+    run();
+    let mut times: Vec<f64> = (0..repeats).map(|_| run()).collect();
+    times.sort_by(f64::total_cmp);
+    let median = times[times.len() / 2].max(f64::MIN_POSITIVE);
+    let rows_per_s = (threads * READS) as f64 / median;
+    Ok(GatherLimit {
+        table_bytes: rows * row_bytes,
+        row_bytes,
+        rows_per_s,
+        bytes_per_s: rows_per_s * row_bytes as f64,
+        additions_per_s: rows_per_s * (8 * nch) as f64,
+    })
+}
