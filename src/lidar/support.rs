@@ -8,7 +8,7 @@ use crate::operator::LinearOperator;
 use crate::operator::VoxelOperator;
 use crate::real::Real;
 
-use super::kernels::{lane_dot_isa, signed_copy_isa};
+use super::kernels::{lane_dot_isa, signed_copy_isa, signed_dot_isa};
 use super::rdop::RdOperator;
 
 /// `A·Rᵀ` for a set S of voxels: the input holds one amplitude per voxel of S (in the order
@@ -90,7 +90,7 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
         let codes = self.op.codes();
         let isa = self.op.isa_kind();
         // Per pixel: its codes applied to y once (z = s ⊙ y), then one windowed dot product with
-        // the pulse per voxel of that pixel.
+        // the pulse per voxel of that pixel; a pixel with one voxel does both in one pass.
         let out: Vec<(usize, T)> = self
             .by_pixel
             .par_chunks(
@@ -105,6 +105,22 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
                 for run in runs {
                     let (p, ref members) = *run;
                     let (g, bit) = (p / 8, (p % 8) as u32);
+                    if let [i] = members[..] {
+                        // One voxel: codes, measurements and pulse in one pass.
+                        let j = self.voxels[i] % ks;
+                        let mut acc = 0.0;
+                        signed_dot_isa(
+                            isa,
+                            bit,
+                            &codes.plus_group(g)[j..j + kp],
+                            codes.minus_group(g).map(|m| &m[j..j + kp]),
+                            &y[j..j + kp],
+                            pulse,
+                            &mut acc,
+                        );
+                        res.push((i, T::of_f64(acc)));
+                        continue;
+                    }
                     let lo = members
                         .iter()
                         .map(|&i| self.voxels[i] % ks)
