@@ -230,8 +230,9 @@ pub(crate) struct AdjChunk<'a, T> {
     pub prev: &'a [T],
     /// As in [`FwdBlock`].
     pub base0: usize,
-    /// The chunk: samples `8·octets.start .. 8·octets.end` (those past K count as zero).
-    pub octets: std::ops::Range<usize>,
+    /// The chunk's first octet: the chunk holds samples `8·first_octet` to
+    /// `8·(first_octet + ADJ_OCTETS)` (those past K count as zero).
+    pub first_octet: usize,
 }
 
 /// Transposes an 8×8 bit matrix held as a `u64` (bit i of byte t, i.e. bit 8t + i, goes to bit
@@ -283,7 +284,7 @@ fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane
     let zero = [T::zero(); 8];
     let binary = a.minus.is_none();
     let k = a.y.len();
-    for (oi, o) in a.octets.clone().enumerate() {
+    for (oi, o) in (a.first_octet..a.first_octet + ADJ_OCTETS).enumerate() {
         let mut w = [[zero; NCH]; 8];
         let mut first = [zero; NCH];
         for (t, wt) in w.iter_mut().enumerate() {
@@ -312,8 +313,8 @@ fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane
     }
 }
 
-/// The adjoint of a chunk of octets for the groups of a task, added to `out[(g·8 + i)·NCH + c]`
-/// (pixel i of group g, chunk c, in `f64`): the chunk's tables are built once
+/// The adjoint of a chunk of octets for a block of groups, added to `out[(g·8 + i)·NCH + c]`
+/// (pixel i of group g, chunk c, in `T`; the caller adds these to `f64` sums): the chunk's tables are built once
 /// ([`adj_tables`]), then each pixel sums one table row per octet, the one its code byte along
 /// the samples selects (two for ternary codes: its +1 row minus its −1 row). Only reads: the
 /// tables are shared by every pixel, and the sum stays in registers.
@@ -331,7 +332,7 @@ fn adj_chunk<T: Real, const NCH: usize>(
     };
     let mut bp = [0u64; ADJ_OCTETS];
     let mut bm = [0u64; ADJ_OCTETS];
-    let o0 = a.octets.start;
+    let o0 = a.first_octet;
     for (g, og) in out.chunks_exact_mut(8 * NCH).enumerate() {
         for (oi, b) in bp.iter_mut().enumerate() {
             *b = octet_bits(a.plus[g], o0 + oi);
@@ -627,138 +628,4 @@ pub(crate) fn gather_rows<T: Real>(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::{RngExt, SeedableRng};
-    use rand_chacha::ChaCha8Rng;
-
-    #[test]
-    fn transpose8_swaps_samples_and_pixels() {
-        let mut rng = ChaCha8Rng::seed_from_u64(8);
-        for _ in 0..200 {
-            let x: u64 = rng.random();
-            let t = transpose8(x);
-            for s in 0..8 {
-                for p in 0..8 {
-                    assert_eq!((x >> (8 * s + p)) & 1, (t >> (8 * p + s)) & 1);
-                }
-            }
-            assert_eq!(transpose8(t), x);
-        }
-    }
-
-    /// The chunk kernel against the direct sum Σ_k s_i(k)·y[k]·p[k − j] on every instruction
-    /// set, binary and ternary codes, with a K that is not a multiple of eight (the last octets
-    /// run past the end) and two chunks.
-    #[test]
-    fn adjoint_chunk_matches_the_direct_sum() {
-        const NCH: usize = 2;
-        let mut rng = ChaCha8Rng::seed_from_u64(27);
-        let (groups, k) = (3usize, 8 * ADJ_OCTETS + 13);
-        let kp = k + 1 - 8 * NCH;
-        let y: Vec<f64> = (0..k).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let pulse: Vec<f64> = (0..kp)
-            .map(|_| f64::from(rng.random_range(0..2u8)))
-            .collect();
-        // prev as the operator lays it out: p[k − j] = prev[base0 − k + j], zero outside.
-        let pad = 8 * NCH;
-        let mut prev = vec![0.0; pad + kp + 8 * NCH];
-        for (t, &v) in pulse.iter().rev().enumerate() {
-            prev[pad + t] = v;
-        }
-        let base0 = pad + kp - 1;
-        let plus: Vec<Vec<u8>> = (0..groups)
-            .map(|_| (0..k).map(|_| rng.random()).collect())
-            .collect();
-        let minus: Vec<Vec<u8>> = plus
-            .iter()
-            .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
-            .collect();
-        let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
-        let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
-        let mut isas = vec![Isa::Generic, Isa::best()];
-        isas.dedup();
-        for ternary in [false, true] {
-            let sign = |g: usize, i: usize, kk: usize| -> f64 {
-                let p = f64::from((plus[g][kk] >> i) & 1);
-                if ternary {
-                    p - f64::from((minus[g][kk] >> i) & 1)
-                } else {
-                    2.0 * p - 1.0
-                }
-            };
-            for &isa in &isas {
-                let mut tables = vec![[0.0; 8]; ADJ_OCTETS * octet_stride::<f64>(NCH)];
-                let mut out = vec![[0.0; 8]; groups * 8 * NCH];
-                let octets = k.div_ceil(8);
-                for o0 in (0..octets).step_by(ADJ_OCTETS) {
-                    let a = AdjChunk {
-                        plus: &plus_refs,
-                        minus: ternary.then_some(minus_refs.as_slice()),
-                        y: &y,
-                        prev: &prev,
-                        base0,
-                        octets: o0..o0 + ADJ_OCTETS,
-                    };
-                    adjoint_chunk(isa, NCH, &a, &mut tables, &mut out);
-                }
-                for g in 0..groups {
-                    for i in 0..8 {
-                        for j in 0..8 * NCH {
-                            let want: f64 = (0..k)
-                                .filter(|&kk| kk >= j && kk - j < kp)
-                                .map(|kk| sign(g, i, kk) * y[kk] * pulse[kk - j])
-                                .sum();
-                            let got = out[(g * 8 + i) * NCH + j / 8][j % 8];
-                            assert!(
-                                (got - want).abs() < 1e-12 * (1.0 + want.abs()),
-                                "{isa:?} ternary {ternary}: pixel {g}/{i} bin {j}: {got} vs {want}"
-                            );
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    /// The one-pass restricted adjoint equals the signed copy followed by the windowed dot
-    /// product, for both alphabets, on every instruction set, with lengths that leave tails.
-    #[test]
-    fn signed_dot_equals_the_copy_then_the_dot() {
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        for n in [1usize, 7, 8, 255, 256, 257, 1000] {
-            let y: Vec<f32> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let p: Vec<f32> = (0..n)
-                .map(|_| f32::from(rng.random_range(0..2u8)))
-                .collect();
-            let plus: Vec<u8> = (0..n).map(|_| rng.random()).collect();
-            let minus: Vec<u8> = plus.iter().map(|&b| !b & rng.random::<u8>()).collect();
-            for minus in [None, Some(minus.as_slice())] {
-                for isa in [Isa::Generic, Isa::best()] {
-                    for bit in [0, 3, 7] {
-                        let mut z = vec![0.0f32; n];
-                        signed_copy_isa(isa, bit, &plus, minus, &y, &mut z);
-                        let (mut want, mut got) = (0.0, 0.0);
-                        lane_dot_isa(isa, &z, &p, &mut want);
-                        signed_dot_isa(isa, bit, &plus, minus, &y, &p, &mut got);
-                        let direct: f64 = (0..n)
-                            .map(|k| {
-                                let s = f64::from((plus[k] >> bit) & 1)
-                                    - match minus {
-                                        None => f64::from(!(plus[k] >> bit) & 1),
-                                        Some(m) => f64::from((m[k] >> bit) & 1),
-                                    };
-                                s * f64::from(y[k]) * f64::from(p[k])
-                            })
-                            .sum();
-                        assert!((got - want).abs() <= 1e-5 * (1.0 + want.abs()), "{n} {bit}");
-                        assert!(
-                            (got - direct).abs() <= 1e-5 * (1.0 + direct.abs()),
-                            "{n} {bit}"
-                        );
-                    }
-                }
-            }
-        }
-    }
-}
+mod tests;

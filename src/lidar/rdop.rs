@@ -74,14 +74,6 @@ struct Work<T> {
     lanes: Vec<Lane<T>>,
 }
 
-/// The adjoint's buffers of one block: allocated per application rather than pooled, so that an
-/// operator that is kept does not hold them (megabytes per thread at large K_s).
-struct AdjWork<T> {
-    tables: Vec<Lane<T>>,
-    part: Vec<Lane<T>>,
-    out: Vec<Lane<f64>>,
-}
-
 struct Pool<T>(Mutex<Vec<Work<T>>>);
 
 impl<T> Pool<T> {
@@ -605,19 +597,17 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
             .for_each(|(b, xb)| {
                 let groups = b * per..((b + 1) * per).min(groups);
                 let (plus, minus) = self.group_codes(groups.clone());
-                let mut w = AdjWork {
-                    tables: Vec::new(),
-                    part: Vec::new(),
-                    out: Vec::new(),
-                };
+                // Allocated per application rather than pooled, so that an operator that is
+                // kept does not hold them (megabytes per thread at large K_s).
+                let (mut tables, mut part, mut out) = (Vec::new(), Vec::new(), Vec::new());
                 for &(j0, nch) in &self.slabs {
                     resize(
-                        &mut w.tables,
+                        &mut tables,
                         ADJ_OCTETS * octet_stride::<T>(nch),
                         [T::zero(); 8],
                     );
-                    resize(&mut w.part, groups.len() * 8 * nch, [T::zero(); 8]);
-                    resize(&mut w.out, groups.len() * 8 * nch, [0.0; 8]);
+                    resize(&mut part, groups.len() * 8 * nch, [T::zero(); 8]);
+                    resize(&mut out, groups.len() * 8 * nch, [0.0; 8]);
                     for (c, o0) in (0..octets).step_by(ADJ_OCTETS).enumerate() {
                         let chunk = AdjChunk {
                             plus: &plus,
@@ -625,12 +615,12 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                             y,
                             prev: &self.prev,
                             base0: self.pad + self.pulse.len() - 1 + j0,
-                            octets: o0..o0 + ADJ_OCTETS,
+                            first_octet: o0,
                         };
-                        adjoint_chunk(self.isa, nch, &chunk, &mut w.tables, &mut w.part);
+                        adjoint_chunk(self.isa, nch, &chunk, &mut tables, &mut part);
                         if c % ADJ_FLUSH_CHUNKS == ADJ_FLUSH_CHUNKS - 1 || o0 + ADJ_OCTETS >= octets
                         {
-                            for (d, s) in w.out.iter_mut().zip(w.part.iter_mut()) {
+                            for (d, s) in out.iter_mut().zip(part.iter_mut()) {
                                 for (dv, sv) in d.iter_mut().zip(s.iter()) {
                                     *dv += sv.as_f64();
                                 }
@@ -639,7 +629,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                         }
                     }
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
-                    for (i, o) in w.out.chunks_exact(nch).take(pixels).enumerate() {
+                    for (i, o) in out.chunks_exact(nch).take(pixels).enumerate() {
                         for jj in 0..(8 * nch).min(ks - j0) {
                             xb[i * ks + j0 + jj] = T::of_f64(o[jj / 8][jj % 8]);
                         }
