@@ -270,7 +270,16 @@ fn run_reading_fifo(args: &[String], fifo: &Path) -> (Output, Vec<u8>) {
         }
         let _ = tx.send(data);
     });
-    let out = run_with_deadline(args, Duration::from_secs(30));
+    // The reader may not have reached open() yet (a loaded machine): the command refuses a FIFO
+    // nobody reads, so it runs again until the reader waits.
+    let mut out = run_with_deadline(args, Duration::from_secs(30));
+    for _ in 0..100 {
+        if !stderr(&out).contains("nobody reads") {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        out = run_with_deadline(args, Duration::from_secs(30));
+    }
     let data = match rx.recv_timeout(Duration::from_secs(5)) {
         Ok(d) => d,
         Err(_) => {

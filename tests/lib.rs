@@ -31,6 +31,7 @@ mod degenerate;
 mod end_to_end;
 mod errors;
 mod experiments;
+mod hard_scenes;
 mod info;
 mod io_files;
 mod iteration;

@@ -76,6 +76,9 @@ fn one_pixel_two_bins_off() {
         (11, 12, 0, 0)
     );
     assert!(close(m.exact_fraction, 11.0 / 12.0));
+    // Two bins off is not within one bin either.
+    assert_eq!(m.within_one, 11);
+    assert!(close(m.within_one_fraction, 11.0 / 12.0));
     // RMSE = √(2² / 12).
     let rmse = (4.0f64 / 12.0).sqrt();
     assert!(close(m.depth_rmse_bins, rmse));
@@ -88,6 +91,21 @@ fn one_pixel_two_bins_off() {
     // The same through scenes.
     let ms = compare(&truth.to_scene(8).unwrap(), &est.to_scene(8).unwrap(), TAU).unwrap();
     assert_same(&ms, &m);
+}
+
+#[test]
+fn one_bin_off_is_within_one_bin_but_not_exact() {
+    let truth = truth_map();
+    let mut est = truth.clone();
+    est.depth[[1, 2]] -= 1;
+    let m = compare_depth(&truth, &est, TAU).unwrap();
+    assert_eq!((m.exact, m.within_one), (11, 12));
+    assert_eq!(m.within_one_fraction, 1.0);
+    assert!(m.to_string().contains("(100.0% within one bin)"), "{m}");
+    // A missed pixel is not within one bin.
+    est.depth[[1, 2]] = NO_RETURN;
+    let m = compare_depth(&truth, &est, TAU).unwrap();
+    assert_eq!((m.exact, m.within_one, m.missed), (11, 11, 1));
 }
 
 #[test]

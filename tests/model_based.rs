@@ -194,6 +194,22 @@ fn invalid_parameters_and_shapes_are_typed_errors() {
             ..ModelBasedParams::default()
         },
         ModelBasedParams {
+            surface_z: -0.5,
+            ..ModelBasedParams::default()
+        },
+        ModelBasedParams {
+            surface_neighbours: 9,
+            ..ModelBasedParams::default()
+        },
+        ModelBasedParams {
+            join_neighbours: 0,
+            ..ModelBasedParams::default()
+        },
+        ModelBasedParams {
+            isolated_z: f64::INFINITY,
+            ..ModelBasedParams::default()
+        },
+        ModelBasedParams {
             stopping: Stopping {
                 max_iter: 0,
                 ..Stopping::default()

@@ -645,9 +645,9 @@ def metrics(truth, estimate, tau_s: Optional[float] = None) -> dict:
     """Detection and error metrics of an estimated scene against the true one.
 
     Both (M, N, K_s). A pixel's depth is its strongest return; ``tau_s`` is the depth bin's
-    duration in seconds (default 200e-12). Returns a dict: exact_fraction, missed,
-    false_detections, depth_rmse_bins, relative_error, and the per-return counts for
-    multi-return scenes.
+    duration in seconds (default 200e-12). Returns a dict: exact_fraction, within_one (lit pixels
+    within one bin of their depth) and within_one_fraction, missed, false_detections,
+    depth_rmse_bins, relative_error, and the per-return counts for multi-return scenes.
     """
     t = _real_array(truth, np.float64, "truth")
     e = _real_array(estimate, np.float64, "estimate")

@@ -985,6 +985,8 @@ fn metrics<'py>(
     d.set_item("empty", m.empty)?;
     d.set_item("exact", m.exact)?;
     d.set_item("exact_fraction", m.exact_fraction)?;
+    d.set_item("within_one", m.within_one)?;
+    d.set_item("within_one_fraction", m.within_one_fraction)?;
     d.set_item("detected", m.detected)?;
     d.set_item("depth_rmse_bins", m.depth_rmse_bins)?;
     d.set_item("depth_rmse_m", m.depth_rmse_m)?;

@@ -112,3 +112,4 @@ def test_metrics_count_exact_missed_and_false():
     m = rdlidar.metrics(truth, est)
     assert (m["lit"], m["exact"], m["missed"], m["false_detections"]) == (2, 1, 1, 1)
     assert m["exact_fraction"] == 0.5
+    assert m["within_one_fraction"] == 0.5

@@ -36,6 +36,11 @@ pub struct Metrics {
     pub exact: usize,
     /// `exact / lit` (1 when no pixel is lit).
     pub exact_fraction: f64,
+    /// Lit pixels whose estimated depth is within one bin of the true depth (the exact ones
+    /// included).
+    pub within_one: usize,
+    /// `within_one / lit` (1 when no pixel is lit).
+    pub within_one_fraction: f64,
     /// Lit pixels that are also lit in the estimate: the pixels the RMSE is computed over.
     pub detected: usize,
     /// Root-mean-square depth error over the detected pixels, in bins (0 when none is detected).
@@ -94,9 +99,11 @@ impl std::fmt::Display for Metrics {
         }
         write!(
             f,
-            "exact depth {:.1}% of {} lit pixels, depth RMSE {:.3} bins ({:.4} m) over {}, \
-             missed {} ({:.1}%), false {} ({:.2}% of all, {:.2}% of empty), relative error {:.4}",
+            "exact depth {:.1}% ({:.1}% within one bin) of {} lit pixels, depth RMSE {:.3} bins \
+             ({:.4} m) over {}, missed {} ({:.1}%), false {} ({:.2}% of all, {:.2}% of empty), \
+             relative error {:.4}",
             100.0 * self.exact_fraction,
+            100.0 * self.within_one_fraction,
             self.lit,
             self.depth_rmse_bins,
             self.depth_rmse_m,
@@ -148,15 +155,15 @@ fn depth_metrics(truth: &Array2<i32>, estimate: &Array2<i32>, tau_s: f64) -> Res
     let bin_m = depth_bin_m(tau_s)?;
     let pixels = truth.len();
     let (mut lit, mut exact, mut detected, mut missed, mut false_detections) = (0, 0, 0, 0, 0);
+    let mut within_one = 0;
     let mut sq = 0.0f64;
     for (&d, &e) in truth.iter().zip(estimate.iter()) {
         match (d != NO_RETURN, e != NO_RETURN) {
             (true, true) => {
                 lit += 1;
                 detected += 1;
-                if d == e {
-                    exact += 1;
-                }
+                exact += usize::from(d == e);
+                within_one += usize::from(d.abs_diff(e) <= 1);
                 let diff = f64::from(d) - f64::from(e);
                 sq += diff * diff;
             }
@@ -180,6 +187,8 @@ fn depth_metrics(truth: &Array2<i32>, estimate: &Array2<i32>, tau_s: f64) -> Res
         empty,
         exact,
         exact_fraction: ratio(exact, lit, 1.0),
+        within_one,
+        within_one_fraction: ratio(within_one, lit, 1.0),
         detected,
         depth_rmse_bins,
         depth_rmse_m: depth_rmse_bins * bin_m,

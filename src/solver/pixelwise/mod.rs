@@ -6,6 +6,7 @@
 
 mod amp;
 mod model_based;
+mod surface;
 mod tv_depth;
 
 pub use amp::{reflector_amp, ReflectorAmpParams};

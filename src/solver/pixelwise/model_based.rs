@@ -10,128 +10,17 @@ use crate::linalg::dot;
 use crate::operator::{check_pixels, LinearOperator, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{
-    cgls, check_problem, check_tolerance, solve, CglsParams, Iteration, Iterative, Observer,
-    Progress, Report, Stopping, Termination,
+    cgls, check_problem, solve, CglsParams, Iteration, Iterative, Observer, Progress, Report,
+    Stopping, Termination,
 };
 use crate::space::{self, Space};
 
-use super::amp::{reflector_amp_constrained, ReflectorAmpParams};
+use super::amp::reflector_amp_constrained;
+use super::surface::{on_surface, surface_depths, SurfaceRule};
 use super::PixelConstraints;
 
-/// Parameters of [`model_based`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ModelBasedParams {
-    /// Returns per pixel at most (k, default 1: one reflector per pixel). With k > 1 each
-    /// iteration picks a pixel's returns one at a time, each judged on the pixel's correlations
-    /// with the ones picked before taken out, and keeps a further return only when it is
-    /// significant ([`detection_z`](Self::detection_z), or already held).
-    pub max_returns: usize,
-    /// Reflectivities are nonnegative: depths are chosen by the largest signed correlation and
-    /// pixels whose least-squares amplitude is not positive are dropped (default `true`).
-    pub nonnegative: bool,
-    /// Exploration: the first iterations put every pixel with a positive best correlation in
-    /// the support (within the budget). Least squares then gives each lit pixel at least about
-    /// half its amplitude even at a wrong depth (a pixel's columns overlap by half for a 0/1
-    /// pulse), so that the amplitude test at the end of the exploration separates lit from empty
-    /// pixels even when cross-talk hides the depths (default 3; 0 skips the exploration).
-    pub explore_iterations: usize,
-    /// After the exploration, a pixel outside the support joins it when its best correlation is
-    /// at least this many robust standard deviations (1.4826·MAD) of all correlations: a maximum
-    /// over the pixel's depths, hence a high bar (default 4).
-    pub detection_z: f64,
-    /// A pixel stays in the support when its least-squares amplitude is at least this many
-    /// standard errors σ_r/(‖a‖·√(1 − |S|/K)) (σ_r² = ‖r‖²/(K − |S|), ‖a‖ its column's norm, the
-    /// square root the variance inflation of least squares on |S| of K measurements, bounded at
-    /// √0.05) (default 3).
-    pub amplitude_z: f64,
-    /// The test of the final support, once, with the same standard errors: a return stays when
-    /// its amplitude is at least this many, and the rest is refitted (default 3.7). An empty
-    /// pixel offers the best of its K_s depths, so its chance of passing in noise is about
-    /// K_s·Q(z): 0.4% for K_s = 40 at z = 3.7.
-    pub final_z: f64,
-    /// The support holds at most this fraction of the number of measurements, keeping the
-    /// least-squares step overdetermined (in (0, 1], default 0.8).
-    pub max_support_fraction: f64,
-    /// The residual's standard deviation in the amplitude test is taken as at least this
-    /// fraction of the measurements' RMS, so that noise-free runs drop the round-off amplitudes
-    /// that least squares leaves on empty pixels: it bounds the dynamic range (default 1e-4).
-    pub noise_floor: f64,
-    /// The least-squares step on the support (CGLS on the restricted operator, warm-started).
-    pub inner: CglsParams,
-    /// Without a warm start, the first support comes from message passing with the
-    /// one-reflector prior ([`reflector_amp`](super::reflector_amp)), and the exploration is
-    /// skipped; `None` starts from the exploration instead (default: AMP with its defaults, but
-    /// stopping once its support has been stable for 3 iterations).
-    pub amp: Option<ReflectorAmpParams>,
-    /// Stopping rules; the residual is ‖Ax − y‖ / ‖y‖.
-    pub stopping: Stopping,
-}
-
-impl Default for ModelBasedParams {
-    fn default() -> Self {
-        ModelBasedParams {
-            max_returns: 1,
-            nonnegative: true,
-            explore_iterations: 3,
-            detection_z: 4.0,
-            amplitude_z: 3.0,
-            final_z: 3.7,
-            noise_floor: 1e-4,
-            max_support_fraction: 0.8,
-            amp: Some(ReflectorAmpParams {
-                stable_support: Some(3),
-                ..ReflectorAmpParams::default()
-            }),
-            inner: CglsParams {
-                damp: 0.0,
-                stopping: Stopping {
-                    max_iter: 10,
-                    rel_residual: Some(1e-6),
-                    ..Stopping::default()
-                },
-            },
-            stopping: Stopping {
-                max_iter: 100,
-                rel_residual: Some(1e-6),
-                ..Stopping::default()
-            },
-        }
-    }
-}
-
-impl ModelBasedParams {
-    /// Checks every setting that needs no operator.
-    ///
-    /// # Errors
-    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) naming the setting.
-    pub fn validate(&self) -> Result<()> {
-        self.stopping.validate()?;
-        self.inner.stopping.validate()?;
-        if let Some(a) = &self.amp {
-            a.validate()?;
-        }
-        if self.max_returns == 0 {
-            return Err(Error::param("max_returns", "must be at least 1"));
-        }
-        check_tolerance("detection_z", self.detection_z)?;
-        check_tolerance("amplitude_z", self.amplitude_z)?;
-        check_tolerance("final_z", self.final_z)?;
-        check_tolerance("noise_floor", self.noise_floor)?;
-        if !(self.max_support_fraction > 0.0 && self.max_support_fraction <= 1.0) {
-            return Err(Error::param(
-                "max_support_fraction",
-                format!("must be in (0, 1], got {}", self.max_support_fraction),
-            ));
-        }
-        if !(self.inner.damp.is_finite() && self.inner.damp >= 0.0) {
-            return Err(Error::param(
-                "inner.damp",
-                format!("must be finite and ≥ 0, got {}", self.inner.damp),
-            ));
-        }
-        Ok(())
-    }
-}
+mod params;
+pub use params::ModelBasedParams;
 
 /// 1.4826 · median |u| over the whole of the unknowns: a robust standard deviation of the
 /// correlations, dominated by the empty voxels.
@@ -263,17 +152,20 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
-    model_based_windowed(op, y, x, params, None, observer)
+    model_based_windowed(op, y, x, params, None, None, observer)
 }
 
 /// [`model_based`] with each pixel's depth restricted to a window `lo..=hi` of its depths
-/// (`windows[p] = (lo, hi)`), as the TV-on-depth solver uses it.
+/// (`windows[p] = (lo, hi)`), as the TV-on-depth solver uses it; with the pixels' `grid`
+/// (this part's rows, N) known, the amplitude tests follow the surface rule
+/// ([`ModelBasedParams::surface_z`]) when the model has one return per pixel.
 pub(crate) fn model_based_windowed<T, A, O>(
     op: &A,
     y: &[T],
     x: &mut [T],
     params: &ModelBasedParams,
     windows: Option<&[(usize, usize)]>,
+    grid: Option<(usize, usize)>,
     observer: &mut O,
 ) -> Result<Report>
 where
@@ -281,9 +173,19 @@ where
     A: VoxelOperator<T> + ?Sized,
     O: Observer<T> + ?Sized,
 {
+    let surface = grid
+        .filter(|_| params.max_returns == 1 && params.surface_neighbours > 0)
+        .map(|grid| SurfaceRule {
+            grid,
+            z: params.surface_z,
+            neighbours: params.surface_neighbours,
+            join: params.join_neighbours,
+            isolated_z: params.isolated_z,
+        });
     let setup = ModelBasedSetup {
         params: *params,
         windows,
+        surface,
     };
     solve::<T, A, O, ModelBasedIteration<'_, T>>(op, y, x, &setup, observer)
 }
@@ -293,6 +195,7 @@ where
 pub(crate) struct ModelBasedSetup<'w> {
     params: ModelBasedParams,
     windows: Option<&'w [(usize, usize)]>,
+    surface: Option<SurfaceRule>,
 }
 
 /// The state of model-based recovery between iterations: the support (voxels, amplitudes and
@@ -300,6 +203,7 @@ pub(crate) struct ModelBasedSetup<'w> {
 pub(crate) struct ModelBasedIteration<'w, T> {
     params: ModelBasedParams,
     windows: Option<&'w [(usize, usize)]>,
+    surface: Option<SurfaceRule>,
     ks: usize,
     ynorm: f64,
     /// The largest support.
@@ -346,15 +250,14 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         }
     }
 
-    /// The amplitude test: which voxels of a support have a least-squares amplitude of at least
-    /// `z` standard errors, inflated for least squares on |S| of K measurements.
-    fn significant<A: VoxelOperator<T> + ?Sized>(
+    /// Each voxel's least-squares amplitude in standard errors σ_r/(‖a‖·√(1 − |S|/K)), for the
+    /// residual `self.r` of the support `voxels`.
+    fn z_scores<A: VoxelOperator<T> + ?Sized>(
         &self,
         op: &A,
         voxels: &[usize],
         amp: &[T],
-        z: f64,
-    ) -> Vec<bool> {
+    ) -> Vec<f64> {
         let m = self.r.len();
         let held = space::count(op.space(), voxels.len());
         let dof = m.saturating_sub(held).max(1);
@@ -362,11 +265,38 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
             .sqrt()
             .max(self.params.noise_floor * self.ynorm / (m as f64).sqrt());
         let inflation = 1.0 / (1.0 - held as f64 / m as f64).max(0.05).sqrt();
+        let bar = inflation * sigma_r;
         let norms = op.column_norms(voxels);
         amp.iter()
             .zip(&norms)
-            .map(|(a, c)| self.score(a.as_f64()) * c >= z * inflation * sigma_r)
+            .map(|(a, c)| self.score(a.as_f64()) * c / bar)
             .collect()
+    }
+
+    /// The amplitude test: which voxels of a support have a least-squares amplitude of at least
+    /// `z` standard errors, inflated for least squares on |S| of K measurements (or, under the
+    /// surface rule, at least its lower bar with enough neighbours that pass it too).
+    fn significant<A: VoxelOperator<T> + ?Sized>(
+        &self,
+        op: &A,
+        voxels: &[usize],
+        amp: &[T],
+        (z, last): (f64, bool),
+    ) -> Vec<bool> {
+        let stat = self.z_scores(op, voxels, amp);
+        let bar = 1.0;
+        let mut keep: Vec<bool> = stat.iter().map(|s| *s >= z * bar).collect();
+        if let Some(rule) = self.surface {
+            let lenient: Vec<bool> = stat.iter().map(|s| *s >= rule.z * bar).collect();
+            let near = on_surface(op.space(), rule.grid, self.ks, voxels, &lenient);
+            for (((k, l), &count), s) in keep.iter_mut().zip(&lenient).zip(&near).zip(&stat) {
+                *k |= *l && count >= rule.neighbours;
+                if last && count == 0 && *s < rule.isolated_z * bar {
+                    *k = false;
+                }
+            }
+        }
+        keep
     }
 
     /// The warm start `x` pruned to the model: per pixel its largest entries.
@@ -391,15 +321,17 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
     }
 
     /// Pixel `p`'s picks (voxel, score, correlation) from its correlations `col` with its own
-    /// reflectors added back: up to `max_returns`, each judged with the ones before taken out.
+    /// reflectors added back: up to `max_returns`, each judged with the ones before taken out;
+    /// under the surface rule, a pixel whose best depth falls short joins within one bin of the
+    /// `surface` its neighbours form when its correlation there reaches the rule's bar.
     fn pixel_picks<A: VoxelOperator<T> + ?Sized>(
         &self,
         op: &A,
         p: usize,
         col: &[T],
         first: usize,
-        sigma: f64,
-        explore: bool,
+        (sigma, explore): (f64, bool),
+        surface: Option<usize>,
     ) -> Vec<(usize, f64, f64)> {
         let ks = self.ks;
         let (lo, hi) = self.windows.map_or((0, ks - 1), |w| w[p]);
@@ -413,7 +345,7 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         }
         let mut found: Vec<(usize, f64, f64)> = Vec::new();
         for rank in 0..self.params.max_returns {
-            let best = (lo..=hi)
+            let mut best = (lo..=hi)
                 .map(|j| (j, self.score(v[j]), v[j]))
                 .filter(|b| !found.iter().any(|f| f.0 == p * ks + b.0))
                 .fold(
@@ -422,11 +354,23 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
                 );
             let held = supported.clone().any(|i| self.voxels[i] == p * ks + best.0);
             let lenient = explore || sigma == 0.0 || held || rank == 0 && first != usize::MAX;
-            let join = if lenient {
+            let mut join = if lenient {
                 best.1 > 0.0
             } else {
                 best.1 >= self.params.detection_z * sigma
             };
+            // The surface rule: a pixel that continues its neighbours' surface joins at a
+            // depth within one bin of it on a lower bar.
+            if let (false, 0, Some(c), Some(rule)) = (join, rank, surface, self.surface) {
+                let (a, b) = (c.saturating_sub(1).max(lo), (c + 1).min(hi));
+                let on = (a..=b).map(|j| (j, self.score(v[j]), v[j])).fold(
+                    (0, f64::NEG_INFINITY, 0.0),
+                    |b, c| if c.1 > b.1 { c } else { b },
+                );
+                if a <= b && on.1 >= rule.z * sigma {
+                    (best, join) = (on, true);
+                }
+            }
             if !join {
                 break;
             }
@@ -461,11 +405,25 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         for (i, &v) in self.voxels.iter().enumerate().rev() {
             first[v / ks] = i;
         }
+        // Surfaces grow from the returns that pass the final test.
+        let surface = match self.surface {
+            Some(rule) if !explore => {
+                let strong: Vec<bool> = self
+                    .z_scores(op, &self.voxels, &self.amp)
+                    .iter()
+                    .map(|z| *z >= self.params.final_z)
+                    .collect();
+                surface_depths(op.space(), rule.grid, ks, &self.voxels, &strong, rule.join)
+            }
+            _ => vec![None; first.len()],
+        };
         let mut picks: Vec<(usize, f64, f64)> = self
             .u
             .par_chunks(ks)
             .enumerate()
-            .flat_map_iter(|(p, col)| self.pixel_picks(op, p, col, first[p], sigma, explore))
+            .flat_map_iter(|(p, col)| {
+                self.pixel_picks(op, p, col, first[p], (sigma, explore), surface[p])
+            })
             .collect();
         let space = op.space();
         if space::count(space, picks.len()) > self.budget {
@@ -533,6 +491,7 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
         let mut run = ModelBasedIteration {
             params,
             windows: setup.windows,
+            surface: setup.surface,
             ks,
             ynorm,
             budget: ((params.max_support_fraction * m as f64) as usize).max(1),
@@ -594,7 +553,8 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
         let explained = self.params.stopping.rel_residual.is_some_and(|t| rel <= t);
         if it >= self.explore_iterations || explained {
             // The amplitude test, then least squares on what remains.
-            let keep = self.significant(op, &new_voxels, &new_amp, self.params.amplitude_z);
+            let keep =
+                self.significant(op, &new_voxels, &new_amp, (self.params.amplitude_z, false));
             if !space::all(space, keep.iter().all(|k| *k)) {
                 retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
                 self.refit(op, y, &new_voxels, &mut new_amp)?;
@@ -629,7 +589,7 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
     /// refitted after it could not be re-tested without drifting (each pass raising σ_r and
     /// dropping more).
     fn finish(&mut self, op: &A, y: &[T], x: &mut [T], _termination: Termination) -> Result<()> {
-        let keep = self.significant(op, &self.voxels, &self.amp, self.params.final_z);
+        let keep = self.significant(op, &self.voxels, &self.amp, (self.params.final_z, true));
         if !space::all(op.space(), keep.iter().all(|k| *k)) {
             let (mut voxels, mut amp, mut own) = (
                 std::mem::take(&mut self.voxels),

@@ -370,6 +370,7 @@ where
         x,
         &params.model,
         None,
+        Some(grid),
         observer,
     )?);
     Ok(rep)
@@ -410,6 +411,13 @@ where
 ///    (a few depths instead of K_s, which is what lets it resolve pulses too short for the
 ///    unconstrained prior), then the least-squares refinement. Otherwise the reflectors are moved
 ///    into their windows and the greedy fit continues from them.
+///
+/// Every model-based fit here knows the grid, so its detections follow the surface rule
+/// ([`ModelBasedParams::surface_z`]): a return that continues its neighbours' surface (within one
+/// bin of their depths) stays on a lower amplitude bar, a pixel next to such a surface joins it
+/// on a lower correlation bar, and an isolated return must stand out far more. At 10 dB SNR and
+/// 2.4 measurements per lit pixel this roughly doubles the depths found within one bin with no
+/// more false returns than the per-pixel tests leave.
 ///
 /// Steps 2–3 repeat [`rounds`](TvDepthParams::rounds) times; none run when the first fit already
 /// explains the data (it stopped on its residual tolerance), and a round whose fit leaves more than
@@ -525,7 +533,7 @@ where
         params.neighbour_rounds > 0 && space::all(op.space(), x.iter().all(|v| *v == T::zero()))
     });
     let Some(amp) = amp else {
-        return model_based_windowed(op, y, x, &params.model, None, observer);
+        return model_based_windowed(op, y, x, &params.model, None, Some(grid), observer);
     };
     let mut report = prior_then_fit(op, grid, y, x, amp, params, Schedule::Continued, observer)?;
     let a = residual_norm_sq(op, y, x);
@@ -653,7 +661,7 @@ where
                 }
             }
         }
-        let r = model_based_windowed(op, y, x, &windowed, Some(&windows), observer)?;
+        let r = model_based_windowed(op, y, x, &windowed, Some(&windows), Some((m, n)), observer)?;
         report.absorb(r);
         // The windows are a heuristic: a windowed fit that lost what the previous one had found
         // (more than doubling the squared residual) is undone. Smaller increases are expected

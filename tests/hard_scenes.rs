@@ -1,0 +1,103 @@
+//! Guards of the hard cases: few measurements per lit pixel and heavy noise, at small sizes, so
+//! that a change made for one regime cannot trade these away unnoticed.
+
+use std::sync::Arc;
+
+use rdlidar::lidar::{add_gaussian_snr, paper_scene, Codes, Geometry, Pulse, RdOperator, Scene};
+use rdlidar::recon::{compare, Metrics};
+use rdlidar::solver::{tv_depth, ModelBasedParams, TvDepthParams};
+use rdlidar::LinearOperator;
+
+/// The paper scene on `g` measured with a pulse of `kp` samples (seed `seed`, codes `seed + 1`)
+/// at `snr_db` (noise seed `seed + 2`; none without).
+fn measured(g: Geometry, kp: usize, snr_db: Option<f64>, seed: u64) -> (RdOperator<f64>, Vec<f64>) {
+    let pulse = Pulse::<f64>::bernoulli(kp, seed).unwrap().into_inner();
+    let codes = Codes::random_binary(g.pixels(), g.samples(kp), seed + 1).unwrap();
+    let op = RdOperator::new(g, pulse, Arc::new(codes)).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    let mut y = vec![0.0; op.nrows()];
+    op.apply(truth.as_slice(), &mut y);
+    if let Some(snr) = snr_db {
+        add_gaussian_snr(&mut y, snr, seed + 2).unwrap();
+    }
+    (op, y)
+}
+
+/// TV on the depth map with `params`, judged against the paper scene.
+fn tv_on(g: Geometry, op: &RdOperator<f64>, y: &[f64], params: &TvDepthParams) -> Metrics {
+    let truth = paper_scene::<f64>(g).unwrap();
+    let mut x = vec![0.0; g.voxels()];
+    tv_depth(op, (g.m, g.n), y, &mut x, params, &mut ()).unwrap();
+    compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap()
+}
+
+/// TV on the depth map with the per-pixel amplitude tests alone (the surface rule off).
+fn per_pixel() -> TvDepthParams {
+    TvDepthParams {
+        model: ModelBasedParams {
+            surface_neighbours: 0,
+            ..ModelBasedParams::default()
+        },
+        ..TvDepthParams::default()
+    }
+}
+
+/// The means over `runs` of the share of lit pixels within one bin and of the false detections'
+/// share of the empty pixels.
+fn means(runs: &[Metrics]) -> (f64, f64) {
+    let n = runs.len() as f64;
+    (
+        runs.iter().map(|m| m.within_one_fraction).sum::<f64>() / n,
+        runs.iter().map(|m| m.false_fraction_empty).sum::<f64>() / n,
+    )
+}
+
+#[test]
+fn at_10_db_the_surface_rule_finds_more_returns_without_more_false_ones() {
+    // The paper scene at 32×32×16 (550 lit pixels) from K = 1315 measurements, 2.4 per lit
+    // pixel, at 10 dB SNR: per-pixel tests alone find about a quarter of the depths.
+    let g = Geometry::new(32, 32, 16).unwrap();
+    let (mut after, mut before) = (Vec::new(), Vec::new());
+    for seed in [40, 41, 42] {
+        let (op, y) = measured(g, 1300, Some(10.0), seed);
+        after.push(tv_on(g, &op, &y, &TvDepthParams::default()));
+        before.push(tv_on(g, &op, &y, &per_pixel()));
+    }
+    let ((near_a, false_a), (near_b, false_b)) = (means(&after), means(&before));
+    let show = || format!("after {after:#?}\nbefore {before:#?}");
+    assert!(near_a >= 0.40 && near_a >= 1.3 * near_b, "{}", show());
+    assert!(false_a <= 0.03 && false_a <= false_b + 0.005, "{}", show());
+}
+
+#[test]
+fn at_20_db_the_surface_rule_keeps_every_depth_and_few_false_returns() {
+    let g = Geometry::new(32, 32, 16).unwrap();
+    for seed in [40, 41, 42] {
+        let (op, y) = measured(g, 1300, Some(20.0), seed);
+        let m = tv_on(g, &op, &y, &TvDepthParams::default());
+        assert_eq!(m.exact, m.lit, "seed {seed}: {m}");
+        assert!(m.false_fraction_empty <= 0.01, "seed {seed}: {m}");
+    }
+}
+
+#[test]
+fn below_one_measurement_per_lit_pixel_the_surface_rule_loses_nothing() {
+    // K = 515 measurements for 550 lit pixels: beyond what one amplitude per pixel can fit
+    // (the support stays below K), so both find a small share; the rule must not find less.
+    let g = Geometry::new(32, 32, 16).unwrap();
+    let (mut after, mut before) = (Vec::new(), Vec::new());
+    for seed in [40, 41, 42] {
+        let (op, y) = measured(g, 500, None, seed);
+        after.push(tv_on(g, &op, &y, &TvDepthParams::default()));
+        before.push(tv_on(g, &op, &y, &per_pixel()));
+    }
+    let ((near_a, false_a), (near_b, false_b)) = (means(&after), means(&before));
+    assert!(
+        near_a >= near_b - 0.02,
+        "after {after:#?}\nbefore {before:#?}"
+    );
+    assert!(
+        false_a <= false_b + 0.005,
+        "after {after:#?}\nbefore {before:#?}"
+    );
+}
