@@ -23,12 +23,23 @@ fn measured(g: Geometry, kp: usize, snr_db: Option<f64>, seed: u64) -> (RdOperat
     (op, y)
 }
 
-/// TV on the depth map with `params`, judged against the paper scene.
-fn tv_on(g: Geometry, op: &RdOperator<f64>, y: &[f64], params: &TvDepthParams) -> Metrics {
+/// TV on the depth map with `params`, judged against the paper scene, with its iterations.
+fn tv_run(
+    g: Geometry,
+    op: &RdOperator<f64>,
+    y: &[f64],
+    params: &TvDepthParams,
+) -> (Metrics, usize) {
     let truth = paper_scene::<f64>(g).unwrap();
     let mut x = vec![0.0; g.voxels()];
-    tv_depth(op, (g.m, g.n), y, &mut x, params, &mut ()).unwrap();
-    compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap()
+    let report = tv_depth(op, (g.m, g.n), y, &mut x, params, &mut ()).unwrap();
+    let m = compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap();
+    (m, report.iterations)
+}
+
+/// TV on the depth map with `params`, judged against the paper scene.
+fn tv_on(g: Geometry, op: &RdOperator<f64>, y: &[f64], params: &TvDepthParams) -> Metrics {
+    tv_run(g, op, y, params).0
 }
 
 /// TV on the depth map with the per-pixel amplitude tests alone (the surface rule off).
@@ -55,7 +66,8 @@ fn means(runs: &[Metrics]) -> (f64, f64) {
 #[test]
 fn at_10_db_the_surface_rule_finds_more_returns_without_more_false_ones() {
     // The paper scene at 32×32×16 (550 lit pixels) from K = 1315 measurements, 2.4 per lit
-    // pixel, at 10 dB SNR: per-pixel tests alone find about a quarter of the depths.
+    // pixel, at 10 dB SNR: per-pixel tests alone find about a quarter of the depths within one
+    // bin, the surface rule about 1.5 times as many with fewer false returns.
     let g = Geometry::new(32, 32, 16).unwrap();
     let (mut after, mut before) = (Vec::new(), Vec::new());
     for seed in [40, 41, 42] {
@@ -65,8 +77,8 @@ fn at_10_db_the_surface_rule_finds_more_returns_without_more_false_ones() {
     }
     let ((near_a, false_a), (near_b, false_b)) = (means(&after), means(&before));
     let show = || format!("after {after:#?}\nbefore {before:#?}");
-    assert!(near_a >= 0.40 && near_a >= 1.3 * near_b, "{}", show());
-    assert!(false_a <= 0.03 && false_a <= false_b + 0.005, "{}", show());
+    assert!(near_a >= 0.33 && near_a >= 1.3 * near_b, "{}", show());
+    assert!(false_a <= 0.02 && false_a <= false_b, "{}", show());
 }
 
 #[test]
@@ -100,4 +112,26 @@ fn below_one_measurement_per_lit_pixel_the_surface_rule_loses_nothing() {
         false_a <= false_b + 0.005,
         "after {after:#?}\nbefore {before:#?}"
     );
+}
+
+#[test]
+fn the_surface_rule_does_not_cycle_where_the_data_suffice() {
+    // Redundant (K = 8207 for 16×16×16) at 20 dB: a pixel that joined on the surface rule's
+    // lower bar and left again once cycled for the whole iteration budget (223 iterations
+    // instead of 15). Joins and departures must settle as fast as the per-pixel tests do.
+    let g = Geometry::new(16, 16, 16).unwrap();
+    for seed in [0, 10] {
+        let (op, y) = measured(g, 8192, Some(20.0), seed);
+        let (after, iterations) = tv_run(g, &op, &y, &TvDepthParams::default());
+        let (before, base) = tv_run(g, &op, &y, &per_pixel());
+        assert_eq!(after.exact, after.lit, "seed {seed}: {after}");
+        assert!(
+            after.false_fraction_empty <= 0.02,
+            "seed {seed}: {after}\n{before}"
+        );
+        assert!(
+            iterations <= base + base / 2 + 5,
+            "seed {seed}: {iterations} vs {base}"
+        );
+    }
 }

@@ -1,6 +1,7 @@
 //! Model-based recovery with at most k reflectors per pixel, one by default (model-based CoSaMP
 //! with an adaptive support size).
 
+use std::collections::HashMap;
 use std::ops::ControlFlow;
 
 use rayon::prelude::*;
@@ -223,9 +224,17 @@ pub(crate) struct ModelBasedIteration<'w, T> {
     /// With several returns per pixel, the rows that take a picked return out of its pixel's
     /// correlations, when every pixel has the same ones.
     shared_rows: Option<Vec<f64>>,
+    /// Under the surface rule, how often each voxel has left the support (by the amplitude test,
+    /// a non-positive amplitude or its pixel's new depth): after [`LEAVES`] times the rule does
+    /// not let it join again (only the plain detection test does), so that joining on its lower
+    /// bar and leaving cannot cycle.
+    dropped: HashMap<usize, usize>,
     /// The last iteration (for messages).
     it: usize,
 }
+
+/// How often a voxel may leave the support before the surface rule stops offering it.
+const LEAVES: usize = 2;
 
 impl<'w, T: Real> Iterative<T> for ModelBasedIteration<'w, T> {
     const NAME: &'static str = "model-based";
@@ -367,7 +376,13 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
                     (0, f64::NEG_INFINITY, 0.0),
                     |b, c| if c.1 > b.1 { c } else { b },
                 );
-                if a <= b && on.1 >= rule.z * sigma {
+                if a <= b
+                    && on.1 >= rule.z * sigma
+                    && self
+                        .dropped
+                        .get(&(p * ks + on.0))
+                        .is_none_or(|&n| n < LEAVES)
+                {
                     (best, join) = (on, true);
                 }
             }
@@ -504,6 +519,7 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
             prev: x.to_vec(),
             shared_rows: (params.max_returns > 1 && op.uniform_pixel_gram())
                 .then(|| op.self_correlations(&(0..ks).collect::<Vec<_>>())),
+            dropped: HashMap::new(),
             it: 0,
         };
         // The warm start, pruned to the model and re-fitted.
@@ -556,12 +572,26 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
             let keep =
                 self.significant(op, &new_voxels, &new_amp, (self.params.amplitude_z, false));
             if !space::all(space, keep.iter().all(|k| *k)) {
+                if self.surface.is_some() {
+                    for (&v, _) in new_voxels.iter().zip(&keep).filter(|(_, k)| !**k) {
+                        *self.dropped.entry(v).or_insert(0) += 1;
+                    }
+                }
                 retain_support(&keep, &mut new_voxels, &mut new_amp, &mut new_own, ks);
                 self.refit(op, y, &new_voxels, &mut new_amp)?;
             }
         }
 
         let same = space::all(space, new_voxels == self.voxels);
+        if self.surface.is_some() {
+            for &v in self
+                .voxels
+                .iter()
+                .filter(|v| new_voxels.binary_search(v).is_err())
+            {
+                *self.dropped.entry(v).or_insert(0) += 1;
+            }
+        }
         self.voxels = new_voxels;
         self.amp = new_amp;
         self.own = new_own;
