@@ -158,7 +158,7 @@ where
 
 /// [`model_based`] with each pixel's depth restricted to a window `lo..=hi` of its depths
 /// (`windows[p] = (lo, hi)`), as the TV-on-depth solver uses it; with the pixels' `grid`
-/// (this part's rows, N) known, the amplitude tests follow the surface rule
+/// (this part's rows, N) known, the detections follow the surface rule
 /// ([`ModelBasedParams::surface_z`]) when the model has one return per pixel.
 pub(crate) fn model_based_windowed<T, A, O>(
     op: &A,
@@ -293,14 +293,13 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         (z, last): (f64, bool),
     ) -> Vec<bool> {
         let stat = self.z_scores(op, voxels, amp);
-        let bar = 1.0;
-        let mut keep: Vec<bool> = stat.iter().map(|s| *s >= z * bar).collect();
+        let mut keep: Vec<bool> = stat.iter().map(|s| *s >= z).collect();
         if let Some(rule) = self.surface {
-            let lenient: Vec<bool> = stat.iter().map(|s| *s >= rule.z * bar).collect();
+            let lenient: Vec<bool> = stat.iter().map(|s| *s >= rule.z).collect();
             let near = on_surface(op.space(), rule.grid, self.ks, voxels, &lenient);
             for (((k, l), &count), s) in keep.iter_mut().zip(&lenient).zip(&near).zip(&stat) {
                 *k |= *l && count >= rule.neighbours;
-                if last && count == 0 && *s < rule.isolated_z * bar {
+                if last && count == 0 && *s < rule.isolated_z {
                     *k = false;
                 }
             }
@@ -573,7 +572,12 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
                 self.significant(op, &new_voxels, &new_amp, (self.params.amplitude_z, false));
             if !space::all(space, keep.iter().all(|k| *k)) {
                 if self.surface.is_some() {
-                    for (&v, _) in new_voxels.iter().zip(&keep).filter(|(_, k)| !**k) {
+                    // New picks that fail at once (a held voxel's departure is counted below).
+                    let gone = new_voxels
+                        .iter()
+                        .zip(&keep)
+                        .filter(|(v, k)| !**k && self.voxels.binary_search(v).is_err());
+                    for (&v, _) in gone {
                         *self.dropped.entry(v).or_insert(0) += 1;
                     }
                 }
