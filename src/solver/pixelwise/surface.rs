@@ -1,4 +1,4 @@
-//! The surface rule of the model-based amplitude tests: a return that continues a surface of
+//! The surface rule of the model-based detections: a return that continues a surface of
 //! neighbouring returns needs less evidence of its own than an isolated one.
 //!
 //! A reflector's amplitude test weighs one pixel's data alone. Where the measurements per lit
@@ -99,10 +99,10 @@ pub(crate) fn on_surface(
         .collect()
 }
 
-/// For each pixel of this part's `grid`, the depth of the surface its neighbours' returns
-/// (the `voxels` flagged in `passing`) form around it: of the neighbours' depths, the one with the most neighbours' returns
-/// within one bin of it (the shallower among equals), when at least `need` are. A collective call
-/// when the space is split.
+/// For each pixel of this part's `grid`, the depth of the surface its neighbours' returns (the
+/// `voxels` flagged in `passing`) form around it: of the neighbours' depths, the one with the most
+/// neighbours' returns within one bin of it (the shallower among equals), when at least `need`
+/// are. A collective call when the space is split.
 pub(crate) fn surface_depths(
     space: &dyn Space,
     grid: (usize, usize),

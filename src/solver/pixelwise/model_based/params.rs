@@ -68,10 +68,10 @@ pub struct ModelBasedParams {
     pub noise_floor: f64,
     /// The least-squares step on the support (CGLS on the restricted operator, warm-started).
     pub inner: CglsParams,
-    /// Without a warm start, the first support comes from message passing with the
-    /// one-reflector prior ([`reflector_amp`](crate::solver::reflector_amp)), and the exploration is
-    /// skipped; `None` starts from the exploration instead (default: AMP with its defaults, but
-    /// stopping once its support has been stable for 3 iterations).
+    /// Without a warm start, the first support comes from message passing with the one-reflector
+    /// prior ([`reflector_amp`](crate::solver::reflector_amp)), and the exploration is skipped;
+    /// `None` starts from the exploration instead (default: AMP with its defaults, but stopping
+    /// once its support has been stable for 3 iterations).
     pub amp: Option<ReflectorAmpParams>,
     /// Stopping rules; the residual is ‖Ax − y‖ / ‖y‖.
     pub stopping: Stopping,
