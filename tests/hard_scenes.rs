@@ -1,22 +1,18 @@
 //! Guards of the hard cases: few measurements per lit pixel and heavy noise, at small sizes, so
 //! that a change made for one regime cannot trade these away unnoticed.
 
-use std::sync::Arc;
-
-use rdlidar::lidar::{add_gaussian_snr, paper_scene, Codes, Geometry, Pulse, RdOperator, Scene};
+use rdlidar::lidar::{add_gaussian_snr, paper_scene, Geometry, RdOperator, Scene};
 use rdlidar::recon::{compare, Metrics};
 use rdlidar::solver::{cgls, tv_depth, CglsParams, ModelBasedParams, Stopping, TvDepthParams};
 use rdlidar::LinearOperator;
 
+use crate::reconstruct::{measure, problem};
+
 /// The paper scene on `g` measured with a pulse of `kp` samples (seed `seed`, codes `seed + 1`)
 /// at `snr_db` (noise seed `seed + 2`; none without).
 fn measured(g: Geometry, kp: usize, snr_db: Option<f64>, seed: u64) -> (RdOperator<f64>, Vec<f64>) {
-    let pulse = Pulse::<f64>::bernoulli(kp, seed).unwrap().into_inner();
-    let codes = Codes::random_binary(g.pixels(), g.samples(kp), seed + 1).unwrap();
-    let op = RdOperator::new(g, pulse, Arc::new(codes)).unwrap();
-    let truth = paper_scene::<f64>(g).unwrap();
-    let mut y = vec![0.0; op.nrows()];
-    op.apply(truth.as_slice(), &mut y);
+    let op = problem::<f64>(g, kp, seed);
+    let mut y = measure(&op, &paper_scene::<f64>(g).unwrap());
     if let Some(snr) = snr_db {
         add_gaussian_snr(&mut y, snr, seed + 2).unwrap();
     }

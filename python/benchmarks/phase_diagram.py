@@ -113,20 +113,20 @@ def main():
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for scene in args.scenes.split(","):
+            # The scene and its lit pixels first, to size the pulse.
+            if scene == "paper":
+                probe = os.path.join(tmp, "probe")
+                run([first, "simulate", "--scene", "paper", "--size", args.size,
+                     "--pulse-len", "8", "--out", probe, "--quiet", "--force"], "simulate")
+                truth = np.load(f"{probe}/scene.npy")
+            elif scene == "surfaces":
+                truth = surfaces_scene(m, n, ks, args.seed)
+            else:
+                sys.exit(f"--scenes: unknown scene {scene!r} (paper, surfaces)")
+            lit = int((truth != 0).any(axis=-1).sum())
             for ratio in ratios:
                 for snr in snrs:
                     d = os.path.join(tmp, f"{scene}-{ratio}-{snr}")
-                    # The lit pixels first, to size the pulse.
-                    if scene == "paper":
-                        probe = os.path.join(tmp, "probe")
-                        run([first, "simulate", "--scene", "paper", "--size", args.size,
-                             "--pulse-len", "8", "--out", probe, "--quiet", "--force"], "simulate")
-                        truth = np.load(f"{probe}/scene.npy")
-                    elif scene == "surfaces":
-                        truth = surfaces_scene(m, n, ks, args.seed)
-                    else:
-                        sys.exit(f"--scenes: unknown scene {scene!r} (paper, surfaces)")
-                    lit = int((truth != 0).any(axis=-1).sum())
                     k = max(int(round(ratio * lit)), ks)
                     kp = k - ks + 1
                     run([first, "simulate", "--scene", "paper", "--size", args.size,

@@ -57,18 +57,24 @@ fn depth_rows(
 }
 
 /// The depths of the eight neighbours of pixel (`i`, `j`) of `map` (`all_rows` rows of `n`) that
-/// hold a return.
-fn neighbour_depths(map: &[f64], (i, j): (usize, usize), n: usize, all_rows: usize) -> Vec<f64> {
-    let mut out = Vec::with_capacity(8);
+/// hold a return: the first `count` entries of the array.
+fn neighbour_depths(
+    map: &[f64],
+    (i, j): (usize, usize),
+    n: usize,
+    all_rows: usize,
+) -> ([f64; 8], usize) {
+    let (mut out, mut count) = ([0.0; 8], 0);
     for a in i.saturating_sub(1)..(i + 2).min(all_rows) {
         for b in j.saturating_sub(1)..(j + 2).min(n) {
             let e = map[a * n + b];
             if (a, b) != (i, j) && e >= 0.0 {
-                out.push(e);
+                out[count] = e;
+                count += 1;
             }
         }
     }
-    out
+    (out, count)
 }
 
 /// How many of `depths` lie within one bin of `d`.
@@ -93,8 +99,8 @@ pub(crate) fn on_surface(
         .iter()
         .map(|&v| {
             let p = v / ks;
-            let near = neighbour_depths(&map, (p / n + first, p % n), n, all_rows);
-            within_one(&near, (v % ks) as f64)
+            let (near, count) = neighbour_depths(&map, (p / n + first, p % n), n, all_rows);
+            within_one(&near[..count], (v % ks) as f64)
         })
         .collect()
 }
@@ -115,10 +121,11 @@ pub(crate) fn surface_depths(
     let (map, first, all_rows) = depth_rows(space, grid, ks, voxels, passing);
     (0..rows * n)
         .map(|p| {
-            let near = neighbour_depths(&map, (p / n + first, p % n), n, all_rows);
+            let (near, count) = neighbour_depths(&map, (p / n + first, p % n), n, all_rows);
+            let near = &near[..count];
             let mut best: Option<(usize, f64)> = None;
-            for &d in &near {
-                let c = within_one(&near, d);
+            for &d in near {
+                let c = within_one(near, d);
                 if best.is_none_or(|(bc, bd)| c > bc || c == bc && d < bd) {
                     best = Some((c, d));
                 }
