@@ -150,6 +150,13 @@ where
         }
         self.inner.column_norms(columns)
     }
+
+    fn column(&self, c: usize) -> (usize, Vec<f64>) {
+        if self.cancelled() {
+            return (0, Vec::new());
+        }
+        self.inner.column(c)
+    }
 }
 
 impl<'f, T, P> LidarOperator<T> for Cancellable<'f, P>
@@ -187,6 +194,10 @@ where
 
     fn observed_pixels(&self) -> Option<Vec<bool>> {
         self.inner.observed_pixels()
+    }
+
+    fn whole_codes(&self) -> Option<&std::sync::Arc<super::Codes>> {
+        self.inner.whole_codes()
     }
 
     fn regime(&self) -> Regime {

@@ -58,6 +58,13 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
         None
     }
 
+    /// The ±1 (or ternary) codes of a one-ADC operator over the whole scene, for operators built
+    /// from them ([`BlockOperator`](super::BlockOperator)); `None` (the default) for several
+    /// ADCs, streamed codes or pixels split across processes.
+    fn whole_codes(&self) -> Option<&Arc<Codes>> {
+        None
+    }
+
     /// The regime of the measurements against the unknowns (eq. 8–9, with every ADC's rows),
     /// those of every part when the unknowns are split ([`space`](LinearOperator::space)).
     fn regime(&self) -> Regime {
@@ -83,6 +90,9 @@ impl<T: Real> LidarOperator<T> for RdOperator<T> {
         let observed = self.codes().observed_pixels();
         observed.iter().any(|&o| !o).then_some(observed)
     }
+    fn whole_codes(&self) -> Option<&Arc<Codes>> {
+        Some(self.codes())
+    }
 }
 
 /// A reference to a lidar operator, or a box of one, is one.
@@ -106,6 +116,9 @@ macro_rules! forward_lidar {
             }
             fn observed_pixels(&self) -> Option<Vec<bool>> {
                 (**self).observed_pixels()
+            }
+            fn whole_codes(&self) -> Option<&Arc<Codes>> {
+                (**self).whole_codes()
             }
             fn regime(&self) -> Regime {
                 (**self).regime()
@@ -164,6 +177,9 @@ impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Counted<A> {
     }
     fn observed_pixels(&self) -> Option<Vec<bool>> {
         self.inner().observed_pixels()
+    }
+    fn whole_codes(&self) -> Option<&Arc<Codes>> {
+        self.inner().whole_codes()
     }
     fn regime(&self) -> Regime {
         self.inner().regime()

@@ -5,6 +5,7 @@
 //! samples the sum: `y[k] = Σ_{m,n} s[m,n,k]·(x[m,n,:] ⊛ p)[k]`, k < K = K_p + K_s − 1.
 
 mod architectures;
+mod blocks;
 mod cancel;
 mod codes;
 mod composed;
@@ -26,6 +27,7 @@ mod support;
 pub use architectures::{
     aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles, Architecture, TileSize,
 };
+pub use blocks::BlockOperator;
 pub use cancel::Cancellable;
 pub use codes::{packed_len, CodeAlphabet, Codes};
 pub use geometry::{Geometry, Regime};

@@ -262,6 +262,20 @@ impl<T: Real> VoxelOperator<T> for RdOperator<T> {
         true
     }
 
+    /// s_p[d + t]·p[t] from row d, for column (p, d).
+    fn column(&self, c: usize) -> (usize, Vec<f64>) {
+        let ks = self.geometry().ks;
+        let (p, d) = (c / ks, c % ks);
+        let codes = self.codes();
+        let values = self
+            .pulse()
+            .iter()
+            .enumerate()
+            .map(|(t, v)| f64::from(codes.get(p, d + t)) * v.as_f64())
+            .collect();
+        (d, values)
+    }
+
     /// ‖p‖ for ±1 codes; with ternary codes the pulse energy over the nonzero codes of the window.
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
         let ks = self.geometry().ks;

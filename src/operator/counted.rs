@@ -6,7 +6,9 @@ use crate::error::Result;
 use crate::real::Real;
 use crate::space::Space;
 
-use super::pixel::{column_norms_by_applies, pixel_gram_by_applies, self_correlations_by_applies};
+use super::pixel::{
+    column_by_apply, column_norms_by_applies, pixel_gram_by_applies, self_correlations_by_applies,
+};
 use super::{LinearOperator, VoxelOperator};
 
 /// Wraps an operator and counts its applications (thread-safe), in three kinds:
@@ -166,6 +168,15 @@ impl<T: Real, A: VoxelOperator<T>> VoxelOperator<T> for Counted<A> {
             self.inner.column_norms(columns)
         } else {
             column_norms_by_applies(self, columns)
+        }
+    }
+    /// Not counted when the columns are structured (one column costs a pass over its K_p rows,
+    /// far below a support application); else one forward application.
+    fn column(&self, c: usize) -> (usize, Vec<f64>) {
+        if self.inner.structured_columns() {
+            self.inner.column(c)
+        } else {
+            column_by_apply(self, c)
         }
     }
     fn structured_columns(&self) -> bool {

@@ -49,6 +49,13 @@ pub trait VoxelOperator<T: Real>: LinearOperator<T> {
         column_norms_by_applies(self, columns)
     }
 
+    /// Column c as the span of rows it may touch: the first row and the values from there on
+    /// (`op.apply(e_c)[start..start + values.len()]`, zero elsewhere). By default from one
+    /// forward application, trimmed to its nonzero rows.
+    fn column(&self, c: usize) -> (usize, Vec<f64>) {
+        column_by_apply(self, c)
+    }
+
     /// Whether [`self_correlations`](Self::self_correlations), [`pixel_gram`](Self::pixel_gram)
     /// and [`column_norms`](Self::column_norms) come from the operator's structure, each call
     /// costing about one application restricted to the columns asked for (`true`), or from
@@ -83,6 +90,9 @@ macro_rules! forward_voxel {
             fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
                 (**self).column_norms(columns)
             }
+            fn column(&self, c: usize) -> (usize, Vec<f64>) {
+                (**self).column(c)
+            }
             fn structured_columns(&self) -> bool {
                 (**self).structured_columns()
             }
@@ -111,6 +121,23 @@ pub(crate) fn self_correlations_by_applies<T: Real, A: VoxelOperator<T> + ?Sized
         out.extend(u[p0..p0 + ks].iter().map(|v| v.as_f64()));
     }
     out
+}
+
+/// [`VoxelOperator::column`] from one forward application of `op`.
+pub(crate) fn column_by_apply<T: Real, A: VoxelOperator<T> + ?Sized>(
+    op: &A,
+    c: usize,
+) -> (usize, Vec<f64>) {
+    let mut e = vec![T::zero(); op.ncols()];
+    e[c] = T::one();
+    let mut a = vec![T::zero(); op.nrows()];
+    op.apply(&e, &mut a);
+    let first = a.iter().position(|v| *v != T::zero()).unwrap_or(0);
+    let last = a
+        .iter()
+        .rposition(|v| *v != T::zero())
+        .map_or(first, |l| l + 1);
+    (first, a[first..last].iter().map(|v| v.as_f64()).collect())
 }
 
 /// [`VoxelOperator::pixel_gram`] from `column_len` forward applications of `op`.

@@ -72,6 +72,12 @@ pub enum Method {
     ModelBased,
     /// Total variation on the depth map ([`TvDepthParams::default`]).
     Tv,
+    /// For fewer measurements than lit pixels, or heavy noise: [`Method::Tv`] on a grid of 2×2
+    /// blocks (each block's pixels share one depth column, so the blocks' codes add up and a
+    /// quarter of the unknowns remain), then the surfaces refined on the pixels
+    /// ([`refine_surfaces`](crate::solver::refine_surfaces): amplitudes tied along surfaces,
+    /// depths moved pixel by pixel). One ADC, codes in memory, the whole scene in one process.
+    CoarseToFine,
     /// Chosen from the regime of the pulse length; see [`reconstruct`](super::reconstruct).
     Auto,
 }
@@ -79,7 +85,7 @@ pub enum Method {
 impl Method {
     /// Every method with its command-line name, in the order of the command-line help: the
     /// one table of methods.
-    const TABLE: [(Method, &'static str); 11] = [
+    const TABLE: [(Method, &'static str); 12] = [
         (Method::Backprojection, "backprojection"),
         (Method::BackprojectionDebiased, "backprojection-debiased"),
         (Method::Cgls, "cgls"),
@@ -90,14 +96,15 @@ impl Method {
         (Method::Amp, "amp"),
         (Method::ModelBased, "model-based"),
         (Method::Tv, "tv"),
+        (Method::CoarseToFine, "coarse-to-fine"),
         (Method::Auto, "auto"),
     ];
 
     /// Every method, in the order of the command-line help.
-    pub const ALL: [Method; 11] = values(&Method::TABLE);
+    pub const ALL: [Method; 12] = values(&Method::TABLE);
 
     /// The command-line names of [`Method::ALL`].
-    pub const NAMES: [&'static str; 11] = names(&Method::TABLE);
+    pub const NAMES: [&'static str; 12] = names(&Method::TABLE);
 
     /// The command-line name (`"model-based"`, …).
     pub fn name(self) -> &'static str {
@@ -352,6 +359,17 @@ pub(super) fn run<T: Real>(
             with_progress(params.model.stopping.max_iter, options, observer, |obs| {
                 tv_depth(op, (g.m, g.n), y, &mut x, &params, obs)
             })?
+        }
+        Method::CoarseToFine => {
+            let params = model_params(options);
+            let (mut report, uncounted) =
+                with_progress(params.stopping.max_iter, options, observer, |obs| {
+                    super::coarse::coarse_to_fine(op, y, &mut x, options, obs)
+                })?;
+            report.count_from(&counted);
+            report.support_applies += uncounted;
+            report.elapsed = started.elapsed();
+            return Ok((x, Some(report)));
         }
         Method::Auto => unreachable!("Auto is resolved before run"),
     };

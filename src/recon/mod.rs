@@ -4,6 +4,7 @@
 //! backprojection thresholds, and the quality metrics against a truth.
 
 mod auto;
+mod coarse;
 mod method;
 mod metrics;
 mod names;
@@ -13,7 +14,8 @@ mod reconstruct;
 mod refit;
 mod tiled;
 
-pub use auto::{Stage, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
+pub use auto::{Stage, COARSE_RESIDUAL, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
+pub use coarse::COARSE_BLOCK;
 pub use method::{estimate_returns, Method, ReconstructOptions, MAX_RETURNS_ESTIMATE};
 pub use metrics::{
     compare, compare_depth, compare_observed, relative_error, Metrics, ObservedComparison,

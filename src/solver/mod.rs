@@ -42,7 +42,8 @@ pub use fista::{fista, FistaIteration, FistaParams, Lambda, Restart, StepRule};
 pub use iht::{iht, IhtIteration, IhtParams, IhtStep};
 pub use iteration::{solve, solve_with, Iteration, Iterative, Progress};
 pub use pixelwise::{
-    model_based, reflector_amp, tv_depth, ModelBasedParams, ReflectorAmpParams, TvDepthParams,
+    model_based, refine_surfaces, reflector_amp, tv_depth, ModelBasedParams, RefineParams,
+    ReflectorAmpParams, TvDepthParams,
 };
 #[cfg(feature = "progress")]
 pub use progress::ProgressObserver;

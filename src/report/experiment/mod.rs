@@ -286,6 +286,7 @@ pub fn estimated_work(method: Method, budget: Option<usize>, pulse_len: usize) -
         Method::Amp => 2.0 * it(60),
         Method::ModelBased => 15.0 * it(30),
         Method::Tv => 30.0 * it(30),
+        Method::CoarseToFine => 40.0 * it(30),
         Method::Auto => 45.0 * it(30),
     };
     applies * pulse_len.max(1) as f64 / 1000.0

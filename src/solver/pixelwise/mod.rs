@@ -6,11 +6,13 @@
 
 mod amp;
 mod model_based;
+mod refine;
 mod surface;
 mod tv_depth;
 
 pub use amp::{reflector_amp, ReflectorAmpParams};
 pub use model_based::{model_based, ModelBasedParams};
+pub use refine::{refine_surfaces, RefineParams};
 pub use tv_depth::{tv_depth, TvDepthParams};
 
 /// What restricts (or resumes) a pixelwise solve beyond its parameters.
