@@ -7,6 +7,7 @@ mod amp;
 mod architectures;
 mod argmin_solvers;
 mod auto;
+mod blocks;
 mod cli;
 mod cli_adjoint;
 mod cli_architecture_variants;
