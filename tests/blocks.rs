@@ -2,7 +2,10 @@
 
 use std::sync::Arc;
 
-use rdlidar::lidar::{paper_scene, BlockOperator, Codes, Geometry, MultiAdcOperator, Pulse, Scene};
+use rdlidar::lidar::{
+    paper_scene, BlockOperator, Codes, Geometry, LidarOperator, MultiAdcOperator, Pulse, Scene,
+    SeededCodes, StreamedOperator,
+};
 use rdlidar::operator::{dot_test, LinearOperator, VoxelOperator};
 use rdlidar::recon::compare;
 use rdlidar::solver::{refine_surfaces, RefineParams};
@@ -23,60 +26,82 @@ fn gap(a: &[f64], b: &[f64]) -> f64 {
         / top
 }
 
+/// The coarse operator of `op` for `block` against its definition A·U: the dot test, the dense
+/// path through A on upsampled scenes, and the restriction to a support (the blocks' summed
+/// codes) against the dense path in both directions.
+fn check_coarse(op: &dyn LidarOperator<f64>, block: (usize, usize)) {
+    let g = op.geometry();
+    let b = BlockOperator::new(op, block).unwrap();
+    let (gm, gn) = b.grid();
+    assert_eq!((gm, gn), (g.m.div_ceil(block.0), g.n.div_ceil(block.1)));
+    assert_eq!(b.ncols(), gm * gn * g.ks);
+    assert!(dot_test(&b, 11).unwrap().passed(), "{block:?}");
+    // A coarse scene, upsampled, through the fine operator.
+    let xc: Vec<f64> = (0..b.ncols())
+        .map(|i| ((i * 37) % 11) as f64 - 5.0)
+        .collect();
+    let mut xf = vec![0.0; op.ncols()];
+    b.upsample(&xc, &mut xf);
+    let (mut y_coarse, mut y_fine) = (vec![0.0; b.nrows()], vec![0.0; b.nrows()]);
+    b.apply(&xc, &mut y_coarse);
+    op.apply(&xf, &mut y_fine);
+    assert!(gap(&y_coarse, &y_fine) < 1e-12, "{block:?}");
+    let support: Vec<usize> = (0..b.ncols()).filter(|c| c % 5 == 1).collect();
+    let restricted = b.restrict_columns(support.clone()).unwrap();
+    let amps: Vec<f64> = (0..support.len()).map(|i| 1.0 + i as f64 * 0.25).collect();
+    let mut dense_x = vec![0.0; b.ncols()];
+    for (&c, &a) in support.iter().zip(&amps) {
+        dense_x[c] = a;
+    }
+    let (mut ys, mut yd) = (vec![0.0; b.nrows()], vec![0.0; b.nrows()]);
+    restricted.apply(&amps, &mut ys);
+    b.apply(&dense_x, &mut yd);
+    assert!(gap(&ys, &yd) < 1e-12, "{block:?}");
+    let mut us = vec![0.0; support.len()];
+    let mut ud = vec![0.0; b.ncols()];
+    restricted.apply_adjoint(&yd, &mut us);
+    b.apply_adjoint(&yd, &mut ud);
+    let picked: Vec<f64> = support.iter().map(|&c| ud[c]).collect();
+    assert!(gap(&us, &picked) < 1e-12, "{block:?}");
+}
+
 #[test]
 fn the_coarse_operator_passes_the_dot_test_and_is_the_fine_one_on_upsampled_scenes() {
     // 7×5 pixels: blocks of 2×2 and 3×2 leave smaller blocks at the last row and column.
     let g = Geometry::new(7, 5, 6).unwrap();
     let op = problem::<f64>(g, 37, 3);
     for block in [(1, 1), (2, 2), (3, 2)] {
-        let b = BlockOperator::new(&op, block).unwrap();
-        let (gm, gn) = b.grid();
-        assert_eq!(
-            (gm, gn),
-            (7usize.div_ceil(block.0), 5usize.div_ceil(block.1))
-        );
-        assert_eq!(b.ncols(), gm * gn * g.ks);
-        assert!(dot_test(&b, 11).unwrap().passed(), "{block:?}");
+        check_coarse(&op, block);
         let op32 = problem::<f32>(g, 37, 3);
         let b32 = BlockOperator::new(&op32, block).unwrap();
         assert!(dot_test(&b32, 12).unwrap().passed(), "{block:?} f32");
-        // A coarse scene, upsampled, through the fine operator.
-        let xc: Vec<f64> = (0..b.ncols())
-            .map(|i| ((i * 37) % 11) as f64 - 5.0)
-            .collect();
-        let mut xf = vec![0.0; op.ncols()];
-        b.upsample(&xc, &mut xf);
-        let (mut y_coarse, mut y_fine) = (vec![0.0; b.nrows()], vec![0.0; b.nrows()]);
-        b.apply(&xc, &mut y_coarse);
-        op.apply(&xf, &mut y_fine);
-        assert!(gap(&y_coarse, &y_fine) < 1e-12, "{block:?}");
-        // The restriction to a support (the blocks' summed codes) agrees with the dense path
-        // (through the fine operator) in both directions.
-        let support: Vec<usize> = (0..b.ncols()).filter(|c| c % 5 == 1).collect();
-        let restricted = b.restrict_columns(support.clone()).unwrap();
-        let amps: Vec<f64> = (0..support.len()).map(|i| 1.0 + i as f64 * 0.25).collect();
-        let mut dense_x = vec![0.0; b.ncols()];
-        for (&c, &a) in support.iter().zip(&amps) {
-            dense_x[c] = a;
-        }
-        let (mut ys, mut yd) = (vec![0.0; b.nrows()], vec![0.0; b.nrows()]);
-        restricted.apply(&amps, &mut ys);
-        b.apply(&dense_x, &mut yd);
-        assert!(gap(&ys, &yd) < 1e-12, "{block:?}");
-        let mut us = vec![0.0; support.len()];
-        let mut ud = vec![0.0; b.ncols()];
-        restricted.apply_adjoint(&yd, &mut us);
-        b.apply_adjoint(&yd, &mut ud);
-        let picked: Vec<f64> = support.iter().map(|&c| ud[c]).collect();
-        assert!(gap(&us, &picked) < 1e-12, "{block:?}");
     }
+    // Three ADCs: every code set summed over the blocks, rows stacked ADC by ADC.
+    check_coarse(&three_adcs(g), (2, 2));
+}
+
+/// The operator of `g` with three ADCs (pulse of 31 samples).
+fn three_adcs(g: Geometry) -> MultiAdcOperator<f64> {
+    let p = Pulse::<f64>::bernoulli(31, 1).unwrap().into_inner();
+    let codes = (0..3)
+        .map(|s| Arc::new(Codes::random_binary(g.pixels(), g.samples(31), 10 + s).unwrap()))
+        .collect();
+    MultiAdcOperator::new(g, &p, codes).unwrap()
 }
 
 #[test]
 fn the_coarse_operators_column_queries_match_its_applications() {
     let g = Geometry::new(6, 6, 5).unwrap();
     let op = problem::<f64>(g, 29, 8);
-    let b = BlockOperator::new(&op, (2, 3)).unwrap();
+    check_columns(&op, (2, 3));
+    check_columns(&three_adcs(g), (2, 2));
+}
+
+/// The column queries of the coarse operator of `op` (and of `op` itself) against its
+/// applications.
+fn check_columns(op: &dyn LidarOperator<f64>, block: (usize, usize)) {
+    let g = op.geometry();
+    let b = BlockOperator::new(op, block).unwrap();
     let ks = g.ks;
     let voxels = [0usize, 7, 13, 24, b.ncols() - 1];
     let norms = b.column_norms(&voxels);
@@ -116,7 +141,7 @@ fn the_coarse_operators_column_queries_match_its_applications() {
 }
 
 #[test]
-fn impossible_blocks_and_operators_without_whole_codes_are_refused() {
+fn impossible_blocks_and_streamed_codes_are_refused() {
     let g = Geometry::new(4, 4, 3).unwrap();
     let op = problem::<f64>(g, 20, 1);
     for block in [(0, 2), (2, 0), (12, 11)] {
@@ -124,13 +149,12 @@ fn impossible_blocks_and_operators_without_whole_codes_are_refused() {
         assert!(matches!(e, Error::InvalidParameter { .. }), "{e}");
         assert!(e.to_string().contains("block"), "{e}");
     }
+    // Codes streamed from their seed are not held: nothing to sum.
+    let codes = SeededCodes::new(1, 1, g.pixels(), g.samples(20)).unwrap();
     let p = Pulse::<f64>::bernoulli(20, 1).unwrap().into_inner();
-    let codes = (0..2)
-        .map(|s| Arc::new(Codes::random_binary(g.pixels(), g.samples(20), s).unwrap()))
-        .collect();
-    let multi = MultiAdcOperator::new(g, &p, codes).unwrap();
-    let e = BlockOperator::new(&multi, (2, 2)).unwrap_err();
-    assert!(e.to_string().contains("one ADC"), "{e}");
+    let streamed = StreamedOperator::new(g, p, codes, 0).unwrap();
+    let e = BlockOperator::new(&streamed, (2, 2)).unwrap_err();
+    assert!(e.to_string().contains("codes in memory"), "{e}");
 }
 
 #[test]

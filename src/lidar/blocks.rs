@@ -15,7 +15,7 @@ use crate::real::Real;
 use super::measurement::LidarOperator;
 use super::pulse::zero_mean;
 
-/// `A·U` for a one-ADC lidar operator A over the whole scene and the upsampling U that copies each block's depth column to
+/// `A·U` for a lidar operator A over the whole scene (one ADC or several) and the upsampling U that copies each block's depth column to
 /// its pixels: the operator of the scene on the grid of blocks (⌈M/bm⌉ × ⌈N/bn⌉ pixels, K_s
 /// bins, C order). Its dense applications and correlations go through A (one application of A
 /// each, so that A's wrappers count or cancel them); its support-restricted applications and
@@ -24,14 +24,18 @@ pub struct BlockOperator<'a, T: Real> {
     op: &'a dyn LidarOperator<T>,
     block: (usize, usize),
     grid: (usize, usize),
-    /// The summed codes c_B, block-major (K per block).
+    /// The summed codes c_B of each code set, set-major then block-major (K per block).
     codes: Vec<i8>,
+    /// Code sets (ADCs), each with K rows.
+    sets: usize,
+    /// Rows per code set (K).
+    k: usize,
     pulse: Vec<f64>,
     /// The zero-mean pulse, for the debiased correlation.
     pulse0: Vec<f64>,
     /// The pulse's autocorrelation at lags 0..K_s.
     lags: Vec<f64>,
-    /// Each block's mean squared code.
+    /// Each block's mean squared code, summed over the code sets.
     power: Vec<f64>,
 }
 
@@ -41,8 +45,8 @@ impl<'a, T: Real> BlockOperator<'a, T> {
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] for a block side of 0 or a block of more than 127 pixels
-    /// (the summed codes are stored as bytes), or for an operator without whole one-ADC codes
-    /// ([`LidarOperator::whole_codes`]).
+    /// (the summed codes are stored as bytes), or for an operator without whole codes in
+    /// memory ([`LidarOperator::whole_code_sets`]).
     pub fn new(op: &'a dyn LidarOperator<T>, block: (usize, usize)) -> Result<Self> {
         let (bm, bn) = block;
         if bm == 0 || bn == 0 || bm * bn > 127 {
@@ -51,23 +55,26 @@ impl<'a, T: Real> BlockOperator<'a, T> {
                 format!("must have 1 to 127 pixels, got {bm}×{bn}"),
             ));
         }
-        let Some(src) = op.whole_codes() else {
+        let Some(sources) = op.whole_code_sets() else {
             return Err(Error::param(
                 "operator",
-                "the coarse grid needs one ADC, codes in memory and the whole scene in one process",
+                "the coarse grid needs the codes in memory and the whole scene in one process",
             ));
         };
         let g = op.geometry();
         let grid = (g.m.div_ceil(bm), g.n.div_ceil(bn));
-        let k = op.nrows();
-        let mut codes = vec![0i8; grid.0 * grid.1 * k];
-        codes.par_chunks_mut(k).enumerate().for_each(|(b, row)| {
+        let blocks = grid.0 * grid.1;
+        let sets = sources.len().max(1);
+        let k = op.nrows() / sets;
+        let mut codes = vec![0i8; sets * blocks * k];
+        codes.par_chunks_mut(k).enumerate().for_each(|(i, row)| {
+            let (src, b) = (sources[i / blocks], i % blocks);
             let (bi, bj) = (b / grid.1, b % grid.1);
-            for i in bi * bm..((bi + 1) * bm).min(g.m) {
-                for j in bj * bn..((bj + 1) * bn).min(g.n) {
-                    let p = i * g.n + j;
-                    for (t, c) in row.iter_mut().enumerate() {
-                        *c += src.get(p, t);
+            for r in bi * bm..((bi + 1) * bm).min(g.m) {
+                for c in bj * bn..((bj + 1) * bn).min(g.n) {
+                    let p = r * g.n + c;
+                    for (t, code) in row.iter_mut().enumerate() {
+                        *code += src.get(p, t);
                     }
                 }
             }
@@ -82,13 +89,21 @@ impl<'a, T: Real> BlockOperator<'a, T> {
                     .sum()
             })
             .collect();
-        let power = codes
-            .par_chunks(k)
-            .map(|c| c.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / k as f64)
+        let power = (0..blocks)
+            .map(|b| {
+                (0..sets)
+                    .map(|set| {
+                        let c = &codes[(set * blocks + b) * k..][..k];
+                        c.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / k.max(1) as f64
+                    })
+                    .sum()
+            })
             .collect();
         Ok(BlockOperator {
             lags,
             power,
+            sets,
+            k,
             op,
             block,
             grid,
@@ -153,23 +168,27 @@ impl<'a, T: Real> BlockOperator<'a, T> {
         });
     }
 
-    fn block_codes(&self, b: usize) -> &[i8] {
-        let k = self.op.nrows();
-        &self.codes[b * k..(b + 1) * k]
+    /// Block b's summed codes of code set `set`.
+    fn block_codes(&self, set: usize, b: usize) -> &[i8] {
+        let blocks = self.grid.0 * self.grid.1;
+        &self.codes[(set * blocks + b) * self.k..][..self.k]
     }
 
-    /// Σ_t w(c_B[d + t])·p[t]·q[t + lag] over the overlap, for block b, depth d.
-    fn weighted(&self, b: usize, d: usize, lag: isize, q: &[f64], square: bool) -> f64 {
+    /// Σ_sets Σ_t c_B[d + t]²·p[t]·q[t + lag] over the overlap, for block b, depth d.
+    fn weighted(&self, b: usize, d: usize, lag: isize, q: &[f64]) -> f64 {
         let kp = self.pulse.len() as isize;
         let lo = 0.max(-lag);
         let hi = kp.min(kp - lag);
-        let c = &self.block_codes(b)[d..];
-        (lo..hi)
-            .map(|t| {
-                let t = t as usize;
-                let w = f64::from(c[t]);
-                let w = if square { w * w } else { w };
-                w * self.pulse[t] * q[(t as isize + lag) as usize]
+        (0..self.sets)
+            .map(|set| {
+                let c = &self.block_codes(set, b)[d..];
+                (lo..hi)
+                    .map(|t| {
+                        let t = t as usize;
+                        let w = f64::from(c[t]);
+                        w * w * self.pulse[t] * q[(t as isize + lag) as usize]
+                    })
+                    .sum::<f64>()
             })
             .sum()
     }
@@ -250,7 +269,7 @@ impl<T: Real> VoxelOperator<T> for BlockOperator<'_, T> {
             .flat_map_iter(|&v| {
                 let (b, d) = (v / ks, v % ks);
                 (0..ks)
-                    .map(|j| self.weighted(b, d, d as isize - j as isize, &self.pulse0, true))
+                    .map(|j| self.weighted(b, d, d as isize - j as isize, &self.pulse0))
                     .collect::<Vec<_>>()
             })
             .collect()
@@ -270,16 +289,19 @@ impl<T: Real> VoxelOperator<T> for BlockOperator<'_, T> {
         true
     }
 
+    /// The code sets' columns in their blocks of rows, from the first set's row d.
     fn column(&self, c: usize) -> (usize, Vec<f64>) {
         let ks = self.ks();
         let (b, d) = (c / ks, c % ks);
-        let codes = &self.block_codes(b)[d..];
-        let values = self
-            .pulse
-            .iter()
-            .zip(codes)
-            .map(|(v, &s)| f64::from(s) * v)
-            .collect();
+        let kp = self.pulse.len();
+        let mut values = vec![0.0; (self.sets - 1) * self.k + kp];
+        for set in 0..self.sets {
+            let codes = &self.block_codes(set, b)[d..];
+            let out = &mut values[set * self.k..set * self.k + kp];
+            for ((o, v), &s) in out.iter_mut().zip(&self.pulse).zip(codes) {
+                *o = f64::from(s) * v;
+            }
+        }
         (d, values)
     }
 
@@ -287,7 +309,7 @@ impl<T: Real> VoxelOperator<T> for BlockOperator<'_, T> {
         let ks = self.ks();
         columns
             .par_iter()
-            .map(|&v| self.weighted(v / ks, v % ks, 0, &self.pulse, true).sqrt())
+            .map(|&v| self.weighted(v / ks, v % ks, 0, &self.pulse).sqrt())
             .collect()
     }
 }
@@ -309,7 +331,8 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
 
     fn forward_kernel(&self, x: &[T], y: &mut [T], _: &mut [T]) {
         let ks = self.op.ks();
-        let k = y.len();
+        let rows = y.len();
+        let (sets, k) = (self.op.sets, self.op.k);
         let kp = self.op.pulse.len();
         let threads = rayon::current_num_threads().max(1);
         let chunk = self.voxels.len().div_ceil(threads).max(1);
@@ -318,22 +341,25 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
             .par_chunks(chunk)
             .zip(x.par_chunks(chunk))
             .map(|(vs, xs)| {
-                let mut acc = vec![0.0f64; k];
+                let mut acc = vec![0.0f64; rows];
                 for (&v, &a) in vs.iter().zip(xs) {
                     let a = a.as_f64();
                     if a == 0.0 {
                         continue;
                     }
                     let (b, d) = (v / ks, v % ks);
-                    let c = &self.op.block_codes(b)[d..d + kp];
-                    for ((s, &ct), &pt) in acc[d..d + kp].iter_mut().zip(c).zip(&self.op.pulse) {
-                        *s += a * f64::from(ct) * pt;
+                    for set in 0..sets {
+                        let c = &self.op.block_codes(set, b)[d..d + kp];
+                        let out = &mut acc[set * k + d..set * k + d + kp];
+                        for ((s, &ct), &pt) in out.iter_mut().zip(c).zip(&self.op.pulse) {
+                            *s += a * f64::from(ct) * pt;
+                        }
                     }
                 }
                 acc
             })
             .reduce(
-                || vec![0.0f64; k],
+                || vec![0.0f64; rows],
                 |mut a, b| {
                     for (u, v) in a.iter_mut().zip(b) {
                         *u += v;
@@ -349,14 +375,18 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
     fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
         let ks = self.op.ks();
         let kp = self.op.pulse.len();
+        let (sets, k) = (self.op.sets, self.op.k);
         x.par_iter_mut().zip(&self.voxels).for_each(|(xi, &v)| {
             let (b, d) = (v / ks, v % ks);
-            let c = &self.op.block_codes(b)[d..d + kp];
-            let s: f64 = c
-                .iter()
-                .zip(&self.op.pulse)
-                .zip(&y[d..d + kp])
-                .map(|((&ct, &pt), yt)| f64::from(ct) * pt * yt.as_f64())
+            let s: f64 = (0..sets)
+                .map(|set| {
+                    let c = &self.op.block_codes(set, b)[d..d + kp];
+                    c.iter()
+                        .zip(&self.op.pulse)
+                        .zip(&y[set * k + d..set * k + d + kp])
+                        .map(|((&ct, &pt), yt)| f64::from(ct) * pt * yt.as_f64())
+                        .sum::<f64>()
+                })
                 .sum();
             *xi = T::of_f64(s);
         });

@@ -196,8 +196,8 @@ where
         self.inner.observed_pixels()
     }
 
-    fn whole_codes(&self) -> Option<&std::sync::Arc<super::Codes>> {
-        self.inner.whole_codes()
+    fn whole_code_sets(&self) -> Option<Vec<&std::sync::Arc<super::Codes>>> {
+        self.inner.whole_code_sets()
     }
 
     fn regime(&self) -> Regime {

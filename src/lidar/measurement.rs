@@ -58,10 +58,10 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
         None
     }
 
-    /// The ±1 (or ternary) codes of a one-ADC operator over the whole scene, for operators built
-    /// from them ([`BlockOperator`](super::BlockOperator)); `None` (the default) for several
-    /// ADCs, streamed codes or pixels split across processes.
-    fn whole_codes(&self) -> Option<&Arc<Codes>> {
+    /// The ±1 (or ternary) codes of every ADC over the whole scene, in the order of the ADCs'
+    /// rows, for operators built from them ([`BlockOperator`](super::BlockOperator)); `None`
+    /// (the default) for codes not held in memory (streamed) or pixels split across processes.
+    fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
         None
     }
 
@@ -90,8 +90,8 @@ impl<T: Real> LidarOperator<T> for RdOperator<T> {
         let observed = self.codes().observed_pixels();
         observed.iter().any(|&o| !o).then_some(observed)
     }
-    fn whole_codes(&self) -> Option<&Arc<Codes>> {
-        Some(self.codes())
+    fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
+        Some(vec![self.codes()])
     }
 }
 
@@ -117,8 +117,8 @@ macro_rules! forward_lidar {
             fn observed_pixels(&self) -> Option<Vec<bool>> {
                 (**self).observed_pixels()
             }
-            fn whole_codes(&self) -> Option<&Arc<Codes>> {
-                (**self).whole_codes()
+            fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
+                (**self).whole_code_sets()
             }
             fn regime(&self) -> Regime {
                 (**self).regime()
@@ -178,8 +178,8 @@ impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Counted<A> {
     fn observed_pixels(&self) -> Option<Vec<bool>> {
         self.inner().observed_pixels()
     }
-    fn whole_codes(&self) -> Option<&Arc<Codes>> {
-        self.inner().whole_codes()
+    fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
+        self.inner().whole_code_sets()
     }
     fn regime(&self) -> Regime {
         self.inner().regime()
@@ -318,11 +318,36 @@ impl<T: Real> VoxelOperator<T> for MultiAdcOperator<T> {
         .map(f64::sqrt)
         .collect()
     }
+
+    /// The code sets' columns in their blocks of rows, from the first set's first row.
+    fn column(&self, c: usize) -> (usize, Vec<f64>) {
+        let k = self.parts[0].nrows();
+        let mut first = usize::MAX;
+        let mut pieces = Vec::with_capacity(self.parts.len());
+        for (g, op) in self.parts.iter().enumerate() {
+            let (at, values) = op.column(c);
+            first = first.min(g * k + at);
+            pieces.push((g * k + at, values));
+        }
+        let end = pieces
+            .iter()
+            .map(|(at, v)| at + v.len())
+            .max()
+            .unwrap_or(first);
+        let mut out = vec![0.0; end - first];
+        for (at, values) in pieces {
+            out[at - first..at - first + values.len()].copy_from_slice(&values);
+        }
+        (first, out)
+    }
 }
 
 impl<T: Real> LidarOperator<T> for MultiAdcOperator<T> {
     fn geometry(&self) -> Geometry {
         self.geom
+    }
+    fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
+        Some(self.parts.iter().map(|op| op.codes()).collect())
     }
 
     fn pulse(&self) -> &[T] {

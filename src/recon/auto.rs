@@ -281,7 +281,7 @@ pub(super) fn auto<T: Real>(
         stages.push(other.stage);
         // A fit that leaves much of the data unexplained (fewer measurements than lit pixels,
         // or heavy noise): the coarse grid and the surfaces' priors, kept if they fit better.
-        if one.stage.relative_residual > COARSE_RESIDUAL && op.whole_codes().is_some() {
+        if one.stage.relative_residual > COARSE_RESIDUAL && op.whole_code_sets().is_some() {
             let mut fine = attempt(op, y, Method::CoarseToFine, options, observer)?;
             let (r_one, r_fine) = (one.stage.relative_residual, fine.stage.relative_residual);
             if r_fine < r_one {

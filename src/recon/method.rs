@@ -76,7 +76,8 @@ pub enum Method {
     /// blocks (each block's pixels share one depth column, so the blocks' codes add up and a
     /// quarter of the unknowns remain), then the surfaces refined on the pixels
     /// ([`refine_surfaces`](crate::solver::refine_surfaces): amplitudes tied along surfaces,
-    /// depths moved pixel by pixel). One ADC, codes in memory, the whole scene in one process.
+    /// depths moved pixel by pixel). Codes in memory (one ADC or several), the whole scene in one
+    /// process.
     CoarseToFine,
     /// Chosen from the regime of the pulse length; see [`reconstruct`](super::reconstruct).
     Auto,

@@ -1,8 +1,9 @@
 //! The one-reflector family: solvers for operators whose columns come in pixels
 //! ([`VoxelOperator`](crate::operator::VoxelOperator)) with at most one return per pixel —
 //! message passing with the one-reflector prior ([`reflector_amp`]), model-based recovery
-//! ([`model_based`], which starts from it) and TV on the depth map ([`tv_depth`], which runs both
-//! within depth windows).
+//! ([`model_based`], which starts from it), TV on the depth map ([`tv_depth`], which runs both
+//! within depth windows) and the refinement of a one-return scene along its surfaces
+//! ([`refine_surfaces`]).
 
 mod amp;
 mod model_based;
