@@ -270,8 +270,9 @@ pub(super) fn auto<T: Real>(
         return Ok(finish(best, stages));
     }
     // Does the residual of the one-reflector fit still hold returns in its lit pixels?
+    // (A fit without a lit pixel has no returns to hide.)
     let (hidden, lit) = hidden_returns(op, y, &one.x, one.stage.report.as_mut());
-    if (hidden as f64) < HIDDEN_FRACTION * lit as f64 {
+    if lit == 0 || (hidden as f64) < HIDDEN_FRACTION * lit as f64 {
         one.stage.verdict = format!(
             "{}; its residual holds no further return in {} of {lit} lit pixels",
             one.stage.verdict,

@@ -304,9 +304,11 @@ struct Fit {
     tolerance: f64,
 }
 
-/// A support of at most this share of the measurements determines its amplitudes: the last fit
-/// is then free of ties (unbiased where the reflectivity varies within a surface).
-const FREE_SHARE: f64 = 0.5;
+/// A support of at most this share of the measurements (four measurements per return) determines
+/// its amplitudes well: the last fit is then free of ties (unbiased where the reflectivity varies
+/// along a surface). With fewer measurements per return the ties are kept: at 10 dB and 2.4 per
+/// return a free fit raised the amplitude error from 0.26 to 0.35 and lost a return in a hundred.
+const FREE_SHARE: f64 = 0.25;
 
 /// CGLS iterations of the free fit at most.
 const FREE_ITERATIONS: usize = 500;
