@@ -284,19 +284,39 @@ pub(super) fn auto<T: Real>(
         // or heavy noise): the coarse grid and the surfaces' priors, kept if they fit better.
         if one.stage.relative_residual > COARSE_RESIDUAL && op.whole_code_sets().is_some() {
             let mut fine = attempt(op, y, Method::CoarseToFine, options, observer)?;
-            let (r_one, r_fine) = (one.stage.relative_residual, fine.stage.relative_residual);
+            // Its amplitudes are tied along surfaces (better amplitudes for a little more
+            // residual); its support is judged as the other fits' are, by least squares on it
+            // (where it holds at most half as many voxels as measurements).
+            let mut free = fine.x.clone();
+            let r_fine = match refit_support(op, y, &mut free, REFIT_MAX_ITER, 1)? {
+                Some(refit) => {
+                    let rep = fine
+                        .stage
+                        .report
+                        .as_mut()
+                        .expect("iterative methods report");
+                    rep.absorb_applies(&refit);
+                    relative_residual(op, y, &free, rep)
+                }
+                None => fine.stage.relative_residual,
+            };
+            let r_one = one.stage.relative_residual;
             if r_fine < r_one {
                 one.stage.verdict = format!(
                     "{}; it leaves more than {COARSE_RESIDUAL} of the data unexplained",
                     one.stage.verdict
                 );
-                fine.stage.verdict =
-                    format!("fits better (residual {r_fine:.2e} against {r_one:.2e})");
+                fine.stage.verdict = format!(
+                    "fits better (by least squares on its support where it holds at most K/2 \
+                     voxels: residual {r_fine:.2e} against {r_one:.2e})"
+                );
                 stages.push(one.stage);
                 return Ok(finish(fine, stages));
             }
-            fine.stage.verdict =
-                format!("fits no better (residual {r_fine:.2e} against {r_one:.2e})");
+            fine.stage.verdict = format!(
+                "fits no better (by least squares on its support where it holds at most K/2 \
+                 voxels: residual {r_fine:.2e} against {r_one:.2e})"
+            );
             stages.push(fine.stage);
         }
         return Ok(finish(one, stages));
@@ -311,7 +331,8 @@ pub(super) fn auto<T: Real>(
 
 /// [`Method::Auto`] runs [`Method::CoarseToFine`] after the one-reflector fits in the compressive
 /// regime when the kept fit leaves more than this share of ‖y‖ unexplained (relative residual),
-/// and keeps it if it fits better. A fit at 20 dB SNR leaves about 0.1, one at 10 dB about
+/// and keeps it if it fits better (its support judged by least squares on it, as the others'
+/// estimates are, where it holds at most K/2 voxels). A fit at 20 dB SNR leaves about 0.1, one at 10 dB about
 /// 0.3, one with fewer measurements than lit pixels 0.6 and more.
 pub const COARSE_RESIDUAL: f64 = 0.25;
 
