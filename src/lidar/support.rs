@@ -262,7 +262,7 @@ impl<T: Real> VoxelOperator<T> for RdOperator<T> {
         true
     }
 
-    /// s_p[d + t]·p[t] from row d, for column (p, d).
+    /// `s_p[d + t]·p[t]` from row d, for column (p, d).
     fn column(&self, c: usize) -> (usize, Vec<f64>) {
         let ks = self.geometry().ks;
         let (p, d) = (c / ks, c % ks);

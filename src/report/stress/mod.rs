@@ -49,8 +49,9 @@ pub use conditioning::{
 };
 pub use precision::{ADJOINT_TOL_EPS, DOT_TOL_EPS, FORWARD_TOL_EPS};
 pub use solvers::{
-    ceiling, solver_tolerance, SolverCase, AMP_TOL, EXACT_TOL, FLOOR_MARGIN, LOW_DUTY,
-    LOW_DUTY_TOL, NOISE_FACTOR, PEAK_FLOOR, TERNARY_TOL, TERNARY_ZERO_PROB, WEAKEST_AMPLITUDE,
+    ceiling, solver_tolerance, SolverCase, AMP_TOL, COARSE_DYNAMIC_TOL, COARSE_LOW_DUTY_TOL,
+    EXACT_TOL, FLOOR_MARGIN, LOW_DUTY, LOW_DUTY_TOL, NOISE_FACTOR, PEAK_FLOOR, TERNARY_TOL,
+    TERNARY_ZERO_PROB, WEAKEST_AMPLITUDE,
 };
 
 /// Which sizes the suite runs at.
