@@ -49,7 +49,7 @@ impl<'a, T: Real> BlockOperator<'a, T> {
     /// memory ([`LidarOperator::whole_code_sets`]).
     pub fn new(op: &'a dyn LidarOperator<T>, block: (usize, usize)) -> Result<Self> {
         let (bm, bn) = block;
-        if bm == 0 || bn == 0 || bm * bn > 127 {
+        if bm == 0 || bn == 0 || bm.checked_mul(bn).is_none_or(|pixels| pixels > 127) {
             return Err(Error::param(
                 "block",
                 format!("must have 1 to 127 pixels, got {bm}×{bn}"),

@@ -18,8 +18,9 @@ use super::{LinearOperator, VoxelOperator};
 /// * adjoint applications of the whole operator;
 /// * support applications: applications, in either direction, of a restriction to a few
 ///   columns ([`LinearOperator::restrict_columns`]), and the column queries of an operator whose
-///   columns are [structured](VoxelOperator::structured_columns), one per call. Column queries
-///   answered by applications of the whole operator count as those applications.
+///   columns are [structured](VoxelOperator::structured_columns), one per call (a single
+///   column, [`VoxelOperator::column`], costs one pass over its rows and is not counted). Column
+///   queries answered by applications of the whole operator count as those applications.
 ///
 /// Every solver reports its counts through it; tests use it to check that an algorithm applies
 /// the operator as often as it claims.

@@ -283,12 +283,20 @@ pub(super) fn auto<T: Real>(
         // A fit that leaves much of the data unexplained (fewer measurements than lit pixels,
         // or heavy noise): the coarse grid and the surfaces' priors, kept if they fit better.
         if one.stage.relative_residual > COARSE_RESIDUAL && op.whole_code_sets().is_some() {
-            let mut fine = attempt(op, y, Method::CoarseToFine, options, observer)?;
+            // An optional stage: if it fails (other than by cancellation), the fit stands.
+            let mut fine = match attempt(op, y, Method::CoarseToFine, options, observer) {
+                Ok(fine) => fine,
+                Err(e @ crate::error::Error::Cancelled { .. }) => return Err(e),
+                Err(_) => return Ok(finish(one, stages)),
+            };
             // Its amplitudes are tied along surfaces (better amplitudes for a little more
             // residual); its support is judged as the other fits' are, by least squares on it
             // (where it holds at most half as many voxels as measurements).
             let mut free = fine.x.clone();
-            let r_fine = match refit_support(op, y, &mut free, REFIT_MAX_ITER, 1)? {
+            let r_fine = match refit_support(op, y, &mut free, REFIT_MAX_ITER, 1)
+                .ok()
+                .flatten()
+            {
                 Some(refit) => {
                     let rep = fine
                         .stage

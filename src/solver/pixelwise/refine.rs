@@ -2,6 +2,13 @@
 //! lit pixels: the amplitudes share a surface's reflectivity (total variation between
 //! neighbours on one surface), the depths move pixel by pixel where that lowers the residual and
 //! agrees with the neighbours.
+//!
+//! A pixel's own depth is among its candidates only when a neighbour holds it too, so a return
+//! that no neighbour agrees with (an isolated return, a line one pixel wide that climbs a bin
+//! per pixel) moves or goes at every sweep: a strong prior for surfaces, and the sweeps then end
+//! at their limit. Offering every pixel its own depth settles such returns, but measured worse
+//! on the surfaces this is for (10 dB, 32×32×16: 2.5% of the empty pixels false instead of 1.9%;
+//! 48×48×24 below one measurement per lit pixel: 71% exact instead of 84%).
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
@@ -205,7 +212,9 @@ impl Surfaces {
 ///    neighbours' median amplitude) or lose it, whichever lowers the squared residual plus
 ///    [`RefineParams::disagreement`] per disagreeing neighbour most.
 ///
-/// It stops when a sweep moves no depth, after a last amplitude fit. The operator's columns are
+/// It stops when a sweep moves no depth, after a last amplitude fit; when the support then holds
+/// at most a quarter as many voxels as there are measurements, a final fit without ties removes
+/// their bias where the reflectivity varies along a surface. The operator's columns are
 /// taken one at a time ([`VoxelOperator::column`]); the unknowns must be whole (one process).
 ///
 /// # Errors
@@ -443,6 +452,8 @@ where
         }
         candidates.push(None);
         if let Some(d) = current {
+            // A pixel keeps its depth only where a neighbour holds it too: a return that no
+            // neighbour agrees with moves or goes (see the module's notes on isolated returns).
             candidates.extend([d.checked_sub(1), (d + 1 < ks).then_some(d + 1)]);
         }
         candidates.sort_unstable();
@@ -450,6 +461,7 @@ where
         let amp = match current {
             Some(_) => s.amp[p],
             None => {
+                // The upper of the two middle values for an even count.
                 amps.sort_unstable_by(f64::total_cmp);
                 amps[amps.len() / 2]
             }
