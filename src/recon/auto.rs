@@ -280,54 +280,7 @@ pub(super) fn auto<T: Real>(
         );
         stages.push(best.stage);
         stages.push(other.stage);
-        // A fit that leaves much of the data unexplained (fewer measurements than lit pixels,
-        // or heavy noise): the coarse grid and the surfaces' priors, kept if they fit better.
-        if one.stage.relative_residual > COARSE_RESIDUAL && op.whole_code_sets().is_some() {
-            // An optional stage: if it fails (other than by cancellation), the fit stands.
-            let mut fine = match attempt(op, y, Method::CoarseToFine, options, observer) {
-                Ok(fine) => fine,
-                Err(e @ crate::error::Error::Cancelled { .. }) => return Err(e),
-                Err(_) => return Ok(finish(one, stages)),
-            };
-            // Its amplitudes are tied along surfaces (better amplitudes for a little more
-            // residual); its support is judged as the other fits' are, by least squares on it
-            // (where it holds at most half as many voxels as measurements).
-            let mut free = fine.x.clone();
-            let r_fine = match refit_support(op, y, &mut free, REFIT_MAX_ITER, 1)
-                .ok()
-                .flatten()
-            {
-                Some(refit) => {
-                    let rep = fine
-                        .stage
-                        .report
-                        .as_mut()
-                        .expect("iterative methods report");
-                    rep.absorb_applies(&refit);
-                    relative_residual(op, y, &free, rep)
-                }
-                None => fine.stage.relative_residual,
-            };
-            let r_one = one.stage.relative_residual;
-            if r_fine < r_one {
-                one.stage.verdict = format!(
-                    "{}; it leaves more than {COARSE_RESIDUAL} of the data unexplained",
-                    one.stage.verdict
-                );
-                fine.stage.verdict = format!(
-                    "fits better (by least squares on its support where it holds at most K/2 \
-                     voxels: residual {r_fine:.2e} against {r_one:.2e})"
-                );
-                stages.push(one.stage);
-                return Ok(finish(fine, stages));
-            }
-            fine.stage.verdict = format!(
-                "fits no better (by least squares on its support where it holds at most K/2 \
-                 voxels: residual {r_fine:.2e} against {r_one:.2e})"
-            );
-            stages.push(fine.stage);
-        }
-        return Ok(finish(one, stages));
+        return coarse_stage(op, y, options, observer, one, stages);
     }
     one.stage.verdict = format!(
         "{}; its residual still holds returns in {hidden} of {lit} lit pixels",
@@ -335,6 +288,64 @@ pub(super) fn auto<T: Real>(
     );
     stages.push(other.stage);
     several_returns(op, y, options, observer, (best, p.end), vec![one], stages)
+}
+
+/// The end of auto's one-return branch: the kept one-reflector fit `one`, or, where it leaves
+/// more than [`COARSE_RESIDUAL`] of the data unexplained (fewer measurements than lit pixels, or
+/// heavy noise) and the codes are whole, [`Method::CoarseToFine`] if it fits better.
+fn coarse_stage<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
+    mut one: Tried<T>,
+    mut stages: Vec<Stage>,
+) -> Result<Auto<T>> {
+    if one.stage.relative_residual <= COARSE_RESIDUAL || op.whole_code_sets().is_none() {
+        return Ok(finish(one, stages));
+    }
+    // An optional stage: if it fails (other than by cancellation), the fit stands.
+    let mut fine = match attempt(op, y, Method::CoarseToFine, options, observer) {
+        Ok(fine) => fine,
+        Err(e @ crate::error::Error::Cancelled { .. }) => return Err(e),
+        Err(_) => return Ok(finish(one, stages)),
+    };
+    // Its amplitudes are tied along surfaces (better amplitudes for a little more residual); its
+    // support is judged as the other fits' are, by least squares on it (where it holds at most
+    // half as many voxels as measurements).
+    let mut free = fine.x.clone();
+    let r_fine = match refit_support(op, y, &mut free, REFIT_MAX_ITER, 1)
+        .ok()
+        .flatten()
+    {
+        Some(refit) => {
+            let rep = fine
+                .stage
+                .report
+                .as_mut()
+                .expect("iterative methods report");
+            rep.absorb_applies(&refit);
+            relative_residual(op, y, &free, rep)
+        }
+        None => fine.stage.relative_residual,
+    };
+    let r_one = one.stage.relative_residual;
+    let how = format!(
+        "by least squares on its support where it holds at most K/2 voxels: residual \
+         {r_fine:.2e} against {r_one:.2e}"
+    );
+    if r_fine < r_one {
+        one.stage.verdict = format!(
+            "{}; it leaves more than {COARSE_RESIDUAL} of the data unexplained",
+            one.stage.verdict
+        );
+        fine.stage.verdict = format!("fits better ({how})");
+        stages.push(one.stage);
+        return Ok(finish(fine, stages));
+    }
+    fine.stage.verdict = format!("fits no better ({how})");
+    stages.push(fine.stage);
+    Ok(finish(one, stages))
 }
 
 /// [`Method::Auto`] runs [`Method::CoarseToFine`] after the one-reflector fits in the compressive
