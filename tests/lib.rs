@@ -22,6 +22,7 @@ mod cli_file_checks;
 mod cli_forward;
 mod cli_front_door;
 mod cli_reconstruct;
+mod cli_scene_png;
 mod cli_shards;
 mod cli_simulate;
 mod cli_support;

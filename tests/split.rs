@@ -1135,3 +1135,43 @@ fn a_simulation_split_over_parts_measures_what_one_process_measures() {
         assert!(r.unwrap_err().to_string().contains("seeded"));
     }
 }
+
+#[test]
+fn a_supplied_scene_is_simulated_as_a_generated_one_whole_and_split() {
+    use rdlidar::lidar::{
+        simulate, simulate_split_supplied, simulate_supplied, SceneSpec, SimulationSpec,
+    };
+    let g = Geometry::new(9, 6, 12).unwrap();
+    let generated = SimulationSpec {
+        scene: SceneSpec::Random { lit_fraction: 0.6 },
+        snr_db: Some(25.0),
+        seeded_codes: true,
+        ..SimulationSpec::new(g, 200, 3)
+    };
+    let reference = simulate::<f64>(&generated).unwrap();
+    // The same scene supplied: the same pulse, codes, noise and measurements.
+    let spec = SimulationSpec {
+        scene: SceneSpec::Supplied,
+        ..generated
+    };
+    let whole = simulate_supplied::<f64>(&spec, reference.scene.clone()).unwrap();
+    assert_eq!(whole.meas, reference.meas);
+    for sim in in_spaces(2, &|space| {
+        simulate_split_supplied::<f64>(&spec, &space, reference.scene.clone()).unwrap()
+    }) {
+        let worst = sim
+            .meas
+            .iter()
+            .zip(&whole.meas)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(worst <= 1e-12, "{worst:e}");
+    }
+    // A supplied scene needs the supplied kind and the spec's grid; the kind needs a scene.
+    let err = simulate_supplied::<f64>(&generated, reference.scene.clone()).unwrap_err();
+    assert!(err.to_string().contains("scene"), "{err}");
+    let other = rdlidar::lidar::Scene::<f64>::zeros(Geometry::new(9, 7, 12).unwrap());
+    let err = simulate_supplied::<f64>(&spec, other).unwrap_err();
+    assert!(err.to_string().contains("9x7x12"), "{err}");
+    let err = simulate::<f64>(&spec).unwrap_err();
+    assert!(err.to_string().contains("supplied"), "{err}");
+}

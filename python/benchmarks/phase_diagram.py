@@ -1,19 +1,20 @@
 """Phase diagram of the hard regimes: measurements per lit pixel x SNR -> depths recovered.
 
 For each scene, each number of measurements per lit pixel and each SNR, the script simulates an
-acquisition with the command line (``rdlidar simulate`` for the pulse and codes, ``rdlidar
-forward`` for the measurements), adds white Gaussian noise at the SNR (sigma^2 = mean(y^2) /
-10^(SNR/10), the definition of ``rdlidar simulate --snr-db``, drawn here with numpy from the run's
-seed), reconstructs with ``rdlidar reconstruct --solver auto`` and compares its depth map with
-the truth: the share of lit pixels at the exact depth and within one bin, and the false returns'
+acquisition with the command line (``rdlidar simulate``, with ``--snr-db`` for the noise),
+reconstructs with ``rdlidar reconstruct --solver auto`` and compares its depth map with the
+truth: the share of lit pixels at the exact depth and within one bin, and the false returns'
 share of the empty pixels, with the wall-clock time of the reconstruction.
 
-Two scenes: the paper's (a square, a disk and a slanted plane of constant reflectivities) and a
-drawn one with curved surfaces and textured reflectivity ("surfaces": a sphere, a cylinder, a
-staircase and a slanted wall, the top rows empty).
+Scenes: the paper's ("paper": a square, a disk and a slanted plane of constant reflectivities),
+and scenes read from PNG depth and reflectivity maps by ``rdlidar simulate --scene png``:
+"surfaces", drawn here with curved surfaces and textured reflectivity (a sphere, a cylinder, a
+staircase and a slanted wall, the top rows empty) and written as 16-bit PNGs, or your own depth
+map (``--depth-png FILE`` and optionally ``--reflectivity-png FILE``, scene "png"; --size then
+takes its height and width from the file, and only K_s from the option).
 
-Several builds can be compared in one run (``--bin before=PATH --bin after=PATH``), each run of
-each build on the same files. Prints one markdown table per scene and build.
+Several builds can be compared in one run (``--bin before=PATH --bin after=PATH``), each build on
+the same files, simulated by the first. Prints one markdown table per scene and build.
 
     python python/benchmarks/phase_diagram.py --bin rdlidar=target/release/rdlidar
 """
@@ -23,13 +24,42 @@ import os
 import subprocess
 import sys
 import tempfile
+import struct
 import time
+import zlib
 
 import numpy as np
 
 
-def surfaces_scene(m: int, n: int, ks: int, seed: int) -> np.ndarray:
-    """A drawn scene with piecewise-smooth depth and textured reflectivity, (m, n, ks)."""
+def write_png16(path: str, image: np.ndarray) -> None:
+    """Writes a 2-D array of integers in [0, 65535] as a 16-bit grayscale PNG."""
+    h, w = image.shape
+    rows = image.astype(">u2")
+    raw = b"".join(b"\x00" + rows[i].tobytes() for i in range(h))
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    header = struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0)
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+                + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def png_size(path: str):
+    """(height, width) of a PNG file, from its header."""
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        sys.exit(f"--depth-png: {path} is not a PNG file")
+    w, h = struct.unpack(">II", head[16:24])
+    return h, w
+
+
+def surfaces_maps(m: int, n: int, ks: int, seed: int):
+    """A drawn scene with piecewise-smooth depth and textured reflectivity, as 16-bit maps:
+    depth (0: no return; v > 0: bin round(v / 65535 * (ks - 1))) and reflectivity."""
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:m, 0:n].astype(float)
     u, v = yy / m, xx / n
@@ -56,11 +86,10 @@ def surfaces_scene(m: int, n: int, ks: int, seed: int) -> np.ndarray:
     refl = 0.6 + 0.25 * field / (np.abs(field).max() + 1e-12)
     refl = np.where(~(stairs | cyl | sphere) & (np.floor(xx / 6) % 2 == 0), refl * 0.7, refl)
     refl = np.clip(refl, 0.25, 1.0)
-    bins = np.clip(np.round(depth * (ks - 1)), 0, ks - 1).astype(int)
-    x = np.zeros((m, n, ks))
-    ii, jj = np.nonzero(lit)
-    x[ii, jj, bins[ii, jj]] = refl[ii, jj]
-    return x
+    bins = np.clip(np.round(depth * (ks - 1)), 0, ks - 1)
+    # Bin b is written as the value nearest b / (ks - 1) of full scale, at least 1 (0 is empty).
+    depth16 = np.where(lit, np.maximum(np.round(bins / (ks - 1) * 65535), 1), 0)
+    return depth16.astype(int), np.round(refl * 65535).astype(int)
 
 
 def run(cmd, what):
@@ -86,7 +115,7 @@ def reconstruct(binary, d, ks, truth):
     t0 = time.perf_counter()
     run(
         [binary, "reconstruct", "--pulse", f"{d}/pulse.npy", "--codes", f"{d}/codes.npy",
-         "--meas", f"{d}/y.npy", "--depth-bins", str(ks), "--solver", "auto",
+         "--meas", f"{d}/meas.npy", "--depth-bins", str(ks), "--solver", "auto",
          "--out-depth", f"{d}/d.npy", "--out-scene", f"{d}/x.npy", "--quiet"],
         "reconstruct",
     )
@@ -102,46 +131,54 @@ def main():
     ap.add_argument("--ratios", default="0.9,1.5,2.4,3.5",
                     help="measurements per lit pixel")
     ap.add_argument("--snr", default="none,20,10", help="SNRs in dB (none: noise-free)")
-    ap.add_argument("--scenes", default="paper,surfaces")
+    ap.add_argument("--scenes", default="paper,surfaces",
+                    help="paper, surfaces, png (the map of --depth-png)")
+    ap.add_argument("--depth-png", help="a depth map for the scene png")
+    ap.add_argument("--reflectivity-png", help="its reflectivity map (default: 1)")
     ap.add_argument("--seed", type=int, default=40)
     args = ap.parse_args()
     bins = [b.split("=", 1) for b in (args.bin or ["rdlidar=rdlidar"])]
     m, n, ks = (int(v) for v in args.size.split("x"))
+    sizes = {"paper": args.size, "surfaces": args.size}
+    if args.depth_png:
+        h, w = png_size(args.depth_png)
+        sizes["png"] = f"{h}x{w}x{ks}"
     ratios = [float(r) for r in args.ratios.split(",")]
     snrs = [None if s == "none" else float(s) for s in args.snr.split(",")]
     first = bins[0][1]
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for scene in args.scenes.split(","):
-            # The scene and its lit pixels first, to size the pulse.
+            if scene not in sizes:
+                sys.exit(f"--scenes: unknown scene {scene!r} (paper, surfaces, png with "
+                         "--depth-png)")
+            # The scene's flags, and its lit pixels (from a short probe) to size the pulse.
             if scene == "paper":
-                probe = os.path.join(tmp, "probe")
-                run([first, "simulate", "--scene", "paper", "--size", args.size,
-                     "--pulse-len", "8", "--out", probe, "--quiet", "--force"], "simulate")
-                truth = np.load(f"{probe}/scene.npy")
+                flags = ["--scene", "paper"]
             elif scene == "surfaces":
-                truth = surfaces_scene(m, n, ks, args.seed)
+                depth16, refl16 = surfaces_maps(m, n, ks, args.seed)
+                write_png16(os.path.join(tmp, "depth.png"), depth16)
+                write_png16(os.path.join(tmp, "reflectivity.png"), refl16)
+                flags = ["--scene", "png", "--depth-png", os.path.join(tmp, "depth.png"),
+                         "--reflectivity-png", os.path.join(tmp, "reflectivity.png")]
             else:
-                sys.exit(f"--scenes: unknown scene {scene!r} (paper, surfaces)")
-            lit = int((truth != 0).any(axis=-1).sum())
+                flags = ["--scene", "png", "--depth-png", args.depth_png]
+                if args.reflectivity_png:
+                    flags += ["--reflectivity-png", args.reflectivity_png]
+            probe = os.path.join(tmp, "probe")
+            run([first, "simulate", *flags, "--size", sizes[scene], "--pulse-len", "8",
+                 "--out", probe, "--quiet", "--force"], "simulate")
+            lit = int((np.load(f"{probe}/scene.npy") != 0).any(axis=-1).sum())
             for ratio in ratios:
                 for snr in snrs:
                     d = os.path.join(tmp, f"{scene}-{ratio}-{snr}")
                     k = max(int(round(ratio * lit)), ks)
                     kp = k - ks + 1
-                    run([first, "simulate", "--scene", "paper", "--size", args.size,
-                         "--pulse-len", str(kp), "--seed", str(args.seed), "--out", d,
-                         "--quiet", "--force"], "simulate")
-                    np.save(f"{d}/truth.npy", truth)
-                    run([first, "forward", "--pulse", f"{d}/pulse.npy", "--codes",
-                         f"{d}/codes.npy", "--scene", f"{d}/truth.npy", "--out", f"{d}/y.npy",
-                         "--quiet"], "forward")
-                    y = np.load(f"{d}/y.npy")
-                    if snr is not None:
-                        sigma = np.sqrt(np.mean(y.astype(np.float64) ** 2) / 10 ** (snr / 10))
-                        rng = np.random.default_rng(args.seed + 2)
-                        y = y + sigma * rng.standard_normal(y.shape)
-                        np.save(f"{d}/y.npy", y)
+                    noise = [] if snr is None else ["--snr-db", str(snr)]
+                    run([first, "simulate", *flags, "--size", sizes[scene], "--pulse-len",
+                         str(kp), "--seed", str(args.seed), *noise, "--out", d, "--quiet",
+                         "--force"], "simulate")
+                    truth = np.load(f"{d}/scene.npy")
                     for label, binary in bins:
                         r = reconstruct(binary, d, ks, truth)
                         results[(scene, label, ratio, snr)] = (k, lit) + r
@@ -150,7 +187,7 @@ def main():
                               file=sys.stderr, flush=True)
     for scene in args.scenes.split(","):
         for label, _ in bins:
-            print(f"\n### {scene}, {args.size}, {label}\n")
+            print(f"\n### {scene}, {sizes[scene]}, {label}\n")
             print("exact % / within one bin % / false % of empty / seconds\n")
             head = " | ".join("noise-free" if s is None else f"{s:g} dB" for s in snrs)
             print(f"| meas. per lit pixel (K) | {head} |")

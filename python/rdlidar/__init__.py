@@ -441,14 +441,17 @@ def simulate(
     codes_format: str = "int8",
     out=None,
     force: bool = False,
+    depth_png=None,
+    reflectivity_png=None,
 ) -> Simulation:
     """Simulates an acquisition of any architecture, as ``rdlidar simulate`` does.
 
     Parameters
     ----------
-    scene : "paper", "transparent" or "random"
+    scene : "paper", "transparent", "random" or "png"
         The paper's scene (a square, a disk and a slanted plane), a semi-transparent one (1 to 3
-        returns per lit pixel), or random opaque returns in ``lit_fraction`` of the pixels.
+        returns per lit pixel), random opaque returns in ``lit_fraction`` of the pixels, or an
+        opaque scene read from the PNG depth map ``depth_png``.
     size : (M, N, K_s)
     pulse_len : K_p
     seed : the base seed of every random draw (the command line's ``--seed``).
@@ -464,6 +467,11 @@ def simulate(
     out : a folder to write the command line's files into (scene.npy, pulse.npy, codes.npy,
         meas.npy, meta.json), byte for byte the same as ``rdlidar simulate`` with the same
         settings; an existing non-empty folder is refused unless ``force``.
+    depth_png : the "png" scene's depth map, a PNG file (8- or 16-bit; grayscale, or the first
+        channel of colour) whose height and width are ``size``'s M and N: a value v > 0 is depth
+        bin round(v / full scale * (K_s - 1)), 0 is no return.
+    reflectivity_png : the "png" scene's reflectivity map (same size): amplitude v / full scale
+        at each return (None: 1).
 
     Returns a ``Simulation``.
     """
@@ -500,10 +508,20 @@ def simulate(
         codes_format,
         None if out is None else os.fspath(out),
         bool(force),
+        _optional_path(depth_png, "depth_png"),
+        _optional_path(reflectivity_png, "reflectivity_png"),
     )
     meta = json.loads(d["meta"])
     files = None if out is None else os.fspath(out)
     return Simulation(d["scene"], d["pulse"], d["codes"], d["meas"], meta, files)
+
+
+def _optional_path(value, name):
+    if value is None:
+        return None
+    if not isinstance(value, (str, os.PathLike)):
+        raise TypeError(f"{name}: expected a path, got {type(value).__name__}")
+    return os.fspath(value)
 
 
 def _callback(callback):

@@ -24,8 +24,8 @@ use rdlidar::acquisition::{
     SimulationRequest, Streaming, Use,
 };
 use rdlidar::lidar::{
-    simulate as simulate_scene, zero_mean, Architecture, Cancellable, Codes, Geometry, Scene,
-    SimulationSpec, TileSize, DEFAULT_TAU_S,
+    simulate as simulate_scene, simulate_supplied, zero_mean, Architecture, Cancellable, Codes,
+    Geometry, Scene, SimulationSpec, TileSize, DEFAULT_TAU_S,
 };
 use rdlidar::operator::{BoxedOperator, DotTest, LinearOperator};
 use rdlidar::recon::{compare, Method, ReconstructOptions, TileReconstruction};
@@ -451,7 +451,7 @@ impl PyOperator {
 /// arrays (codes as the format says: int8, packed uint8, or None for seeded codes) and the
 /// meta.json text; with `out`, also writes the same files as the command line.
 #[pyfunction]
-#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double, adcs=1, tiles=None, aperture=None, codes_format="int8", out=None, force=false))]
+#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double, adcs=1, tiles=None, aperture=None, codes_format="int8", out=None, force=false, depth_png=None, reflectivity_png=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -469,6 +469,8 @@ fn simulate<'py>(
     codes_format: &str,
     out: Option<std::path::PathBuf>,
     force: bool,
+    depth_png: Option<std::path::PathBuf>,
+    reflectivity_png: Option<std::path::PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let geometry = Geometry::new(size.0, size.1, size.2).map_err(value_error)?;
     let tiles = match tiles {
@@ -482,6 +484,8 @@ fn simulate<'py>(
     };
     let request = SimulationRequest {
         scene: scene.to_string(),
+        depth_png,
+        reflectivity_png,
         lit_fraction,
         ternary_zero_prob,
         snr_db,
@@ -501,23 +505,31 @@ fn simulate<'py>(
         .map_err(value_error)?;
     let d = PyDict::new(py);
     if double {
-        fill_simulation::<f64>(py, &spec, request.codes_format, out.as_deref(), force, &d)?;
+        fill_simulation::<f64>(py, &request, &spec, out.as_deref(), force, &d)?;
     } else {
-        fill_simulation::<f32>(py, &spec, request.codes_format, out.as_deref(), force, &d)?;
+        fill_simulation::<f32>(py, &request, &spec, out.as_deref(), force, &d)?;
     }
     Ok(d)
 }
 
 fn fill_simulation<'py, T: Real + numpy::Element + ndarray_npy::WritableElement>(
     py: Python<'py>,
+    request: &SimulationRequest,
     spec: &SimulationSpec,
-    format: CodesFormat,
     out: Option<&std::path::Path>,
     force: bool,
     d: &Bound<'py, PyDict>,
 ) -> PyResult<()> {
+    let format = request.codes_format;
     let sim = py
-        .detach(|| simulate_scene::<T>(spec))
+        .detach(|| {
+            let mut sim = match request.supplied_scene::<T>()? {
+                Some(scene) => simulate_supplied::<T>(spec, scene),
+                None => simulate_scene::<T>(spec),
+            }?;
+            sim.scene_source = request.scene_source();
+            Ok::<_, rdlidar::Error>(sim)
+        })
         .map_err(value_error)?;
     let meta = match out {
         Some(dir) => py

@@ -80,6 +80,8 @@ def cli_flags(kwargs):
             flags += ["--ternary-zero-prob", value]
         elif key == "lit_fraction":
             flags += ["--lit-fraction", value]
+        elif key in ("depth_png", "reflectivity_png"):
+            flags += ["--" + key.replace("_", "-"), value]
         elif key == "dtype":
             flags += ["--precision", "f32" if np.dtype(value) == np.float32 else "f64"]
         else:
@@ -222,6 +224,59 @@ def test_simulate_in_memory_is_simulate_to_files(tmp_path):
         for name in ("scene", "pulse", "codes", "meas"):
             assert np.array_equal(getattr(a, name), getattr(b, name)), name
         assert a.meta == b.meta
+
+
+def write_png16(path, image):
+    """A 16-bit grayscale PNG of a 2-D array of integers in [0, 65535]."""
+    import struct
+    import zlib
+
+    h, w = image.shape
+    raw = b"".join(b"\x00" + image[i].astype(">u2").tobytes() for i in range(h))
+
+    def chunk(kind, data):
+        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    header = struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+                     + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def test_a_png_scene_is_the_command_lines_and_bad_maps_name_their_argument(tmp_path,
+                                                                           rdlidar_bin):
+    rng = np.random.default_rng(12)
+    m, n, ks = SIZE
+    depth = np.where(rng.random((m, n)) < 0.3, 0, rng.integers(1, 65536, (m, n)))
+    refl = rng.integers(8000, 65536, (m, n))
+    write_png16(tmp_path / "depth.png", depth)
+    write_png16(tmp_path / "refl.png", refl)
+    maps = {"depth_png": tmp_path / "depth.png", "reflectivity_png": tmp_path / "refl.png"}
+    cli_dir, py_dir = tmp_path / "cli", tmp_path / "py"
+    cli_simulate(rdlidar_bin, cli_dir, "png", SIZE, KP, SEED, snr_db=20.0, **maps)
+    sim = rdlidar.simulate("png", size=SIZE, pulse_len=KP, seed=SEED, snr_db=20.0, out=py_dir,
+                           **maps)
+    for name in ("scene.npy", "pulse.npy", "codes.npy", "meas.npy", "meta.json"):
+        assert (py_dir / name).read_bytes() == (cli_dir / name).read_bytes(), name
+    lit = depth > 0
+    bins = np.rint(depth / 65535 * (ks - 1)).astype(int)
+    assert np.array_equal(truth_depth(sim.scene), np.where(lit, bins, -1))
+    assert np.allclose(sim.scene.max(axis=2), np.where(lit, refl / 65535, 0))
+    assert sim.meta["scene"]["source"] == "depth depth.png, reflectivity refl.png"
+
+    wrong = (m, n + 1, ks)
+    with pytest.raises(ValueError, match=r"depth_png: .*depth\.png is"):
+        rdlidar.simulate("png", size=wrong, pulse_len=KP, depth_png=maps["depth_png"])
+    (tmp_path / "bad.png").write_bytes(b"not a png")
+    with pytest.raises(ValueError, match=r"reflectivity_png: .*bad\.png: not a readable PNG"):
+        rdlidar.simulate("png", size=SIZE, pulse_len=KP, depth_png=maps["depth_png"],
+                         reflectivity_png=tmp_path / "bad.png")
+    with pytest.raises(ValueError, match="depth_png"):
+        rdlidar.simulate("png", size=SIZE, pulse_len=KP)
+    with pytest.raises(ValueError, match="depth_png: applies only to the png scene"):
+        rdlidar.simulate("paper", size=SIZE, pulse_len=KP, depth_png=maps["depth_png"])
+    with pytest.raises(TypeError, match="depth_png: expected a path"):
+        rdlidar.simulate("png", size=SIZE, pulse_len=KP, depth_png=3)
 
 
 # The operator of every architecture ----------------------------------------------------------

@@ -63,16 +63,24 @@ impl std::str::FromStr for CodesFormat {
     }
 }
 
-/// The scenes a simulation generates, by name.
-pub const SCENES: [&str; 3] = ["paper", "random", "transparent"];
+/// The scenes a simulation generates or reads, by name ("png": from a depth map, see
+/// [`SimulationRequest::depth_png`]).
+pub const SCENES: [&str; 4] = ["paper", "random", "transparent", "png"];
 
 /// What a user asks `simulate` for, setting by setting, as the command line and Python take
 /// it. [`SimulationRequest::spec`] checks every setting and their combinations; errors name
 /// the setting (`lit_fraction`, `aperture`, …).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimulationRequest {
-    /// "paper", "random" or "transparent".
+    /// "paper", "random", "transparent" or "png".
     pub scene: String,
+    /// The png scene's depth map ([`crate::io::scene_from_pngs`]: a value v > 0 of the first
+    /// channel is depth bin round(v / full scale · (K_s − 1)), 0 no return); its height and
+    /// width must be the grid's M and N.
+    pub depth_png: Option<PathBuf>,
+    /// The png scene's reflectivity map (same size; amplitude v / full scale), or `None` for
+    /// amplitude 1 at every return.
+    pub reflectivity_png: Option<PathBuf>,
     /// The grid.
     pub geometry: Geometry,
     /// K_p.
@@ -101,6 +109,8 @@ impl SimulationRequest {
     pub fn new(geometry: Geometry, pulse_len: usize, seed: u64) -> Self {
         SimulationRequest {
             scene: "paper".into(),
+            depth_png: None,
+            reflectivity_png: None,
             geometry,
             pulse_len,
             seed,
@@ -129,11 +139,12 @@ impl SimulationRequest {
         limits::check_count("adcs", self.adcs, limits::MAX_ADCS)?;
         let scene = match (self.scene.as_str(), self.lit_fraction) {
             ("paper", None) => SceneSpec::Paper,
+            ("png", None) => SceneSpec::Supplied,
             ("transparent", None) => SceneSpec::Transparent,
             ("random", f) => SceneSpec::Random {
                 lit_fraction: f.unwrap_or(0.5),
             },
-            (name @ ("paper" | "transparent"), Some(_)) => {
+            (name @ ("paper" | "transparent" | "png"), Some(_)) => {
                 return Err(Error::param(
                     "lit_fraction",
                     format!("applies only to the random scene, not to the {name} scene"),
@@ -143,12 +154,35 @@ impl SimulationRequest {
                 return Err(Error::param(
                     "scene",
                     format!(
-                        "{} is not one of \"paper\", \"random\", \"transparent\"",
+                        "{} is not one of \"paper\", \"random\", \"transparent\", \"png\"",
                         crate::io::meta::excerpt(other)
                     ),
                 ))
             }
         };
+        match (&scene, &self.depth_png, &self.reflectivity_png) {
+            (SceneSpec::Supplied, None, _) => {
+                return Err(Error::param(
+                    "depth_png",
+                    "the png scene reads its depths from a PNG depth map: give its file",
+                ))
+            }
+            (SceneSpec::Supplied, Some(_), _) => {}
+            (other, depth, reflectivity) => {
+                if let Some(name) = [("depth_png", depth), ("reflectivity_png", reflectivity)]
+                    .into_iter()
+                    .find_map(|(name, v)| v.is_some().then_some(name))
+                {
+                    return Err(Error::param(
+                        name,
+                        format!(
+                            "applies only to the png scene, not to the {} scene",
+                            other.name()
+                        ),
+                    ));
+                }
+            }
+        }
         if let Some(f) = self.lit_fraction {
             if !(0.0..=1.0).contains(&f) {
                 return Err(Error::param(
@@ -236,6 +270,81 @@ impl SimulationRequest {
             snr_db: self.snr_db,
             seeded_codes: self.codes_format == CodesFormat::Seed,
             ..SimulationSpec::new(self.geometry, self.pulse_len, self.seed)
+        })
+    }
+}
+
+impl SimulationRequest {
+    /// The scene the request reads (the png scene's, in `T`), or `None` when the simulation
+    /// generates its scene. The depth map's height and width must be the grid's M and N.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming `depth_png` for a map of another size, `depth_png`
+    /// or `reflectivity_png` (the reason starting with the file's path) for a file that cannot
+    /// be read or decoded, and for a png scene without the `images` feature;
+    /// [`Error::ShapeMismatch`] for maps of different sizes.
+    pub fn supplied_scene<T: Real>(&self) -> Result<Option<crate::lidar::Scene<T>>> {
+        let Some(depth) = self.depth_png.as_deref() else {
+            return Ok(None);
+        };
+        #[cfg(feature = "images")]
+        {
+            let g = self.geometry;
+            let reflectivity = self.reflectivity_png.as_deref();
+            // The reader names the file in its reason: name the setting that gave it.
+            let scene =
+                io::scene_from_pngs::<T>(depth, reflectivity, g.ks).map_err(|e| match e {
+                    Error::InvalidParameter {
+                        name: "png",
+                        reason,
+                    } => {
+                        let of_reflectivity = reflectivity
+                            .is_some_and(|r| reason.starts_with(&format!("{}:", r.display())));
+                        let name = if of_reflectivity {
+                            "reflectivity_png"
+                        } else {
+                            "depth_png"
+                        };
+                        Error::InvalidParameter { name, reason }
+                    }
+                    other => other,
+                })?;
+            let found = scene.geometry();
+            if (found.m, found.n) != (g.m, g.n) {
+                return Err(Error::param(
+                    "depth_png",
+                    format!(
+                        "{} is {} pixels high and {} wide, but the grid {g} asks for {} by {}",
+                        depth.display(),
+                        found.m,
+                        found.n,
+                        g.m,
+                        g.n
+                    ),
+                ));
+            }
+            Ok(Some(scene))
+        }
+        #[cfg(not(feature = "images"))]
+        Err(Error::param(
+            "depth_png",
+            format!(
+                "{}: reading PNG depth maps needs rdlidar's `images` feature",
+                depth.display()
+            ),
+        ))
+    }
+
+    /// How `meta.json` names the supplied scene's source: its maps' file names.
+    pub fn scene_source(&self) -> Option<String> {
+        let name = |p: &Path| {
+            p.file_name()
+                .map_or_else(|| p.display().to_string(), |f| f.to_string_lossy().into())
+        };
+        let depth = self.depth_png.as_deref()?;
+        Some(match self.reflectivity_png.as_deref() {
+            None => format!("depth {}", name(depth)),
+            Some(r) => format!("depth {}, reflectivity {}", name(depth), name(r)),
         })
     }
 }

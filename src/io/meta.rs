@@ -69,8 +69,12 @@ pub struct ArchitectureMeta {
 /// The scene.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneMeta {
-    /// "paper", "random" or "transparent".
+    /// "paper", "random", "transparent", or "supplied" (read from a depth map or given by the
+    /// caller; `source` says which).
     pub kind: String,
+    /// Where a supplied scene came from (the depth and reflectivity maps' file names).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
     /// A random scene's fraction of lit pixels.
     pub lit_fraction: Option<f64>,
     /// A semi-transparent scene's range of returns per pixel.
@@ -211,11 +215,16 @@ impl SimulationMeta {
                 codes: seeds.code_set(0),
                 code_sets: (0..arch.code_sets()).map(|i| seeds.code_set(i)).collect(),
                 noise: seeds.noise(),
-                scene: (spec.scene.name() != "paper").then(|| seeds.scene()),
+                scene: matches!(
+                    spec.scene,
+                    crate::lidar::SceneSpec::Random { .. } | crate::lidar::SceneSpec::Transparent
+                )
+                .then(|| seeds.scene()),
                 aperture: matches!(arch, Architecture::Aperture(_)).then(|| seeds.aperture()),
             },
             scene: SceneMeta {
                 kind: spec.scene.name().into(),
+                source: sim.scene_source.clone(),
                 lit_fraction: match spec.scene {
                     crate::lidar::SceneSpec::Random { lit_fraction } => Some(lit_fraction),
                     _ => None,

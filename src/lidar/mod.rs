@@ -58,6 +58,9 @@ pub use scenes::{
 #[cfg(feature = "images")]
 pub(crate) use scenes::{bin_of_fraction, checked};
 pub use seeded::{SeededCodes, SEEDED_CODES_GENERATOR};
-pub use simulate::{simulate, simulate_split, SceneSpec, Seeds, Simulation, SimulationSpec};
+pub use simulate::{
+    simulate, simulate_split, simulate_split_supplied, simulate_supplied, SceneSpec, Seeds,
+    Simulation, SimulationSpec,
+};
 pub use streamed::{StreamedOperator, STREAM_BLOCK_BYTES};
 pub use support::SupportOperator;

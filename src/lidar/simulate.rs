@@ -86,6 +86,9 @@ pub enum SceneSpec {
     /// A semi-transparent scene ([`semi_transparent_scene`]) with 1 to min(3, K_s) returns per
     /// pixel.
     Transparent,
+    /// A scene the caller supplies (for example one read from a depth map): pass it to
+    /// [`simulate_supplied`] or [`simulate_split_supplied`]; [`SceneSpec::generate`] refuses it.
+    Supplied,
 }
 
 impl SceneSpec {
@@ -95,6 +98,7 @@ impl SceneSpec {
             SceneSpec::Paper => "paper",
             SceneSpec::Random { .. } => "random",
             SceneSpec::Transparent => "transparent",
+            SceneSpec::Supplied => "supplied",
         }
     }
 
@@ -109,9 +113,14 @@ impl SceneSpec {
     /// The scene itself, random ones drawn from `seeds.scene()`.
     ///
     /// # Errors
-    /// The generators' errors.
+    /// The generators' errors; [`Error::InvalidParameter`] (`scene`) for
+    /// [`SceneSpec::Supplied`], which has no generator.
     pub fn generate<T: Real>(&self, g: Geometry, seeds: Seeds) -> Result<Scene<T>> {
         match *self {
+            SceneSpec::Supplied => Err(Error::param(
+                "scene",
+                "a supplied scene has no generator: pass it to simulate_supplied",
+            )),
             SceneSpec::Paper => paper_scene(g),
             SceneSpec::Random { lit_fraction } => {
                 random_opaque_scene(g, lit_fraction, seeds.scene())
@@ -247,6 +256,9 @@ pub struct Simulation<T> {
     pub meas: Vec<T>,
     /// What the noise did (`None` when noise-free).
     pub noise: Option<NoiseReport>,
+    /// Where a supplied scene came from (for example its depth map's file name), as the caller
+    /// describes it; `meta.json` records it. `None` for generated scenes.
+    pub scene_source: Option<String>,
 }
 
 impl<T: Real> Simulation<T> {
@@ -302,6 +314,48 @@ impl<T: Real> Simulation<T> {
 /// that overflows, a zero-size tile, an aperture fraction outside (0, 1], too many ADCs, a
 /// ternary zero probability outside [0, 1)); the generators' and operators' errors.
 pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
+    simulate_inner(spec, None)
+}
+
+/// [`simulate`] of `scene`, which the caller supplies: `spec.scene` must be
+/// [`SceneSpec::Supplied`] and the scene's grid `spec.geometry`.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`scene`) for another scene kind or a scene of another grid; the errors of [`simulate`].
+pub fn simulate_supplied<T: Real>(spec: &SimulationSpec, scene: Scene<T>) -> Result<Simulation<T>> {
+    simulate_inner(spec, Some(scene))
+}
+
+/// The scene of `spec`: `supplied` (checked against the spec) or the generated one.
+fn scene_of<T: Real>(spec: &SimulationSpec, supplied: Option<Scene<T>>) -> Result<Scene<T>> {
+    let g = spec.geometry;
+    match (spec.scene, supplied) {
+        (SceneSpec::Supplied, Some(scene)) => {
+            let found = scene.geometry();
+            if found != g {
+                return Err(Error::param(
+                    "scene",
+                    format!("the supplied scene is {found}, the simulation's grid {g}"),
+                ));
+            }
+            Ok(scene)
+        }
+        (SceneSpec::Supplied, None) => spec.scene.generate(g, spec.seeds()),
+        (other, Some(_)) => Err(Error::param(
+            "scene",
+            format!(
+                "a scene was supplied for the {} scene: ask for SceneSpec::Supplied",
+                other.name()
+            ),
+        )),
+        (other, None) => other.generate(g, spec.seeds()),
+    }
+}
+
+fn simulate_inner<T: Real>(
+    spec: &SimulationSpec,
+    supplied: Option<Scene<T>>,
+) -> Result<Simulation<T>> {
     let g = spec.geometry;
     let k = spec.samples()?;
     let seeds = spec.seeds();
@@ -322,7 +376,7 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
         Architecture::Aperture(f) => Some(aperture_pixels(g.pixels(), f, seeds.aperture())?),
         _ => None,
     };
-    let scene = spec.scene.generate::<T>(g, seeds)?;
+    let scene = scene_of(spec, supplied)?;
     let pulse = Pulse::<T>::bernoulli(spec.pulse_len, seeds.pulse())?;
     if spec.seeded_codes && spec.ternary_zero_prob.is_some() {
         return Err(Error::param(
@@ -351,6 +405,7 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
         groups,
         meas: Vec::new(),
         noise: None,
+        scene_source: None,
     };
     let y = match &sim.groups {
         // One tile at a time: only one tile's operator (and copy of its codes) is alive.
@@ -403,8 +458,29 @@ pub fn simulate_split<T: Real>(
     spec: &SimulationSpec,
     space: &Arc<dyn crate::space::Space>,
 ) -> Result<Simulation<T>> {
+    simulate_split_inner(spec, space, None)
+}
+
+/// [`simulate_split`] of a scene the caller supplies (the whole scene, in every part), as
+/// [`simulate_supplied`].
+///
+/// # Errors
+/// As [`simulate_split`] and [`simulate_supplied`].
+pub fn simulate_split_supplied<T: Real>(
+    spec: &SimulationSpec,
+    space: &Arc<dyn crate::space::Space>,
+    scene: Scene<T>,
+) -> Result<Simulation<T>> {
+    simulate_split_inner(spec, space, Some(scene))
+}
+
+fn simulate_split_inner<T: Real>(
+    spec: &SimulationSpec,
+    space: &Arc<dyn crate::space::Space>,
+    supplied: Option<Scene<T>>,
+) -> Result<Simulation<T>> {
     if space.parts() == 1 {
-        return simulate(spec);
+        return simulate_inner(spec, supplied);
     }
     let g = spec.geometry;
     let seeded = spec.seeded()?.ok_or_else(|| {
@@ -449,7 +525,7 @@ pub fn simulate_split<T: Real>(
         "lower --size or --pulse-len, or use more processes",
     )?;
     let seeds = spec.seeds();
-    let scene = spec.scene.generate::<T>(g, seeds)?;
+    let scene = scene_of(spec, supplied)?;
     let pulse = Pulse::<T>::bernoulli(spec.pulse_len, seeds.pulse())?;
     let mine = seeded.band(rows.start * g.n..rows.end * g.n)?;
     let code_sets = (0..arch.code_sets())
@@ -473,6 +549,7 @@ pub fn simulate_split<T: Real>(
         groups: None,
         meas: Vec::new(),
         noise: None,
+        scene_source: None,
     };
     sim.measured(y)
 }

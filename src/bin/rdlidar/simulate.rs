@@ -10,7 +10,8 @@ use rdlidar::acquisition::{
 use rdlidar::io;
 use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
 use rdlidar::lidar::{
-    simulate, simulate_split, Geometry, SimulationSpec, TileSize, SEEDED_CODES_GENERATOR,
+    simulate, simulate_split, simulate_split_supplied, simulate_supplied, Geometry, SimulationSpec,
+    TileSize, SEEDED_CODES_GENERATOR,
 };
 use rdlidar::Real;
 
@@ -43,6 +44,9 @@ pub enum SceneKind {
     Random,
     /// Semi-transparent scene: 1 to 3 returns per pixel (at most K_s), amplitudes in [0.1, 1].
     Transparent,
+    /// An opaque scene read from a PNG depth map (--depth-png) and optionally a reflectivity
+    /// map (--reflectivity-png).
+    Png,
 }
 
 impl SceneKind {
@@ -51,6 +55,7 @@ impl SceneKind {
             SceneKind::Paper => "paper",
             SceneKind::Random => "random",
             SceneKind::Transparent => "transparent",
+            SceneKind::Png => "png",
         }
     }
 }
@@ -102,6 +107,15 @@ pub struct SimulateArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// The depth map of `--scene png`: a PNG (8- or 16-bit; grayscale, or the first channel of
+    /// colour) whose value v > 0 is depth bin round(v / full scale · (K_s − 1)) and 0 no return.
+    /// Its height and width must be --size's M and N.
+    #[arg(long, value_name = "FILE")]
+    pub depth_png: Option<PathBuf>,
+    /// The reflectivity map of `--scene png` (same size as the depth map): amplitude
+    /// v / full scale at each return (default: 1).
+    #[arg(long, value_name = "FILE")]
+    pub reflectivity_png: Option<PathBuf>,
     /// Fraction of lit pixels of `--scene random`, in [0, 1] (default 0.5).
     #[arg(long, value_name = "F")]
     pub lit_fraction: Option<f64>,
@@ -145,6 +159,8 @@ fn flag(name: &str) -> String {
 fn request_of(a: &SimulateArgs, seed: u64) -> SimulationRequest {
     SimulationRequest {
         scene: a.scene.name().into(),
+        depth_png: a.depth_png.clone(),
+        reflectivity_png: a.reflectivity_png.clone(),
         lit_fraction: a.lit_fraction,
         ternary_zero_prob: a.ternary_zero_prob,
         snr_db: a.snr_db,
@@ -179,10 +195,12 @@ pub fn run(a: &SimulateArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
                 "codes_format",
                 "ternary_zero_prob",
                 "random scene",
+                "png scene",
             ]
             .iter()
             .fold(reason, |r, n| match *n {
                 "random scene" => r.replace("the random scene", "--scene random"),
+                "png scene" => r.replace("the png scene", "--scene png"),
                 n => r.replace(&format!("{n} "), &format!("{} ", flag(n))),
             });
             format!("{}: {reason}", flag(name))
@@ -195,32 +213,46 @@ pub fn run(a: &SimulateArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
         &format!("its {}", SIMULATION_FILES.join(", ")),
     )?;
     let precision = globals.precision.unwrap_or(Precision::F64);
-    with_precision!(precision, simulate_into(a, &spec, ranks))
+    let request = request_of(a, globals.seed());
+    with_precision!(precision, simulate_into(a, &request, &spec, ranks))
 }
 
 fn simulate_into<T: Real + WritableElement>(
     a: &SimulateArgs,
+    request: &SimulationRequest,
     spec: &SimulationSpec,
     ranks: &Ranks,
 ) -> CliResult {
     let g = spec.geometry;
     let kp = spec.pulse_len;
     // Under mpirun, each process generates and measures its own rows' codes.
-    let sim = match ranks.space() {
-        Some(space) => simulate_split::<T>(spec, space),
-        None => simulate::<T>(spec),
-    }
-    .map_err(|e| match e {
-        rdlidar::Error::InvalidParameter {
-            name: "parts",
-            reason,
-        } => {
-            format!("mpirun -n {}: {reason}", ranks.processes())
-        }
-        rdlidar::Error::InvalidParameter { name, reason } => format!("{}: {reason}", flag(name)),
-        e @ rdlidar::Error::TooLarge { .. } => e.to_string(),
-        other => format!("--scene {}: {other}", a.scene.name()),
-    });
+    let sim = request
+        .supplied_scene::<T>()
+        .and_then(|supplied| match (ranks.space(), supplied) {
+            (Some(space), Some(scene)) => simulate_split_supplied::<T>(spec, space, scene),
+            (Some(space), None) => simulate_split::<T>(spec, space),
+            (None, Some(scene)) => simulate_supplied::<T>(spec, scene),
+            (None, None) => simulate::<T>(spec),
+        })
+        .map(|mut sim| {
+            sim.scene_source = request.scene_source();
+            sim
+        })
+        .map_err(|e| match e {
+            rdlidar::Error::InvalidParameter {
+                name: "parts",
+                reason,
+            } => {
+                format!("mpirun -n {}: {reason}", ranks.processes())
+            }
+            rdlidar::Error::InvalidParameter { name, reason } => {
+                format!("{}: {reason}", flag(name))
+            }
+            e @ (rdlidar::Error::TooLarge { .. } | rdlidar::Error::ShapeMismatch { .. }) => {
+                e.to_string()
+            }
+            other => format!("--scene {}: {other}", a.scene.name()),
+        });
     let sim = ranks.agree(sim.map_err(Into::into))?;
     if !ranks.is_first() {
         return Ok(());
