@@ -210,3 +210,65 @@ fn simulate_errors_leave_nothing_behind() {
     assert!(stderr(&out).contains(s(&deep)), "{}", stderr(&out));
     assert!(listing(&tmp.0).is_empty());
 }
+
+#[test]
+fn simulate_with_photon_noise_and_an_adc_records_them_and_refuses_bad_values() {
+    let tmp = TempDir::new("sim-noise-models");
+    let dir = tmp.path("run");
+    let base = [
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "6x6x5",
+        "--pulse-len",
+        "120",
+        "--out",
+        s(&dir),
+    ];
+    let mut args = base.to_vec();
+    args.extend([
+        "--photons",
+        "25",
+        "--background",
+        "3",
+        "--adc-bits",
+        "5",
+        "--full-scale",
+        "4",
+    ]);
+    let out = rdlidar(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
+    let noise = &meta["noise"];
+    assert_eq!(noise["model"], "poisson+quantized");
+    assert_eq!(noise["photons"], 25.0);
+    assert_eq!(noise["background"], 3.0);
+    assert_eq!(noise["adc_bits"], 5);
+    assert_eq!(noise["full_scale"], 4.0);
+    let meas: Array1<f64> = read_npy(dir.join("meas.npy")).unwrap();
+    let clipped = meas.iter().filter(|v| v.abs() == 4.0 - 0.125).count();
+    assert!(noise["clipped"].as_u64().unwrap() as usize <= clipped);
+    assert!(meas
+        .iter()
+        .all(|v| ((v + 4.0) / 0.25 - 0.5).fract().abs() < 1e-9));
+    std::fs::remove_dir_all(&dir).unwrap();
+    for (extra, needle) in [
+        (vec!["--background", "2"], "--background: "),
+        (vec!["--full-scale", "2"], "--full-scale: "),
+        (vec!["--adc-bits", "33"], "--adc-bits: "),
+        (vec!["--photons", "inf"], "--photons: "),
+        (
+            vec!["--adc-bits", "8", "--full-scale", "0"],
+            "--full-scale: ",
+        ),
+    ] {
+        let mut args = base.to_vec();
+        args.extend(extra.iter().copied());
+        let out = rdlidar(&args);
+        assert_eq!(out.status.code(), Some(1), "{extra:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains(needle), "{extra:?}: {}", stderr(&out));
+        assert!(!dir.exists());
+    }
+}

@@ -57,6 +57,7 @@ mod recon_architectures;
 mod reconstruct;
 mod scenes;
 mod seeded_codes;
+mod simulate_noise;
 mod solvers;
 mod sparse_solvers;
 mod split;

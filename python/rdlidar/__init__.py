@@ -443,6 +443,10 @@ def simulate(
     force: bool = False,
     depth_png=None,
     reflectivity_png=None,
+    photons: Optional[float] = None,
+    background: Optional[float] = None,
+    adc_bits: Optional[int] = None,
+    full_scale: Optional[float] = None,
 ) -> Simulation:
     """Simulates an acquisition of any architecture, as ``rdlidar simulate`` does.
 
@@ -472,6 +476,15 @@ def simulate(
         bin round(v / full scale * (K_s - 1)), 0 is no return.
     reflectivity_png : the "png" scene's reflectivity map (same size): amplitude v / full scale
         at each return (None: 1).
+    photons : photon (shot) noise, drawn before the Gaussian noise: sample k of each ADC gets the
+        noise of Poisson(photons * (light[k] + background)) counts, divided by ``photons``,
+        light[k] the unmodulated light of the pixels the ADC sums (None: none).
+    background : the photon noise's background light per sample, in units of intensity
+        (default 0; only with ``photons``).
+    adc_bits : quantize the measurements with an ADC of this many bits (1 to 32), after the
+        noise (None: full precision).
+    full_scale : the ADC's full scale F: samples beyond +-F are clipped (default: each ADC's
+        largest sample; only with ``adc_bits``).
 
     Returns a ``Simulation``.
     """
@@ -510,6 +523,10 @@ def simulate(
         bool(force),
         _optional_path(depth_png, "depth_png"),
         _optional_path(reflectivity_png, "reflectivity_png"),
+        _optional_float(photons, "photons"),
+        _optional_float(background, "background"),
+        _optional_int(adc_bits, "adc_bits", 1, 32),
+        _optional_float(full_scale, "full_scale"),
     )
     meta = json.loads(d["meta"])
     files = None if out is None else os.fspath(out)

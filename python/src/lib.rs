@@ -451,7 +451,7 @@ impl PyOperator {
 /// arrays (codes as the format says: int8, packed uint8, or None for seeded codes) and the
 /// meta.json text; with `out`, also writes the same files as the command line.
 #[pyfunction]
-#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double, adcs=1, tiles=None, aperture=None, codes_format="int8", out=None, force=false, depth_png=None, reflectivity_png=None))]
+#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double, adcs=1, tiles=None, aperture=None, codes_format="int8", out=None, force=false, depth_png=None, reflectivity_png=None, photons=None, background=None, adc_bits=None, full_scale=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -471,6 +471,10 @@ fn simulate<'py>(
     force: bool,
     depth_png: Option<std::path::PathBuf>,
     reflectivity_png: Option<std::path::PathBuf>,
+    photons: Option<f64>,
+    background: Option<f64>,
+    adc_bits: Option<u32>,
+    full_scale: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let geometry = Geometry::new(size.0, size.1, size.2).map_err(value_error)?;
     let tiles = match tiles {
@@ -486,6 +490,10 @@ fn simulate<'py>(
         scene: scene.to_string(),
         depth_png,
         reflectivity_png,
+        photons,
+        background,
+        adc_bits,
+        full_scale,
         lit_fraction,
         ternary_zero_prob,
         snr_db,

@@ -80,6 +80,8 @@ def cli_flags(kwargs):
             flags += ["--ternary-zero-prob", value]
         elif key == "lit_fraction":
             flags += ["--lit-fraction", value]
+        elif key in ("photons", "background", "adc_bits", "full_scale"):
+            flags += ["--" + key.replace("_", "-"), value]
         elif key in ("depth_png", "reflectivity_png"):
             flags += ["--" + key.replace("_", "-"), value]
         elif key == "dtype":
@@ -155,6 +157,8 @@ VARIANTS = {
     "f32-noisy": ("paper", {"dtype": np.float32, "snr_db": 20.0}),
     "ternary": ("transparent", {"ternary_zero_prob": 0.3}),
     "random": ("random", {"lit_fraction": 0.3, "snr_db": 35.0}),
+    "photons-adc": ("paper", {"photons": 30.0, "background": 2.0, "snr_db": 40.0,
+                              "adc_bits": 6, "full_scale": 40.0}),
 }
 
 

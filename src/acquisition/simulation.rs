@@ -11,8 +11,8 @@ use crate::error::{Error, Result};
 use crate::io::meta::{SimulationMeta, SIMULATION_FILES};
 use crate::io::{self, StagedFile};
 use crate::lidar::{
-    packed_len, Architecture, Geometry, SceneSpec, Simulation, SimulationSpec, TileSize,
-    SEEDED_CODES_GENERATOR,
+    packed_len, AdcQuantization, Architecture, FullScale, Geometry, NoiseStage, PhotonNoise,
+    SceneSpec, Simulation, SimulationSpec, TileSize, SEEDED_CODES_GENERATOR,
 };
 use crate::limits;
 use crate::real::Real;
@@ -93,6 +93,16 @@ pub struct SimulationRequest {
     pub ternary_zero_prob: Option<f64>,
     /// Gaussian noise at this SNR (dB).
     pub snr_db: Option<f64>,
+    /// Photon noise with this photon count per unit intensity (finite, > 0).
+    pub photons: Option<f64>,
+    /// The photon noise's background light per sample, in units of intensity (finite, ≥ 0;
+    /// default 0); only with `photons`.
+    pub background: Option<f64>,
+    /// An ADC of this many bits (1 … 32) quantizes the measurements.
+    pub adc_bits: Option<u32>,
+    /// The ADC's full scale (finite, > 0; default: each ADC's largest |sample|); only with
+    /// `adc_bits`.
+    pub full_scale: Option<f64>,
     /// G ADCs with one code set each (1: one ADC).
     pub adcs: usize,
     /// One ADC per tile of this size.
@@ -117,6 +127,10 @@ impl SimulationRequest {
             lit_fraction: None,
             ternary_zero_prob: None,
             snr_db: None,
+            photons: None,
+            background: None,
+            adc_bits: None,
+            full_scale: None,
             adcs: 1,
             tiles: None,
             aperture: None,
@@ -130,7 +144,8 @@ impl SimulationRequest {
     /// [`Error::InvalidParameter`] naming the setting: `scene` unknown; `size` beyond
     /// [`Geometry::check_bounds`](crate::lidar::Geometry::check_bounds); `pulse_len` 0 or above [`limits::MAX_PULSE_LEN`];
     /// `lit_fraction` outside [0, 1] or given for another scene than random;
-    /// `ternary_zero_prob` outside [0, 1); `snr_db` not finite; `adcs` 0 or above
+    /// `ternary_zero_prob` outside [0, 1); `snr_db` not finite; `photons`, `background`,
+    /// `adc_bits` or `full_scale` out of range, or `background`/`full_scale` alone; `adcs` 0 or above
     /// [`limits::MAX_ADCS`]; `aperture` outside (0, 1]; several architectures at once;
     /// `codes_format` packed or seed with codes that have zeros.
     pub fn spec(&self) -> Result<SimulationSpec> {
@@ -204,6 +219,7 @@ impl SimulationRequest {
                 return Err(Error::param("snr_db", format!("must be finite, got {s}")));
             }
         }
+        let (photon_noise, quantization) = self.noise_stages()?;
         if let Some(f) = self.aperture {
             if !(f > 0.0 && f <= 1.0) {
                 return Err(Error::param(
@@ -268,6 +284,8 @@ impl SimulationRequest {
             ternary_zero_prob: self.ternary_zero_prob,
             architecture,
             snr_db: self.snr_db,
+            photon_noise,
+            quantization,
             seeded_codes: self.codes_format == CodesFormat::Seed,
             ..SimulationSpec::new(self.geometry, self.pulse_len, self.seed)
         })
@@ -275,6 +293,56 @@ impl SimulationRequest {
 }
 
 impl SimulationRequest {
+    /// The photon noise and the ADC the request asks for, checked.
+    fn noise_stages(&self) -> Result<(Option<PhotonNoise>, Option<AdcQuantization>)> {
+        let photon_noise = match (self.photons, self.background) {
+            (None, None) => None,
+            (None, Some(_)) => {
+                return Err(Error::param(
+                    "background",
+                    "is the photon noise's background: it needs photons too",
+                ))
+            }
+            (Some(photons), background) => {
+                let stage = NoiseStage::Poisson {
+                    photons,
+                    background: background.unwrap_or(0.0),
+                };
+                stage.validate()?;
+                Some(PhotonNoise {
+                    photons,
+                    background: background.unwrap_or(0.0),
+                })
+            }
+        };
+        let quantization = match (self.adc_bits, self.full_scale) {
+            (None, None) => None,
+            (None, Some(_)) => {
+                return Err(Error::param(
+                    "full_scale",
+                    "is the ADC's full scale: it needs adc_bits too",
+                ))
+            }
+            (Some(bits), full_scale) => {
+                let full_scale = full_scale.map_or(FullScale::Auto, FullScale::Fixed);
+                NoiseStage::Quantized { bits, full_scale }
+                    .validate()
+                    .map_err(|e| match e {
+                        Error::InvalidParameter {
+                            name: "bits",
+                            reason,
+                        } => Error::InvalidParameter {
+                            name: "adc_bits",
+                            reason,
+                        },
+                        other => other,
+                    })?;
+                Some(AdcQuantization { bits, full_scale })
+            }
+        };
+        Ok((photon_noise, quantization))
+    }
+
     /// The scene the request reads (the png scene's, in `T`), or `None` when the simulation
     /// generates its scene. The depth map's height and width must be the grid's M and N.
     ///

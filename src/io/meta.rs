@@ -88,8 +88,33 @@ pub struct SceneMeta {
 /// The noise added to the measurements.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NoiseMeta {
-    /// "none" or "gaussian".
+    /// "none", or the stages applied, in order, joined by "+": "poisson", "gaussian",
+    /// "quantized" (e.g. "poisson+gaussian+quantized").
     pub model: String,
+    /// Photon noise: photon count per unit intensity.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photons: Option<f64>,
+    /// Photon noise: background light per sample, in units of intensity.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub background: Option<f64>,
+    /// Photon noise: the mean photon count per sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_photons: Option<f64>,
+    /// The ADC's bit depth.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adc_bits: Option<u32>,
+    /// The ADC's full scale F (of the first ADC when it follows each ADC's largest sample).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub full_scale: Option<f64>,
+    /// The ADC's full scale is each ADC's largest |sample| (nothing clipped).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub full_scale_auto: Option<bool>,
+    /// The ADC's quantization step 2F/2^bits (of the first ADC).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step: Option<f64>,
+    /// Samples clipped by the ADC, over all ADCs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clipped: Option<usize>,
     /// The SNR asked for, in dB.
     pub snr_db: Option<f64>,
     /// The noise's standard deviation.
@@ -178,22 +203,7 @@ impl SimulationMeta {
             .into_iter()
             .filter(|c| c.iter().any(|v| *v != T::zero()))
             .count();
-        let noise = match (&sim.noise, spec.snr_db) {
-            (Some(report), Some(snr_db)) => NoiseMeta {
-                model: "gaussian".into(),
-                snr_db: Some(snr_db),
-                sigma: report.gaussian_sigma(),
-                achieved_snr_db: Some(report.snr_db()).filter(|v| v.is_finite()),
-                seed: Some(seeds.noise()),
-            },
-            _ => NoiseMeta {
-                model: "none".into(),
-                snr_db: None,
-                sigma: None,
-                achieved_snr_db: None,
-                seed: None,
-            },
-        };
+        let noise = noise_meta(sim.noise.as_ref(), spec, seeds.noise());
         let alphabet = sim.code_sets[0].alphabet().name();
         let [scene, pulse, codes, meas, _] = SIMULATION_FILES;
         SimulationMeta {
@@ -261,6 +271,67 @@ impl SimulationMeta {
             },
         }
     }
+}
+
+/// The `noise` entry of a simulation's description.
+fn noise_meta(
+    report: Option<&crate::lidar::NoiseReport>,
+    spec: &crate::lidar::SimulationSpec,
+    seed: u64,
+) -> NoiseMeta {
+    use crate::lidar::{FullScale, StageReport};
+    let mut meta = NoiseMeta {
+        model: "none".into(),
+        photons: None,
+        background: None,
+        mean_photons: None,
+        adc_bits: None,
+        full_scale: None,
+        full_scale_auto: None,
+        step: None,
+        clipped: None,
+        snr_db: None,
+        sigma: None,
+        achieved_snr_db: None,
+        seed: None,
+    };
+    let Some(report) = report else {
+        return meta;
+    };
+    let mut names: Vec<&str> = Vec::new();
+    for stage in &report.stages {
+        match stage {
+            StageReport::Gaussian { sigma } => {
+                names.push("gaussian");
+                meta.sigma = Some(*sigma);
+            }
+            StageReport::Poisson { mean_photons } => {
+                names.push("poisson");
+                meta.mean_photons = Some(*mean_photons);
+            }
+            StageReport::Quantized(q) => {
+                if meta.adc_bits.is_none() {
+                    names.push("quantized");
+                    meta.adc_bits = Some(q.bits);
+                    meta.full_scale = Some(q.full_scale);
+                    meta.step = Some(q.step);
+                }
+            }
+        }
+    }
+    meta.model = names.join("+");
+    meta.snr_db = spec.snr_db;
+    if let Some(p) = spec.photon_noise {
+        meta.photons = Some(p.photons);
+        meta.background = Some(p.background);
+    }
+    if let Some(q) = spec.quantization {
+        meta.full_scale_auto = Some(matches!(q.full_scale, FullScale::Auto));
+        meta.clipped = Some(report.clipped());
+    }
+    meta.achieved_snr_db = Some(report.snr_db()).filter(|v| v.is_finite());
+    meta.seed = Some(seed);
+    meta
 }
 
 /// The codes format of files written before packed codes existed.

@@ -34,8 +34,8 @@ pub use geometry::{Geometry, Regime};
 pub use measurement::{LidarOperator, MultiAdcOperator};
 pub use noise::{
     add_gaussian, add_gaussian_snr, add_photon_noise, mean_power, quantize, sigma_for_snr,
-    unmodulated_light, FullScale, NoiseModel, NoiseReport, NoiseStage, QuantizationReport,
-    StageReport,
+    unmodulated_light, unmodulated_light_of, FullScale, NoiseModel, NoiseReport, NoiseStage,
+    QuantizationReport, StageReport,
 };
 pub use pulse::{zero_mean, Pulse};
 
@@ -59,8 +59,8 @@ pub use scenes::{
 pub(crate) use scenes::{bin_of_fraction, checked};
 pub use seeded::{SeededCodes, SEEDED_CODES_GENERATOR};
 pub use simulate::{
-    simulate, simulate_split, simulate_split_supplied, simulate_supplied, SceneSpec, Seeds,
-    Simulation, SimulationSpec,
+    simulate, simulate_split, simulate_split_supplied, simulate_supplied, AdcQuantization,
+    PhotonNoise, SceneSpec, Seeds, Simulation, SimulationSpec,
 };
 pub use streamed::{StreamedOperator, STREAM_BLOCK_BYTES};
 pub use support::SupportOperator;

@@ -27,7 +27,7 @@ use super::architectures::{aperture_pixels, coded_aperture, multi_adc, pixel_gro
 use super::seeded::SeededCodes;
 use super::{
     codes::CodeAlphabet, paper_scene, random_opaque_scene, semi_transparent_scene, Architecture,
-    Codes, Geometry, NoiseModel, NoiseReport, NoiseStage, Pulse, RdOperator, Scene,
+    Codes, FullScale, Geometry, NoiseModel, NoiseReport, NoiseStage, Pulse, RdOperator, Scene,
 };
 
 /// The seeds of a simulation, all derived from one base seed: the pulse from SEED, code set g
@@ -130,6 +130,26 @@ impl SceneSpec {
     }
 }
 
+/// Photon (shot) noise of a simulation, as [`add_photon_noise`](super::add_photon_noise)
+/// models it: each ADC's sample k gets the noise of Poisson(photons · (light[k] + background))
+/// counts, light[k] the unmodulated light of the pixels it sums.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhotonNoise {
+    /// Photon count per unit intensity (finite, > 0).
+    pub photons: f64,
+    /// Background light and dark counts per sample, in units of intensity (finite, ≥ 0).
+    pub background: f64,
+}
+
+/// The ADC's quantization of a simulation, as [`quantize`](super::quantize) models it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdcQuantization {
+    /// Bit depth, 1 … 32.
+    pub bits: u32,
+    /// The full scale: fixed, or the largest |y| of each ADC's noisy samples.
+    pub full_scale: FullScale,
+}
+
 /// What to simulate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimulationSpec {
@@ -147,6 +167,11 @@ pub struct SimulationSpec {
     pub architecture: Architecture,
     /// Gaussian noise at this SNR (dB) on the measurements; `None` for none.
     pub snr_db: Option<f64>,
+    /// Photon noise, drawn before the Gaussian noise; `None` for none.
+    pub photon_noise: Option<PhotonNoise>,
+    /// The ADC's quantization, applied last (to each ADC's row of samples); `None` for
+    /// measurements of full precision.
+    pub quantization: Option<AdcQuantization>,
     /// ±1 codes from the seeded stream of [`SeededCodes`] (key: the first code set's seed,
     /// [`Seeds::code_set`]`(0)`), which can be regenerated pixel by pixel without a file,
     /// instead of [`Codes::random_binary`]'s stream. Not with ternary codes.
@@ -164,6 +189,8 @@ impl SimulationSpec {
             ternary_zero_prob: None,
             architecture: Architecture::Single,
             snr_db: None,
+            photon_noise: None,
+            quantization: None,
             seeded_codes: false,
         }
     }
@@ -432,14 +459,72 @@ fn simulate_inner<T: Real>(
 impl<T: Real> Simulation<T> {
     /// The simulation with the noiseless measurements `y`, and the noise its spec asks for.
     fn measured(mut self, mut y: Vec<T>) -> Result<Self> {
-        if let Some(snr_db) = self.spec.snr_db {
-            let report = NoiseModel::none()
-                .then(NoiseStage::Gaussian { snr_db })
-                .apply(&mut y, self.spec.seeds().noise())?;
-            self.noise = Some(report);
+        let spec = self.spec;
+        let mut model = NoiseModel::none();
+        if let Some(p) = spec.photon_noise {
+            model = model.then(NoiseStage::Poisson {
+                photons: p.photons,
+                background: p.background,
+            });
         }
+        if let Some(snr_db) = spec.snr_db {
+            model = model.then(NoiseStage::Gaussian { snr_db });
+        }
+        if model.is_none() && spec.quantization.is_none() {
+            self.meas = y;
+            return Ok(self);
+        }
+        let light = match spec.photon_noise {
+            Some(_) => Some(self.light_per_row(y.len())?),
+            None => None,
+        };
+        let clean = spec.quantization.map(|_| y.clone());
+        let mut report =
+            model.apply_with_intensity(&mut y, light.as_deref(), spec.seeds().noise())?;
+        if let (Some(q), Some(clean)) = (spec.quantization, clean) {
+            // Each ADC quantizes its own samples (to its own full scale when automatic).
+            let k = spec.samples()?;
+            let stage = NoiseModel::none().then(NoiseStage::Quantized {
+                bits: q.bits,
+                full_scale: q.full_scale,
+            });
+            for row in y.chunks_mut(k) {
+                report.stages.extend(stage.apply(row, 0)?.stages);
+            }
+            let change: f64 = y
+                .iter()
+                .zip(&clean)
+                .map(|(&a, &b)| (a.as_f64() - b.as_f64()).powi(2))
+                .sum();
+            report.noise_power = change / y.len().max(1) as f64;
+        }
+        self.noise = Some(report);
         self.meas = y;
         Ok(self)
+    }
+
+    /// The unmodulated light reaching each ADC, one row of K samples per ADC as the
+    /// measurements are laid out (`len` samples in all): all pixels' for one ADC or several code
+    /// sets, a tile's pixels' per tile, the active pixels' of a coded aperture.
+    fn light_per_row(&self, len: usize) -> Result<Vec<T>> {
+        let pulse = self.pulse.as_slice();
+        let rows = match (&self.groups, &self.active) {
+            (Some(groups), _) => groups
+                .iter()
+                .map(|g| super::unmodulated_light_of(&self.scene, pulse, Some(g)))
+                .collect::<Result<Vec<_>>>()?,
+            (None, Some(active)) => vec![super::unmodulated_light_of(
+                &self.scene,
+                pulse,
+                Some(active),
+            )?],
+            (None, None) => {
+                let light = super::unmodulated_light(&self.scene, pulse)?;
+                let k = light.len().max(1);
+                vec![light; len / k]
+            }
+        };
+        Ok(rows.concat())
     }
 }
 

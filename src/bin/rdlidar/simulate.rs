@@ -126,6 +126,23 @@ pub struct SimulateArgs {
     /// noiseless measurements (default: noise-free).
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub snr_db: Option<f64>,
+    /// Add photon (shot) noise, drawn before the Gaussian noise: each ADC's sample k gets the
+    /// noise of Poisson(P · (light[k] + B)) photon counts, divided by P, light[k] the
+    /// unmodulated light of the pixels it sums (finite, > 0).
+    #[arg(long, value_name = "P")]
+    pub photons: Option<f64>,
+    /// The photon noise's background light and dark counts per sample, in units of intensity
+    /// (finite, ≥ 0; default 0; only with --photons).
+    #[arg(long, value_name = "B")]
+    pub background: Option<f64>,
+    /// Quantize the measurements with an ADC of B bits (1 … 32), mid-rise levels over
+    /// [−F, F], after the noise.
+    #[arg(long, value_name = "B")]
+    pub adc_bits: Option<u32>,
+    /// The ADC's full scale F (finite, > 0; samples beyond ±F are clipped and counted in
+    /// meta.json; default: each ADC's largest |sample|, nothing clipped; only with --adc-bits).
+    #[arg(long, value_name = "F")]
+    pub full_scale: Option<f64>,
     /// Replace scene.npy, pulse.npy, codes.npy, meas.npy and meta.json in a non-empty DIR.
     #[arg(long)]
     pub force: bool,
@@ -164,6 +181,10 @@ fn request_of(a: &SimulateArgs, seed: u64) -> SimulationRequest {
         lit_fraction: a.lit_fraction,
         ternary_zero_prob: a.ternary_zero_prob,
         snr_db: a.snr_db,
+        photons: a.photons,
+        background: a.background,
+        adc_bits: a.adc_bits,
+        full_scale: a.full_scale,
         adcs: a.adcs,
         tiles: a.tiles,
         aperture: a.aperture,
@@ -194,6 +215,8 @@ pub fn run(a: &SimulateArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
                 "aperture",
                 "codes_format",
                 "ternary_zero_prob",
+                "photons",
+                "adc_bits",
                 "random scene",
                 "png scene",
             ]
@@ -290,10 +313,7 @@ fn simulate_into<T: Real + WritableElement>(
         meta.code_alphabet,
         g.regime(kp),
         g.critical_pulse_len(),
-        match a.snr_db {
-            Some(s) => format!("Gaussian noise at {s} dB SNR"),
-            None => "noise-free".to_string(),
-        }
+        noise_text(&meta)
     );
     if let Some(note) = architecture_note(&meta, g) {
         outln!("architecture: {note}");
@@ -314,6 +334,39 @@ impl From<CodesFormat> for LibCodesFormat {
             CodesFormat::Packed => LibCodesFormat::Packed,
             CodesFormat::Seed => LibCodesFormat::Seed,
         }
+    }
+}
+
+/// The noise of a simulation, in words.
+fn noise_text(meta: &SimulationMeta) -> String {
+    let n = &meta.noise;
+    let mut parts = Vec::new();
+    if let (Some(p), Some(mean)) = (n.photons, n.mean_photons) {
+        parts.push(format!(
+            "photon noise ({p} photons per unit intensity, background {}; {mean:.3e} photons per \
+             sample on average)",
+            n.background.unwrap_or(0.0)
+        ));
+    }
+    if let Some(s) = n.snr_db {
+        parts.push(format!("Gaussian noise at {s} dB SNR"));
+    }
+    if let Some(bits) = n.adc_bits {
+        let scale = match (n.full_scale_auto, n.full_scale) {
+            (Some(false), Some(f)) => format!("full scale {f}"),
+            _ => "full scale at the largest sample".into(),
+        };
+        parts.push(format!(
+            "a {bits}-bit ADC ({scale}, {} samples clipped)",
+            n.clipped.unwrap_or(0)
+        ));
+    }
+    match (parts.is_empty(), n.achieved_snr_db) {
+        (true, _) => "noise-free".into(),
+        (false, Some(snr)) if parts.len() > 1 || n.snr_db.is_none() => {
+            format!("{}; {snr:.1} dB SNR achieved", parts.join(", "))
+        }
+        _ => parts.join(", "),
     }
 }
 

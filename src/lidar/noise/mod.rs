@@ -294,6 +294,20 @@ pub fn add_photon_noise<T: Real>(
 /// [`Error::InvalidParameter`] (`pulse`) for an empty pulse or a negative pulse value, (`scene`)
 /// for a negative reflectivity; [`Error::NonFinite`] for a NaN or infinite value in either.
 pub fn unmodulated_light<T: Real>(scene: &Scene<T>, pulse: &[T]) -> Result<Vec<T>> {
+    unmodulated_light_of(scene, pulse, None)
+}
+
+/// [`unmodulated_light`] of the pixels `pixels` alone (row-major indices m·N + n; `None`: every
+/// pixel): the light that reaches an ADC summing those pixels, a tile's or a coded aperture's.
+///
+/// # Errors
+/// As [`unmodulated_light`], and [`Error::InvalidParameter`] (`pixels`) for an index beyond the
+/// scene.
+pub fn unmodulated_light_of<T: Real>(
+    scene: &Scene<T>,
+    pulse: &[T],
+    pixels: Option<&[usize]>,
+) -> Result<Vec<T>> {
     if pulse.is_empty() {
         return Err(Error::param("pulse", "the pulse is empty"));
     }
@@ -314,9 +328,22 @@ pub fn unmodulated_light<T: Real>(scene: &Scene<T>, pulse: &[T]) -> Result<Vec<T
     }
     let ks = scene.geometry().ks;
     let mut profile = vec![0.0f64; ks];
-    for col in x.chunks_exact(ks) {
+    let mut add = |col: &[T]| {
         for (acc, &v) in profile.iter_mut().zip(col) {
             *acc += v.as_f64();
+        }
+    };
+    match pixels {
+        None => x.chunks_exact(ks).for_each(add),
+        Some(pixels) => {
+            let count = x.len() / ks;
+            if let Some(&p) = pixels.iter().find(|&&p| p >= count) {
+                return Err(Error::param(
+                    "pixels",
+                    format!("pixel {p} is beyond the scene's {count} pixels"),
+                ));
+            }
+            pixels.iter().for_each(|&p| add(&x[p * ks..(p + 1) * ks]));
         }
     }
     let kp = pulse.len();
