@@ -244,3 +244,20 @@ fn bad_depth_maps_are_refused_naming_the_flag_and_leave_nothing_behind() {
     left.sort();
     assert_eq!(left, ["depth.png", "refl.png", "small.png", "text.png"]);
 }
+
+#[test]
+fn a_png_scene_beyond_memory_is_refused_before_its_maps_are_read() {
+    let tmp = TempDir::new("scene-png-memory");
+    maps(&tmp.0);
+    let run = tmp.path("run");
+    // The grid is refused for its memory before the (smaller) map is read and compared.
+    let out = simulate_png(&tmp.0, &run, "4000x4000x4000", &[]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("4000x4000x4000") && err.contains("memory"),
+        "{err}"
+    );
+    assert!(!run.exists());
+}

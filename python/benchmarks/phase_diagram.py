@@ -1,7 +1,7 @@
 """Phase diagram of the hard regimes: measurements per lit pixel x SNR -> depths recovered.
 
 For each scene, each number of measurements per lit pixel and each SNR, the script simulates an
-acquisition with the command line (``rdlidar simulate``, with ``--snr-db`` for the noise),
+acquisition with the command line (``rdlidar simulate``, with its noise flags),
 reconstructs with ``rdlidar reconstruct --solver auto`` and compares its depth map with the
 truth: the share of lit pixels at the exact depth and within one bin, and the false returns'
 share of the empty pixels, with the wall-clock time of the reconstruction.
@@ -123,6 +123,28 @@ def reconstruct(binary, d, ks, truth):
     return judge(d, truth) + (elapsed,)
 
 
+def noise_flags(noise):
+    """The simulate flags of a noise column."""
+    if noise is None:
+        return []
+    if noise.startswith("photons="):
+        return ["--photons", noise.split("=", 1)[1]]
+    if noise.startswith("adc="):
+        return ["--adc-bits", noise.split("=", 1)[1]]
+    return ["--snr-db", noise]
+
+
+def column(noise):
+    """A noise column's heading."""
+    if noise is None:
+        return "noise-free"
+    if noise.startswith("photons="):
+        return f"photon noise, {noise.split('=', 1)[1]} per unit"
+    if noise.startswith("adc="):
+        return f"{noise.split('=', 1)[1]}-bit ADC"
+    return f"{float(noise):g} dB"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--bin", action="append", default=[],
@@ -130,7 +152,10 @@ def main():
     ap.add_argument("--size", default="48x48x24")
     ap.add_argument("--ratios", default="0.9,1.5,2.4,3.5",
                     help="measurements per lit pixel")
-    ap.add_argument("--snr", default="none,20,10", help="SNRs in dB (none: noise-free)")
+    ap.add_argument("--snr", default="none,20,10",
+                    help="noise columns: none, an SNR in dB (Gaussian noise), photons=P "
+                         "(photon noise, simulate --photons P) or adc=B (a B-bit ADC, "
+                         "simulate --adc-bits B, full scale at the largest sample)")
     ap.add_argument("--scenes", default="paper,surfaces",
                     help="paper, surfaces, png (the map of --depth-png)")
     ap.add_argument("--depth-png", help="a depth map for the scene png")
@@ -144,7 +169,10 @@ def main():
         h, w = png_size(args.depth_png)
         sizes["png"] = f"{h}x{w}x{ks}"
     ratios = [float(r) for r in args.ratios.split(",")]
-    snrs = [None if s == "none" else float(s) for s in args.snr.split(",")]
+    snrs = [None if s == "none" else s for s in args.snr.split(",")]
+    for s in snrs:
+        if s is not None and not s.startswith(("photons=", "adc=")):
+            float(s)
     first = bins[0][1]
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -174,7 +202,7 @@ def main():
                     d = os.path.join(tmp, f"{scene}-{ratio}-{snr}")
                     k = max(int(round(ratio * lit)), ks)
                     kp = k - ks + 1
-                    noise = [] if snr is None else ["--snr-db", str(snr)]
+                    noise = noise_flags(snr)
                     run([first, "simulate", *flags, "--size", sizes[scene], "--pulse-len",
                          str(kp), "--seed", str(args.seed), *noise, "--out", d, "--quiet",
                          "--force"], "simulate")
@@ -182,14 +210,14 @@ def main():
                     for label, binary in bins:
                         r = reconstruct(binary, d, ks, truth)
                         results[(scene, label, ratio, snr)] = (k, lit) + r
-                        print(f"{scene} {label} {ratio}/lit {snr} dB: K {k}, exact {r[0]}%, "
+                        print(f"{scene} {label} {ratio}/lit {column(snr)}: K {k}, exact {r[0]}%, "
                               f"within one {r[1]}%, false {r[2]}% of empty, {r[3]:.1f} s",
                               file=sys.stderr, flush=True)
     for scene in args.scenes.split(","):
         for label, _ in bins:
             print(f"\n### {scene}, {sizes[scene]}, {label}\n")
             print("exact % / within one bin % / false % of empty / seconds\n")
-            head = " | ".join("noise-free" if s is None else f"{s:g} dB" for s in snrs)
+            head = " | ".join(column(s) for s in snrs)
             print(f"| meas. per lit pixel (K) | {head} |")
             print("|---|" + "---|" * len(snrs))
             for ratio in ratios:

@@ -350,7 +350,9 @@ impl SimulationRequest {
     /// [`Error::InvalidParameter`] naming `depth_png` for a map of another size, `depth_png`
     /// or `reflectivity_png` (the reason starting with the file's path) for a file that cannot
     /// be read or decoded, and for a png scene without the `images` feature;
-    /// [`Error::ShapeMismatch`] for maps of different sizes.
+    /// [`Error::ShapeMismatch`] for maps of different sizes; the errors of
+    /// [`SimulationRequest::spec`], and [`Error::TooLarge`] when the simulation would not fit
+    /// in memory (checked before reading).
     pub fn supplied_scene<T: Real>(&self) -> Result<Option<crate::lidar::Scene<T>>> {
         let Some(depth) = self.depth_png.as_deref() else {
             return Ok(None);
@@ -358,6 +360,11 @@ impl SimulationRequest {
         #[cfg(feature = "images")]
         {
             let g = self.geometry;
+            // The scene read and the simulation must fit before anything is read.
+            self.spec()?.memory_plan::<T>()?.check(
+                &format!("simulating {g} from the depth map {}", depth.display()),
+                "lower --size or --pulse-len",
+            )?;
             let reflectivity = self.reflectivity_png.as_deref();
             // The reader names the file in its reason: name the setting that gave it.
             let scene =

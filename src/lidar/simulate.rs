@@ -131,8 +131,8 @@ impl SceneSpec {
 }
 
 /// Photon (shot) noise of a simulation, as [`add_photon_noise`](super::add_photon_noise)
-/// models it: each ADC's sample k gets the noise of Poisson(photons · (light[k] + background))
-/// counts, light[k] the unmodulated light of the pixels it sums.
+/// models it: each ADC's sample k gets the noise of Poisson(photons · (light\[k\] + background))
+/// counts, light\[k\] the unmodulated light of the pixels it sums.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PhotonNoise {
     /// Photon count per unit intensity (finite, > 0).
