@@ -188,6 +188,52 @@ fn the_refinement_keeps_an_exact_scene_and_repairs_a_damaged_one() {
 }
 
 #[test]
+fn the_refinement_at_20_db_removes_a_false_patch_and_keeps_every_depth() {
+    // The scene of the test above at 20 dB, started from the truth plus a false 3×3 patch where
+    // it is empty: the fits, the sweeps and the last test of what each patch explains remove
+    // the patch and keep every true return (hard_scenes.rs guards a patch only that test
+    // removes).
+    let g = Geometry::new(16, 16, 16).unwrap();
+    let op = problem::<f64>(g, 1500, 5);
+    let truth = paper_scene::<f64>(g).unwrap();
+    let mut y = measure(&op, &truth);
+    rdlidar::lidar::add_gaussian_snr(&mut y, 20.0, 9).unwrap();
+    let lit = |p: usize| {
+        truth.as_slice()[p * g.ks..(p + 1) * g.ks]
+            .iter()
+            .any(|&v| v != 0.0)
+    };
+    let window = |(a, b): (usize, usize)| -> Vec<usize> {
+        (a..a + 3)
+            .flat_map(|i| (b..b + 3).map(move |j| i * g.n + j))
+            .collect()
+    };
+    let corner = (0..g.m - 2)
+        .flat_map(|a| (0..g.n - 2).map(move |b| (a, b)))
+        .map(window)
+        .find(|w| w.iter().all(|&p| !lit(p)))
+        .expect("an empty 3×3 window");
+    let start = |x: &mut Vec<f64>| {
+        for &p in &corner {
+            x[p * g.ks + 5] = 0.3;
+        }
+    };
+    let kept_in_corner = |x: &[f64]| {
+        corner
+            .iter()
+            .filter(|&&p| x[p * g.ks..(p + 1) * g.ks].iter().any(|&v| v != 0.0))
+            .count()
+    };
+    let mut x = truth.as_slice().to_vec();
+    start(&mut x);
+    refine_surfaces(&op, (g.m, g.n), &y, &mut x, &RefineParams::default()).unwrap();
+    assert_eq!(kept_in_corner(&x), 0);
+    let m = compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap();
+    assert_eq!(m.exact, m.lit, "{m}");
+    assert_eq!(m.false_detections, 0, "{m}");
+}
+
+#[test]
 fn the_refinement_refuses_bad_parameters_and_shapes() {
     let g = Geometry::new(4, 4, 3).unwrap();
     let op = problem::<f64>(g, 20, 1);
@@ -204,6 +250,10 @@ fn the_refinement_refuses_bad_parameters_and_shapes() {
         },
         RefineParams {
             iterations: 0,
+            ..RefineParams::default()
+        },
+        RefineParams {
+            patch_gain: Some(-1.0),
             ..RefineParams::default()
         },
     ];

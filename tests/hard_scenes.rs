@@ -317,3 +317,18 @@ fn at_20_db_with_enough_measurements_auto_keeps_tv_on_the_pixels() {
     );
     assert_eq!(r.method_used, Method::Tv);
 }
+
+#[test]
+fn below_one_measurement_per_lit_pixel_a_false_patch_that_explains_only_noise_is_dropped() {
+    // 48×48×24, 1175 measurements for 1306 lit pixels, noise-free: the coarse solve places a
+    // patch of false surface in the empty top left, which agrees with itself and so survives
+    // the depth sweeps (7.6% of the empty pixels false without the patch test); what it
+    // explains of the data is no more than noise would, and the refinement's last test drops it.
+    let g = Geometry::new(48, 48, 24).unwrap();
+    let (op, y) = measured(g, 1152, None, 40);
+    let (m, used) = auto_on(g, &op, &y);
+    assert_eq!(used, Method::CoarseToFine, "{m}");
+    let empty = (m.pixels - m.lit) as f64;
+    assert!(m.exact_fraction >= 0.8, "{m}");
+    assert!(m.false_detections as f64 <= 0.03 * empty, "{m}");
+}

@@ -145,8 +145,8 @@ impl SimulationRequest {
     /// [`Geometry::check_bounds`](crate::lidar::Geometry::check_bounds); `pulse_len` 0 or above [`limits::MAX_PULSE_LEN`];
     /// `lit_fraction` outside [0, 1] or given for another scene than random;
     /// `ternary_zero_prob` outside [0, 1); `snr_db` not finite; `photons`, `background`,
-    /// `adc_bits` or `full_scale` out of range, or `background`/`full_scale` alone; `adcs` 0 or above
-    /// [`limits::MAX_ADCS`]; `aperture` outside (0, 1]; several architectures at once;
+    /// `adc_bits` or `full_scale` out of range, or `background`/`full_scale` alone; `adcs` 0
+    /// or above [`limits::MAX_ADCS`]; `aperture` outside (0, 1]; several architectures at once;
     /// `codes_format` packed or seed with codes that have zeros.
     pub fn spec(&self) -> Result<SimulationSpec> {
         self.geometry.check_bounds()?;

@@ -348,7 +348,8 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
 /// [`SceneSpec::Supplied`] and the scene's grid `spec.geometry`.
 ///
 /// # Errors
-/// [`Error::InvalidParameter`] (`scene`) for another scene kind or a scene of another grid; the errors of [`simulate`].
+/// [`Error::InvalidParameter`] (`scene`) for another scene kind or a scene of another grid;
+/// the errors of [`simulate`].
 pub fn simulate_supplied<T: Real>(spec: &SimulationSpec, scene: Scene<T>) -> Result<Simulation<T>> {
     simulate_inner(spec, Some(scene))
 }

@@ -34,6 +34,12 @@ pub struct RefineParams {
     /// where it has one, or the reverse, or a depth more than one bin away), as a fraction of its
     /// column's energy times its squared amplitude (default 0.1).
     pub disagreement: f64,
+    /// What a patch of returns (4-neighbours within one bin of each other) must explain to stay,
+    /// at the end: the rise of ‖r‖² without it, per return, in units of the residual's variance
+    /// per sample ‖r‖²/K. `None` (the default) asks 2·ln K_s, about what the best of an empty
+    /// pixel's K_s depths explains of noise alone; `Some(0.0)` keeps every patch. A false patch
+    /// that agrees with itself passes the depth sweep's test of agreement but explains little.
+    pub patch_gain: Option<f64>,
 }
 
 impl Default for RefineParams {
@@ -44,6 +50,7 @@ impl Default for RefineParams {
             reweight_rounds: 2,
             iterations: 100,
             disagreement: 0.1,
+            patch_gain: None,
         }
     }
 }
@@ -68,6 +75,14 @@ impl RefineParams {
         }
         if self.iterations == 0 {
             return Err(Error::param("iterations", "must be ≥ 1"));
+        }
+        if let Some(g) = self.patch_gain {
+            if !(g.is_finite() && g >= 0.0) {
+                return Err(Error::param(
+                    "patch_gain",
+                    format!("must be finite and ≥ 0, got {g}"),
+                ));
+            }
         }
         Ok(())
     }
@@ -212,10 +227,14 @@ impl Surfaces {
 ///    neighbours' median amplitude) or lose it, whichever lowers the squared residual plus
 ///    [`RefineParams::disagreement`] per disagreeing neighbour most.
 ///
-/// It stops when a sweep moves no depth, after a last amplitude fit; when the support then holds
-/// at most a quarter as many voxels as there are measurements, a final fit without ties removes
-/// their bias where the reflectivity varies along a surface. The operator's columns are
-/// taken one at a time ([`VoxelOperator::column`]); the unknowns must be whole (one process).
+/// It stops when a sweep moves no depth, after a last amplitude fit. Each patch of returns
+/// (4-neighbours within one bin) must then explain at least [`RefineParams::patch_gain`] times
+/// its size times the residual's variance per sample, or it is dropped and the amplitudes are
+/// fitted again: a false patch agrees with itself and survives the sweeps. When the support
+/// then holds at most a quarter as many voxels as there are measurements, a final fit without
+/// ties removes their bias where the reflectivity varies along a surface. The operator's
+/// columns are taken one at a time ([`VoxelOperator::column`]); the unknowns must be whole
+/// (one process).
 ///
 /// # Errors
 /// [`Error::ShapeMismatch`] for lengths or a grid that do not match the operator;
@@ -269,21 +288,25 @@ where
         tolerance: (100.0 * T::EPS).max(1e-6),
     };
     let mut sweeps = 0;
-    loop {
+    let last = loop {
         let r = fit_amplitudes(op, y, &mut s, &tied, &mut report)?;
         report.residual_history.push(dot(&r, &r).sqrt() / ynorm);
         report.objective_history.push(f64::NAN);
         if sweeps == params.sweeps {
             report.termination = Termination::MaxIterations;
-            break;
+            break r;
         }
         sweeps += 1;
         report.iterations = sweeps;
         if sweep_depths(op, &mut s, r, params) == 0 {
-            let _ = fit_amplitudes(op, y, &mut s, &tied, &mut report)?;
+            let r = fit_amplitudes(op, y, &mut s, &tied, &mut report)?;
             report.termination = Termination::Converged;
-            break;
+            break r;
         }
+    };
+    let gain = params.patch_gain.unwrap_or(2.0 * (ks as f64).ln());
+    if drop_weak_patches(op, &mut s, &last, gain) > 0 {
+        let _ = fit_amplitudes(op, y, &mut s, &tied, &mut report)?;
     }
     let lit = s.depth.iter().filter(|d| d.is_some()).count();
     if lit as f64 <= FREE_SHARE * y.len() as f64 {
@@ -303,6 +326,76 @@ where
     }
     report.elapsed = start.elapsed();
     Ok(report)
+}
+
+/// Drops the patches of returns (4-neighbours within one bin of each other) that explain less
+/// than `gain` × their size × ‖r‖²/K of the data: without a patch the residual `r` = y − A·x
+/// becomes r + u, u its returns' contribution, and ‖r + u‖² − ‖r‖² = 2⟨r, u⟩ + ‖u‖² measures
+/// what it explains. Returns the returns dropped.
+fn drop_weak_patches<T, A>(op: &A, s: &mut Surfaces, r: &[f64], gain: f64) -> usize
+where
+    T: Real,
+    A: VoxelOperator<T> + ?Sized,
+{
+    let variance = dot(r, r) / r.len().max(1) as f64;
+    if gain <= 0.0 || variance <= 0.0 {
+        return 0;
+    }
+    let (m, n) = s.grid;
+    let mut patch = vec![usize::MAX; m * n];
+    let mut dropped = 0;
+    for seed in 0..m * n {
+        if s.depth[seed].is_none() || patch[seed] != usize::MAX {
+            continue;
+        }
+        // The patch of `seed`, by a depth-first walk.
+        patch[seed] = seed;
+        let mut members = vec![seed];
+        let mut next = 0;
+        while next < members.len() {
+            let p = members[next];
+            next += 1;
+            let (i, j) = (p / n, p % n);
+            let d = s.depth[p].unwrap_or(0);
+            let around = [
+                (i > 0).then(|| p - n),
+                (i + 1 < m).then(|| p + n),
+                (j > 0).then(|| p - 1),
+                (j + 1 < n).then(|| p + 1),
+            ];
+            for q in around.into_iter().flatten() {
+                if patch[q] == usize::MAX && s.depth[q].is_some_and(|e| e.abs_diff(d) <= 1) {
+                    patch[q] = seed;
+                    members.push(q);
+                }
+            }
+        }
+        // The patch's contribution u over the rows its columns span.
+        let columns: Vec<(usize, Vec<f64>, f64)> = members
+            .iter()
+            .map(|&p| {
+                let (first, col) = op.column(p * s.ks + s.depth[p].unwrap_or(0));
+                (first, col, s.amp[p])
+            })
+            .collect();
+        let lo = columns.iter().map(|c| c.0).min().unwrap_or(0);
+        let hi = columns.iter().map(|c| c.0 + c.1.len()).max().unwrap_or(lo);
+        let mut u = vec![0.0f64; hi - lo];
+        for (first, col, a) in &columns {
+            for (ui, c) in u[first - lo..first - lo + col.len()].iter_mut().zip(col) {
+                *ui += a * c;
+            }
+        }
+        let explained = 2.0 * dot(&r[lo..hi], &u) + dot(&u, &u);
+        if explained < gain * members.len() as f64 * variance {
+            for &p in &members {
+                s.depth[p] = None;
+                s.amp[p] = 0.0;
+            }
+            dropped += members.len();
+        }
+    }
+    dropped
 }
 
 /// Whether amplitudes `a` fitted from `start` are finite and lower the tied objective
