@@ -170,6 +170,24 @@ fn bad_depth_maps_are_refused_naming_the_flag_and_leave_nothing_behind() {
     let text = tmp.path("text.png");
     std::fs::write(&text, "not a png").unwrap();
     let missing = tmp.path("missing.png");
+    // A header that claims 60 000 × 60 000 pixels and no image data: refused from the header,
+    // nothing allocated for it.
+    let huge = tmp.path("huge.png");
+    {
+        let file = std::fs::File::create(&huge).unwrap();
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), 60_000, 60_000);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Sixteen);
+        let mut w = enc.write_header().unwrap();
+        w.write_chunk(
+            png::chunk::IDAT,
+            &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
+        )
+        .unwrap();
+        drop(w);
+    }
+    let e = rdlidar::io::scene_from_pngs::<f64>(&huge, None, 4).unwrap_err();
+    assert!(e.to_string().contains("at most 4096"), "{e}");
     let size = format!("{M}x{N}x{KS}");
     let wrong_size = format!("{M}x{}x{KS}", N + 1);
     let cases: Vec<(String, Vec<&str>, Vec<&str>)> = vec![
@@ -186,12 +204,21 @@ fn bad_depth_maps_are_refused_naming_the_flag_and_leave_nothing_behind() {
         (
             size.clone(),
             vec!["--reflectivity-png", s(&small)],
-            vec!["small.png", "width"],
+            vec![
+                "--reflectivity-png",
+                "small.png",
+                "is 2 pixels high and 3 wide",
+            ],
         ),
         (
             size.clone(),
             vec!["--reflectivity-png", s(&text)],
             vec!["--reflectivity-png", "text.png", "not a readable PNG"],
+        ),
+        (
+            size.clone(),
+            vec!["--reflectivity-png", s(&huge)],
+            vec!["--reflectivity-png", "huge.png", "60000 pixels high"],
         ),
         (
             size.clone(),
@@ -242,7 +269,10 @@ fn bad_depth_maps_are_refused_naming_the_flag_and_leave_nothing_behind() {
     }
     let mut left = listing(&tmp.0);
     left.sort();
-    assert_eq!(left, ["depth.png", "refl.png", "small.png", "text.png"]);
+    assert_eq!(
+        left,
+        ["depth.png", "huge.png", "refl.png", "small.png", "text.png"]
+    );
 }
 
 #[test]

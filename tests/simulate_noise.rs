@@ -127,12 +127,25 @@ fn the_adc_quantizes_each_row_to_its_levels_and_counts_what_it_clips() {
     let sim = simulate::<f64>(&auto).unwrap();
     let k = sim.meas.len() / 2;
     for (row, clean) in sim.meas.chunks(k).zip(noisy.meas.chunks(k)) {
+        // Levels ±(2i + 1)·F/8 of this row's own F = max |y|.
         let f = clean.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let mut levels: Vec<i64> = row.iter().map(|v| (v / (f / 8.0)).round() as i64).collect();
-        levels.sort();
-        levels.dedup();
-        assert!(levels.len() <= 8, "{levels:?}");
+        for &q in row {
+            let odd = q / (f / 8.0);
+            assert!(
+                (odd - odd.round()).abs() < 1e-9 && odd.round().abs() as i64 % 2 == 1,
+                "{q} is not a level of full scale {f}"
+            );
+        }
     }
+    let maxima: Vec<f64> = noisy
+        .meas
+        .chunks(k)
+        .map(|c| c.iter().fold(0.0f64, |m, v| m.max(v.abs())))
+        .collect();
+    assert!(
+        maxima[0] != maxima[1],
+        "the rows' full scales differ: {maxima:?}"
+    );
     assert_eq!(sim.noise.as_ref().unwrap().clipped(), 0);
 }
 

@@ -347,12 +347,11 @@ impl SimulationRequest {
     /// generates its scene. The depth map's height and width must be the grid's M and N.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] naming `depth_png` for a map of another size, `depth_png`
-    /// or `reflectivity_png` (the reason starting with the file's path) for a file that cannot
-    /// be read or decoded, and for a png scene without the `images` feature;
-    /// [`Error::ShapeMismatch`] for maps of different sizes; the errors of
-    /// [`SimulationRequest::spec`], and [`Error::TooLarge`] when the simulation would not fit
-    /// in memory (checked before reading).
+    /// [`Error::InvalidParameter`] naming `depth_png` or `reflectivity_png` for a map whose
+    /// header gives another size than the grid's M × N or for a file that cannot be read or
+    /// decoded (the reason starting with the file's path), and `depth_png` for a png scene
+    /// without the `images` feature;
+    /// [`Error::TooLarge`] when the scene would not fit in memory (checked before reading).
     pub fn supplied_scene<T: Real>(&self) -> Result<Option<crate::lidar::Scene<T>>> {
         let Some(depth) = self.depth_png.as_deref() else {
             return Ok(None);
@@ -360,21 +359,59 @@ impl SimulationRequest {
         #[cfg(feature = "images")]
         {
             let g = self.geometry;
-            // The scene read and the simulation must fit before anything is read.
-            self.spec()?.memory_plan::<T>()?.check(
-                &format!("simulating {g} from the depth map {}", depth.display()),
-                "lower --size or --pulse-len",
-            )?;
+            // The scene read must fit; the simulation checks the rest (one band of rows per
+            // process under MPI).
+            limits::MemoryPlan::new()
+                .add("scene", g.voxels() as u128, std::mem::size_of::<T>())
+                .check(
+                    &format!(
+                        "reading the scene {g} from the depth map {}",
+                        depth.display()
+                    ),
+                    "lower --size",
+                )?;
+            // Each map's size from its header, against the grid, before a pixel is decoded.
+            let named = |name: &'static str| {
+                move |e: Error| match e {
+                    Error::InvalidParameter {
+                        name: "png",
+                        reason,
+                    } => Error::InvalidParameter { name, reason },
+                    other => other,
+                }
+            };
             let reflectivity = self.reflectivity_png.as_deref();
-            // The reader names the file in its reason: name the setting that gave it.
+            for (name, path) in [
+                ("depth_png", Some(depth)),
+                ("reflectivity_png", reflectivity),
+            ] {
+                let Some(path) = path else { continue };
+                let (h, w) = io::png_dimensions(path).map_err(named(name))?;
+                if (h, w) != (g.m, g.n) {
+                    return Err(Error::param(
+                        name,
+                        format!(
+                            "{} is {h} pixels high and {w} wide, but the grid {g} asks for {} by {}",
+                            path.display(),
+                            g.m,
+                            g.n
+                        ),
+                    ));
+                }
+            }
+            if let Some(path) = reflectivity {
+                // Read on its own first, so that its errors name it.
+                io::png_dimensions(path).map_err(named("reflectivity_png"))?;
+            }
             let scene =
                 io::scene_from_pngs::<T>(depth, reflectivity, g.ks).map_err(|e| match e {
                     Error::InvalidParameter {
                         name: "png",
                         reason,
                     } => {
-                        let of_reflectivity = reflectivity
-                            .is_some_and(|r| reason.starts_with(&format!("{}:", r.display())));
+                        let of_reflectivity = reflectivity.is_some_and(|r| {
+                            r != depth && reason.starts_with(&format!("{}:", r.display()))
+                        });
                         let name = if of_reflectivity {
                             "reflectivity_png"
                         } else {
@@ -384,20 +421,6 @@ impl SimulationRequest {
                     }
                     other => other,
                 })?;
-            let found = scene.geometry();
-            if (found.m, found.n) != (g.m, g.n) {
-                return Err(Error::param(
-                    "depth_png",
-                    format!(
-                        "{} is {} pixels high and {} wide, but the grid {g} asks for {} by {}",
-                        depth.display(),
-                        found.m,
-                        found.n,
-                        g.m,
-                        g.n
-                    ),
-                ));
-            }
             Ok(Some(scene))
         }
         #[cfg(not(feature = "images"))]

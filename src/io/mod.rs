@@ -41,7 +41,7 @@ pub use npy::{
     ShapeExpectation,
 };
 #[cfg(feature = "images")]
-pub use png::scene_from_pngs;
+pub use png::{png_dimensions, scene_from_pngs};
 
 /// An [`Error::File`] for `path`, on one line: control and non-printable characters of the path
 /// and of the reason (which may quote the file) are escaped.

@@ -15,6 +15,32 @@ fn png_error(path: &Path, what: impl std::fmt::Display) -> Error {
     Error::param("png", format!("{}: {}", path.display(), what))
 }
 
+/// Refuses an image wider or higher than a scene can be ([`crate::limits::MAX_SIDE`]) before
+/// its pixels are decoded.
+fn check_sides(path: &Path, width: usize, height: usize) -> Result<()> {
+    let max = crate::limits::MAX_SIDE;
+    if width > max || height > max {
+        return Err(png_error(
+            path,
+            format!("{width}×{height} pixels: a scene has at most {max} rows and {max} columns"),
+        ));
+    }
+    Ok(())
+}
+
+/// The height and width of a PNG image, from its header alone.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] with name `"png"` and a reason starting with the file's path if
+/// the file cannot be opened or has no readable PNG header.
+pub fn png_dimensions(path: &Path) -> Result<(usize, usize)> {
+    let file = File::open(path).map_err(|e| png_error(path, format!("cannot open: {e}")))?;
+    let reader = png::Decoder::new(BufReader::new(file))
+        .read_info()
+        .map_err(|e| png_error(path, format!("not a readable PNG: {e}")))?;
+    Ok((reader.info().height as usize, reader.info().width as usize))
+}
+
 /// A decoded single-channel image: `values[y·width + x]` in `[0, max]`.
 struct GrayImage {
     width: usize,
@@ -33,6 +59,8 @@ fn read_png(path: &Path) -> Result<GrayImage> {
     let mut reader = decoder
         .read_info()
         .map_err(|e| png_error(path, format!("not a readable PNG: {e}")))?;
+    let (w, h) = (reader.info().width as usize, reader.info().height as usize);
+    check_sides(path, w, h)?;
     let len = reader
         .output_buffer_size()
         .ok_or_else(|| png_error(path, "image too large"))?;

@@ -319,31 +319,30 @@ pub fn unmodulated_light_of<T: Real>(
         ));
     }
     let x = scene.as_slice();
-    check_finite(x, "scene")?;
-    if let Some(v) = x.iter().find(|v| v.as_f64() < 0.0) {
+    let ks = scene.geometry().ks;
+    let count = x.len() / ks.max(1);
+    if let Some(&p) = pixels.and_then(|px| px.iter().find(|&&p| p >= count)) {
         return Err(Error::param(
-            "scene",
-            format!("reflectivity cannot be negative, got {v}"),
+            "pixels",
+            format!("pixel {p} is beyond the scene's {count} pixels"),
         ));
     }
-    let ks = scene.geometry().ks;
+    // Only the pixels that reach the ADC are read (and checked).
+    let columns: Box<dyn Iterator<Item = &[T]>> = match pixels {
+        None => Box::new(x.chunks_exact(ks)),
+        Some(pixels) => Box::new(pixels.iter().map(move |&p| &x[p * ks..(p + 1) * ks])),
+    };
     let mut profile = vec![0.0f64; ks];
-    let mut add = |col: &[T]| {
+    for col in columns {
+        check_finite(col, "scene")?;
+        if let Some(v) = col.iter().find(|v| v.as_f64() < 0.0) {
+            return Err(Error::param(
+                "scene",
+                format!("reflectivity cannot be negative, got {v}"),
+            ));
+        }
         for (acc, &v) in profile.iter_mut().zip(col) {
             *acc += v.as_f64();
-        }
-    };
-    match pixels {
-        None => x.chunks_exact(ks).for_each(add),
-        Some(pixels) => {
-            let count = x.len() / ks;
-            if let Some(&p) = pixels.iter().find(|&&p| p >= count) {
-                return Err(Error::param(
-                    "pixels",
-                    format!("pixel {p} is beyond the scene's {count} pixels"),
-                ));
-            }
-            pixels.iter().for_each(|&p| add(&x[p * ks..(p + 1) * ks]));
         }
     }
     let kp = pulse.len();
