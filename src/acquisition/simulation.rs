@@ -399,10 +399,6 @@ impl SimulationRequest {
                     ));
                 }
             }
-            if let Some(path) = reflectivity {
-                // Read on its own first, so that its errors name it.
-                io::png_dimensions(path).map_err(named("reflectivity_png"))?;
-            }
             let scene =
                 io::scene_from_pngs::<T>(depth, reflectivity, g.ks).map_err(|e| match e {
                     Error::InvalidParameter {

@@ -206,7 +206,8 @@ pub fn splits(a: &SimulateArgs) -> Result<(), &'static str> {
 
 /// Runs `simulate` (in f64 unless --precision says otherwise).
 pub fn run(a: &SimulateArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
-    let spec = request_of(a, globals.seed()).spec().map_err(|e| match e {
+    let request = request_of(a, globals.seed());
+    let spec = request.spec().map_err(|e| match e {
         rdlidar::Error::InvalidParameter { name, reason } => {
             let reason = [
                 "lit_fraction",
@@ -236,7 +237,6 @@ pub fn run(a: &SimulateArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
         &format!("its {}", SIMULATION_FILES.join(", ")),
     )?;
     let precision = globals.precision.unwrap_or(Precision::F64);
-    let request = request_of(a, globals.seed());
     with_precision!(precision, simulate_into(a, &request, &spec, ranks))
 }
 
