@@ -171,7 +171,7 @@ pub fn column_peaks<T: Real>(
     rule: PeakRule,
 ) -> Vec<Option<(usize, f64)>> {
     assert!(
-        column_len > 0 && x.len() % column_len == 0,
+        column_len > 0 && x.len().is_multiple_of(column_len),
         "column_peaks: column length {column_len} does not divide {} values",
         x.len()
     );

@@ -109,7 +109,7 @@ pub fn npy_dict(descr: &str, shape: &str) -> String {
 /// to a multiple of 64 bytes as numpy pads it, then `data`.
 pub fn npy_bytes(dict: &str, data: &[u8]) -> Vec<u8> {
     let mut header = dict.to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
+    while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');
     }
     header.push('\n');

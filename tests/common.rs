@@ -83,7 +83,7 @@ fn indices(count: usize, bound: usize) -> impl Strategy<Value = Vec<usize>> {
 }
 
 fn divisors(n: usize) -> Vec<usize> {
-    (1..=n).filter(|d| n % d == 0).collect()
+    (1..=n).filter(|d| n.is_multiple_of(*d)).collect()
 }
 
 fn conv_out(len: usize, l: usize, mode: ConvMode) -> Option<usize> {

@@ -36,7 +36,7 @@ fn scene(kind: SceneKind, len: usize, seed: u64) -> Vec<f64> {
             .iter()
             .enumerate()
             .map(|(i, &a)| {
-                if (i * 7 + seed as usize) % 13 == 0 {
+                if (i * 7 + seed as usize).is_multiple_of(13) {
                     a
                 } else {
                     0.0
@@ -276,9 +276,9 @@ proptest! {
     }
 }
 
-/// The work model counts one table row per group and sample (forward) and per pixel and octet
-/// (adjoint), two for ternary codes, plus the tables built; rows are padded to whole chunks of
-/// eight values.
+/// The work model counts one table row per group and sample (forward; two rows of the quads'
+/// tables on AVX-512) and per pixel and octet (adjoint), twice that for ternary codes, plus the
+/// tables built; rows are padded to whole chunks of eight values (whole cache lines for quads).
 #[test]
 fn work_counts_the_table_rows_of_each_kernel() {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -296,11 +296,23 @@ fn work_counts_the_table_rows_of_each_kernel() {
             let op = RdOperator::new(g, pulse.clone(), Arc::new(codes)).unwrap();
             let w = op.work();
             let (groups, k, octets, ks) = (3.0, 55.0, 7.0, 6.0);
-            assert_eq!(
-                w.forward.additions,
-                planes * groups * k * ks + groups * 256.0 * ks
-            );
-            assert_eq!(w.forward.table_bytes, planes * groups * k * 8.0 * 4.0);
+            if op.isa() == "avx512" {
+                // Two quads of 16 rows per group, rows padded to a cache line (16 values).
+                assert_eq!(
+                    w.forward.additions,
+                    planes * 2.0 * groups * k * ks + groups * 32.0 * ks
+                );
+                assert_eq!(
+                    w.forward.table_bytes,
+                    planes * 2.0 * groups * k * 16.0 * 4.0
+                );
+            } else {
+                assert_eq!(
+                    w.forward.additions,
+                    planes * groups * k * ks + groups * 256.0 * ks
+                );
+                assert_eq!(w.forward.table_bytes, planes * groups * k * 8.0 * 4.0);
+            }
             // One block of pixels with one thread: the octets' tables are built once.
             assert_eq!(
                 w.adjoint.additions,

@@ -261,7 +261,7 @@ impl AcquisitionFiles {
             ));
         }
         if let Architecture::Tiles(t) = self.architecture {
-            if rows.start % t.m != 0 || (rows.end % t.m != 0 && rows.end != m) {
+            if !rows.start.is_multiple_of(t.m) || (!rows.end.is_multiple_of(t.m) && rows.end != m) {
                 return Err(Error::param(
                     "rows",
                     format!(

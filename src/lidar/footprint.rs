@@ -13,6 +13,7 @@ use crate::real::Real;
 
 use super::codes::CodeAlphabet;
 use super::geometry::Geometry;
+use super::kernels::quads::{quad_row_len, QUAD_ROWS};
 use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
 use super::rdop::{
     adjoint_groups_per_block, depth_slabs, groups_per_block, RdOperator, ADJ_BLOCK_BYTES,
@@ -45,7 +46,9 @@ impl KernelWork {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct OperatorWork {
     /// The dense forward: one row of a group's table per group and sample (two for ternary
-    /// codes), 256 rows tabulated per group.
+    /// codes), 256 rows tabulated per group; with the quad tables (AVX-512), two rows per group
+    /// and sample (four for ternary codes), 2 × 16 rows tabulated per group, each row padded to
+    /// whole cache lines.
     pub forward: KernelWork,
     /// The adjoint: one row of an octet's table per pixel and octet of samples (two for ternary
     /// codes), 256 rows tabulated per octet and block of pixels.
@@ -149,13 +152,27 @@ impl<T: Real> RdOperator<T> {
         let k = self.codes().len() as f64;
         let octets = self.codes().len().div_ceil(8) as f64;
         let blocks = self.codes().groups().div_ceil(self.adjoint_block_groups()) as f64;
-        let forward_lookups = groups * k * planes;
         let adjoint_lookups = 8.0 * groups * octets * planes;
+        let forward = if self.forward_uses_quads() {
+            let row = self
+                .slabs()
+                .iter()
+                .map(|s| quad_row_len::<T>(s.1))
+                .sum::<usize>();
+            let lookups = 2.0 * groups * k * planes;
+            KernelWork {
+                additions: lookups * ks + groups * 2.0 * QUAD_ROWS as f64 * ks,
+                table_bytes: lookups * row as f64 * size,
+            }
+        } else {
+            let lookups = groups * k * planes;
+            KernelWork {
+                additions: lookups * ks + groups * 256.0 * ks,
+                table_bytes: lookups * ks_pad * size,
+            }
+        };
         OperatorWork {
-            forward: KernelWork {
-                additions: forward_lookups * ks + groups * 256.0 * ks,
-                table_bytes: forward_lookups * ks_pad * size,
-            },
+            forward,
             adjoint: KernelWork {
                 additions: adjoint_lookups * ks + blocks * octets * 256.0 * ks,
                 table_bytes: adjoint_lookups * ks_pad * size,

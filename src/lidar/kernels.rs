@@ -89,6 +89,15 @@ impl Isa {
         Isa::chosen().unwrap_or_else(|_| Isa::best())
     }
 
+    /// Whether the dense forward uses the quad tables ([`quads`]): on AVX-512.
+    pub(crate) fn has_quads(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self == Isa::Avx512 {
+            return true;
+        }
+        false
+    }
+
     pub(crate) fn name(self) -> &'static str {
         match self {
             Isa::Generic => "generic",
@@ -627,5 +636,7 @@ pub(crate) fn gather_rows<T: Real>(
     }
 }
 
+pub(crate) mod quads;
 #[cfg(test)]
 mod tests;
+pub(crate) mod wide;

@@ -11,7 +11,7 @@ mod codes;
 mod composed;
 mod footprint;
 mod geometry;
-mod kernels;
+pub(crate) mod kernels;
 mod measurement;
 mod noise;
 mod pulse;

@@ -11,6 +11,10 @@ use crate::real::Real;
 
 use super::codes::Codes;
 use super::geometry::Geometry;
+use super::kernels::quads::{
+    build_quad_tables, lines_as_mut, quad_forward, quad_groups_per_block, quad_lines, CacheLine,
+    QuadBlock,
+};
 use super::kernels::{
     adjoint_chunk, forward_block, octet_stride, sparse_entry_isa, AdjChunk, FwdBlock, Isa, Lane,
     ADJ_OCTETS,
@@ -72,6 +76,7 @@ struct Work<T> {
     y64: Vec<f64>,
     part: Vec<Lane<T>>,
     lanes: Vec<Lane<T>>,
+    lines: Vec<CacheLine>,
 }
 
 struct Pool<T>(Mutex<Vec<Work<T>>>);
@@ -112,16 +117,20 @@ fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
 /// every sample one table row per group (selected by the group's code byte) is added, and the
 /// sum is weighted by the pulse window p[k − j] and accumulated in `f64`. One lookup replaces
 /// eight additions of the equivalent matrix product, and the intermediate K × K_s matrix is never
-/// stored. Scenes with few nonzeros take a sparse path costing O(nnz·K_p)
-/// (see [`ForwardPath`]).
+/// stored. On AVX-512 each group is split into two quads of four pixels with 16-row tables
+/// instead, so that a block's tables stay in the L1 cache: two rows per group and sample, each
+/// read several times faster than a row of a 256-row table from L2
+/// (docs/performance.md). Scenes with few nonzeros take a sparse path costing
+/// O(nnz·K_p) (see [`ForwardPath`]).
 ///
 /// **Adjoint.** The same tables, built along the samples instead of across the pixels: for a
 /// chunk of eight octets (64 samples), the 256 signed subset sums of each octet's eight rows
 /// `y[k]·p[k − j]` are tabulated once, and every pixel adds one row per octet, the one its own
 /// code byte along those eight samples selects (the packed codes are transposed 8 × 8 bits at a
 /// time; a +1 row minus a −1 row for ternary codes). The kernel only reads the shared tables and
-/// keeps the pixel's sum in registers; the partial sums of a block of pixels (1 MB) stay in the L2
-/// cache and are added to `f64` sums every 1024 samples.
+/// keeps the pixel's sum in registers; the tables start on a cache line (a row of `f64` values then
+/// never straddles one more line than it needs); the partial sums of a block of pixels (1 MB) stay
+/// in the L2 cache and are added to `f64` sums every 1024 samples.
 ///
 /// Blocks are processed in parallel with rayon; the kernels are compiled for AVX-512, AVX2+FMA and
 /// generic x86-64 and chosen at run time.
@@ -133,8 +142,11 @@ pub struct RdOperator<T: Real> {
     prev: Vec<T>,
     pad: usize,
     slabs: Vec<(usize, usize)>,
+    /// Groups per block of the forward: of 256-row tables, or of quad tables.
     block_groups: usize,
     adj_block_groups: usize,
+    /// Whether the forward uses the quad tables ([`quad_forward`], AVX-512).
+    quads: bool,
     path: ForwardPath,
     isa: Isa,
     pool: Pool<T>,
@@ -203,7 +215,13 @@ impl<T: Real> RdOperator<T> {
             prev[pad + t] = v;
         }
         let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
-        let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
+        let isa = Isa::chosen()?;
+        let quads = isa.has_quads();
+        let block_groups = if quads {
+            quad_groups_per_block::<T>(max_nch)
+        } else {
+            groups_per_block::<T>(BLOCK_BYTES, max_nch)
+        };
         let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch);
         Ok(RdOperator {
             geom,
@@ -214,8 +232,9 @@ impl<T: Real> RdOperator<T> {
             slabs,
             block_groups,
             adj_block_groups,
+            quads,
             path: ForwardPath::Auto,
-            isa: Isa::chosen()?,
+            isa,
             pool: Pool(Mutex::new(Vec::new())),
             lags: OnceLock::new(),
             twin: OnceLock::new(),
@@ -344,6 +363,11 @@ impl<T: Real> RdOperator<T> {
         groups.div_ceil(blocks)
     }
 
+    /// Whether the dense forward uses the quad tables (AVX-512).
+    pub(crate) fn forward_uses_quads(&self) -> bool {
+        self.quads
+    }
+
     /// The depth slabs: (first bin, chunks of eight bins).
     pub(crate) fn slabs(&self) -> &[(usize, usize)] {
         &self.slabs
@@ -434,26 +458,16 @@ impl<T: Real> RdOperator<T> {
                 let mut w = self.pool.take();
                 resize(&mut w.y64, k, 0.0);
                 resize(&mut w.part, k, [T::zero(); 8]);
-                resize(
-                    &mut w.lanes,
-                    self.block_groups * 256 * max_nch,
-                    [T::zero(); 8],
-                );
+                if self.quads {
+                    let lines = quad_lines::<T>(self.block_groups, max_nch);
+                    resize(&mut w.lines, lines, CacheLine::default());
+                } else {
+                    let lanes = self.block_groups * 256 * max_nch;
+                    resize(&mut w.lanes, lanes, [T::zero(); 8]);
+                }
                 let (b0, b1) = (t * nb / tasks, (t + 1) * nb / tasks);
                 for b in b0..b1 {
-                    let groups = self.block_range(b);
-                    let (plus, minus) = self.group_codes(groups.clone());
-                    for &(j0, nch) in &self.slabs {
-                        self.build_tables(x, groups.clone(), j0, nch, &mut w.lanes);
-                        let blk = FwdBlock {
-                            tables: &w.lanes,
-                            plus: &plus,
-                            minus: minus.as_deref(),
-                            prev: &self.prev,
-                            base0: self.pad + self.pulse.len() - 1 + j0,
-                        };
-                        forward_block(self.isa, nch, &blk, &mut w.part);
-                    }
+                    self.forward_block(x, b, &mut w);
                     // Flush the lane partial sums to f64 every few blocks to bound their length.
                     if (b - b0) % FLUSH_BLOCKS == FLUSH_BLOCKS - 1 || b + 1 == b1 {
                         for (acc, p) in w.y64.iter_mut().zip(w.part.iter_mut()) {
@@ -470,6 +484,41 @@ impl<T: Real> RdOperator<T> {
         }
         for w in partial {
             self.pool.give(w);
+        }
+    }
+
+    /// Adds block `b`'s groups, every slab, to the lane partial sums `w.part`.
+    fn forward_block(&self, x: &[T], b: usize, w: &mut Work<T>) {
+        let groups = self.block_range(b);
+        let (plus, minus) = self.group_codes(groups.clone());
+        for &(j0, nch) in &self.slabs {
+            let base0 = self.pad + self.pulse.len() - 1 + j0;
+            if self.quads {
+                let tables = lines_as_mut::<T>(&mut w.lines);
+                let (geom, binary) = (self.geom, minus.is_none());
+                let shape = (geom.pixels(), geom.ks);
+                build_quad_tables(x, shape, binary, groups.clone(), j0, nch, tables);
+                let blk = QuadBlock {
+                    tables,
+                    nch,
+                    width: (8 * nch).min(geom.ks - j0),
+                    plus: &plus,
+                    minus: minus.as_deref(),
+                    prev: &self.prev,
+                    base0,
+                };
+                quad_forward(self.isa, &blk, &mut w.part);
+            } else {
+                self.build_tables(x, groups.clone(), j0, nch, &mut w.lanes);
+                let blk = FwdBlock {
+                    tables: &w.lanes,
+                    plus: &plus,
+                    minus: minus.as_deref(),
+                    prev: &self.prev,
+                    base0,
+                };
+                forward_block(self.isa, nch, &blk, &mut w.part);
+            }
         }
     }
 
@@ -599,13 +648,13 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                 let (plus, minus) = self.group_codes(groups.clone());
                 // Allocated per application rather than pooled, so that an operator that is
                 // kept does not hold them (megabytes per thread at large K_s).
-                let (mut tables, mut part, mut out) = (Vec::new(), Vec::new(), Vec::new());
+                let (mut lines, mut part, mut out) = (Vec::new(), Vec::new(), Vec::new());
                 for &(j0, nch) in &self.slabs {
-                    resize(
-                        &mut tables,
-                        ADJ_OCTETS * octet_stride::<T>(nch),
-                        [T::zero(); 8],
-                    );
+                    // On whole cache lines, so that rows start on a line where they can.
+                    let bytes =
+                        ADJ_OCTETS * octet_stride::<T>(nch) * std::mem::size_of::<Lane<T>>();
+                    resize(&mut lines, bytes.div_ceil(64), CacheLine::default());
+                    let tables = lines_as_mut::<T>(&mut lines).as_chunks_mut::<8>().0;
                     resize(&mut part, groups.len() * 8 * nch, [T::zero(); 8]);
                     resize(&mut out, groups.len() * 8 * nch, [0.0; 8]);
                     for (c, o0) in (0..octets).step_by(ADJ_OCTETS).enumerate() {
@@ -617,7 +666,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                             base0: self.pad + self.pulse.len() - 1 + j0,
                             first_octet: o0,
                         };
-                        adjoint_chunk(self.isa, nch, &chunk, &mut tables, &mut part);
+                        adjoint_chunk(self.isa, nch, &chunk, tables, &mut part);
                         if c % ADJ_FLUSH_CHUNKS == ADJ_FLUSH_CHUNKS - 1 || o0 + ADJ_OCTETS >= octets
                         {
                             for (d, s) in out.iter_mut().zip(part.iter_mut()) {

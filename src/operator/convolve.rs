@@ -389,7 +389,7 @@ mod tests {
             assert!(f >= n);
             let mut r = f;
             for p in [2, 3, 5] {
-                while r % p == 0 {
+                while r.is_multiple_of(p) {
                     r /= p;
                 }
             }

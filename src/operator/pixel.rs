@@ -256,7 +256,7 @@ pub fn check_pixels(
     ks: usize,
     windows: Option<&[(usize, usize)]>,
 ) -> Result<usize> {
-    if ks == 0 || n % ks != 0 {
+    if ks == 0 || !n.is_multiple_of(ks) {
         return Err(Error::param(
             "column_len",
             format!("must be ≥ 1 and divide the {n} columns, got {ks}"),

@@ -431,7 +431,7 @@ pub fn failures(rows: &[StressRow]) -> usize {
 pub(crate) fn count_text(k: usize) -> String {
     let mut p = 0;
     let mut v = k;
-    while v >= 10 && v % 10 == 0 {
+    while v >= 10 && v.is_multiple_of(10) {
         v /= 10;
         p += 1;
     }

@@ -1,0 +1,362 @@
+//! The dense forward with tables that stay in the L1 cache (AVX-512).
+//!
+//! A group's 256-row table (one row per code byte, 10 kB a group at 40 bins in `f32`) keeps a
+//! block's tables in the L2 cache, and a row read at random from L2 costs several times one read
+//! from L1. Here each group of eight pixels is split into two *quads* of four pixels, each with a
+//! 16-row table (the signed subset sums of its four depth columns), and every sample adds two
+//! rows per group: the ones the low and the high four bits of its code byte select. That is
+//! twice the rows, but a block of several groups' tables (48 kB) stays in L1, the rows start on
+//! cache lines (padded to whole 512-bit vectors), and two samples are summed at once from the
+//! same code bytes.
+
+use std::ops::Range;
+
+use super::{Isa, Lane};
+use crate::real::Real;
+
+/// Rows of a quad's table: one per value of four code bits.
+pub(crate) const QUAD_ROWS: usize = 16;
+
+/// Cache budget (bytes) for the quad tables of one block of groups: the L1 data cache, whose
+/// other traffic (code bytes, the pulse window, the partial sums) streams through it.
+pub(crate) const QUAD_BLOCK_BYTES: usize = 48 * 1024;
+
+/// 64 bytes aligned to 64: the storage of the quad tables, so that every row starts on a line.
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(64))]
+pub(crate) struct CacheLine([u64; 8]);
+
+/// Values per quad-table row for a slab of `nch` chunks of eight bins: 8·nch rounded up to whole
+/// cache lines (sixteen `f32` or eight `f64` values each).
+pub(crate) fn quad_row_len<T>(nch: usize) -> usize {
+    let per = 64 / std::mem::size_of::<T>();
+    (8 * nch).div_ceil(per) * per
+}
+
+/// Groups whose quad tables of `max_nch` chunks fit in [`QUAD_BLOCK_BYTES`] (1 to 64).
+pub(crate) fn quad_groups_per_block<T>(max_nch: usize) -> usize {
+    let group = 2 * QUAD_ROWS * quad_row_len::<T>(max_nch) * std::mem::size_of::<T>();
+    (QUAD_BLOCK_BYTES / group).clamp(1, 64)
+}
+
+/// Cache lines that hold the quad tables of `groups` groups of `max_nch` chunks.
+pub(crate) fn quad_lines<T>(groups: usize, max_nch: usize) -> usize {
+    groups * 2 * QUAD_ROWS * quad_row_len::<T>(max_nch) * std::mem::size_of::<T>() / 64
+}
+
+/// The values of `lines`, as `T`.
+pub(crate) fn lines_as_mut<T: Real>(lines: &mut [CacheLine]) -> &mut [T] {
+    let len = lines.len() * 64 / std::mem::size_of::<T>();
+    // SAFETY: `T` is `f32` or `f64` (`Real` is sealed): plain data for which every bit pattern
+    // is a value, whose alignment divides the lines' 64; the slice covers exactly the lines'
+    // bytes and borrows them mutably for its lifetime.
+    unsafe { std::slice::from_raw_parts_mut(lines.as_mut_ptr().cast::<T>(), len) }
+}
+
+/// Tabulates the quads of `groups` for the slab of bins `j0 ..` (`nch` chunks) of the scene `x`
+/// (`npix` pixels of `ks` bins) into `tables`: for group g (counted from the block's first),
+/// quad h and four code bits b, the row at `((2g + h)·16 + b)·quad_row_len` holds Σ_i ±x[p_i, j]
+/// over the quad's pixels p_i = 8g + 4h + i (+ where bit i of b is set, − elsewhere) for binary
+/// codes, or the sum over the set bits only for ternary codes (whose −1 rows are looked up
+/// separately). Pixels past `npix` count as zero, and so do the bins past the slab's end.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn build_quad_tables<T: Real>(
+    x: &[T],
+    (npix, ks): (usize, usize),
+    binary: bool,
+    groups: Range<usize>,
+    j0: usize,
+    nch: usize,
+    tables: &mut [T],
+) {
+    let rl = quad_row_len::<T>(nch);
+    let width = (8 * nch).min(ks - j0);
+    let two = T::one() + T::one();
+    for (gi, g) in groups.enumerate() {
+        for h in 0..2 {
+            let t = &mut tables[(2 * gi + h) * QUAD_ROWS * rl..][..QUAD_ROWS * rl];
+            let column = |i: usize| {
+                let p = 8 * g + 4 * h + i;
+                (p < npix).then(|| &x[p * ks + j0..p * ks + j0 + width])
+            };
+            t[..rl].fill(T::zero());
+            if binary {
+                for c in (0..4).filter_map(column) {
+                    for (r, &v) in t[..width].iter_mut().zip(c) {
+                        *r = *r - v;
+                    }
+                }
+            }
+            for b in 1..QUAD_ROWS {
+                let from = b & (b - 1);
+                t.copy_within(from * rl..(from + 1) * rl, b * rl);
+                if let Some(c) = column(b.trailing_zeros() as usize) {
+                    let row = &mut t[b * rl..b * rl + width];
+                    for (r, &v) in row.iter_mut().zip(c) {
+                        *r = *r + if binary { two * v } else { v };
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Everything a block of the quad forward needs.
+pub(crate) struct QuadBlock<'a, T> {
+    /// The block's quad tables ([`build_quad_tables`]), 64-byte aligned.
+    pub tables: &'a [T],
+    /// Chunks of eight bins of the slab.
+    pub nch: usize,
+    /// Bins of the slab (at most 8·nch).
+    pub width: usize,
+    /// The +1 code bytes of each group of the block, at least `part.len()` each.
+    pub plus: &'a [&'a [u8]],
+    /// The −1 code bytes (ternary codes only).
+    pub minus: Option<&'a [&'a [u8]]>,
+    /// Reversed, zero-padded pulse, as in [`FwdBlock`](super::FwdBlock).
+    pub prev: &'a [T],
+    /// See `prev`.
+    pub base0: usize,
+}
+
+/// part\[k\] += Σ_j p[k − j]·Σ_g (T_g,lo[b & 15] + T_g,hi[b >> 4])[j] lane by lane, b the code byte
+/// of group g at sample k (the +1 rows minus the −1 rows for ternary codes): the forward of one
+/// block and slab with the quad tables, on AVX-512.
+///
+/// # Panics
+/// If `isa` is not AVX-512, or on buffers too short for the block (checked once, before the
+/// unchecked loops).
+pub(crate) fn quad_forward<T: Real>(isa: Isa, a: &QuadBlock<'_, T>, part: &mut [Lane<T>]) {
+    let rl = quad_row_len::<T>(a.nch);
+    let n = part.len();
+    let streams = a.plus.iter().chain(a.minus.into_iter().flatten());
+    assert!(streams.into_iter().all(|c| c.len() >= n), "code bytes");
+    assert!(
+        a.minus.is_none_or(|m| m.len() == a.plus.len()),
+        "code planes"
+    );
+    assert!(
+        a.tables.len() >= a.plus.len() * 2 * QUAD_ROWS * rl,
+        "tables"
+    );
+    assert_eq!(a.tables.as_ptr() as usize % 64, 0, "tables' alignment");
+    assert!(a.width <= 8 * a.nch && (1..=8).contains(&a.nch), "slab");
+    assert!(
+        n == 0 || (a.base0 + 1 >= n && a.base0 + a.width <= a.prev.len()),
+        "pulse"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if isa == Isa::Avx512 {
+        let z = rl / <T as super::wide::Wide>::PER;
+        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, AVX-512VL and FMA; the
+        // assertions above bound every unchecked read (code bytes below `part.len()`, table
+        // rows within the block's tables, the pulse window within `prev`).
+        unsafe {
+            match z {
+                1 => quad_kernel::<T, 1>(a, part),
+                2 => quad_kernel::<T, 2>(a, part),
+                3 => quad_kernel::<T, 3>(a, part),
+                4 => quad_kernel::<T, 4>(a, part),
+                5 => quad_kernel::<T, 5>(a, part),
+                6 => quad_kernel::<T, 6>(a, part),
+                7 => quad_kernel::<T, 7>(a, part),
+                8 => quad_kernel::<T, 8>(a, part),
+                _ => unreachable!("rows of one to eight vectors"),
+            }
+        }
+        return;
+    }
+    panic!("the quad forward runs on AVX-512 only, not {}", isa.name());
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+unsafe fn quad_kernel<T: Real, const Z: usize>(a: &QuadBlock<'_, T>, part: &mut [Lane<T>]) {
+    let n = part.len();
+    let mut k = 0;
+    while k + 2 <= n {
+        quad_samples::<T, Z, 2>(a, k, part);
+        k += 2;
+    }
+    if k < n {
+        quad_samples::<T, Z, 1>(a, k, part);
+    }
+}
+
+/// Samples `k .. k + S` of [`quad_forward`]. While rows are short (up to four vectors) each
+/// sample sums its low and its high rows in separate registers, so that two chains of additions
+/// run side by side; longer rows share one set, to stay within the 32 vector registers.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+// The accumulators are indexed in step with the vectors' offsets in the rows.
+#[allow(clippy::needless_range_loop)]
+unsafe fn quad_samples<T: Real, const Z: usize, const S: usize>(
+    a: &QuadBlock<'_, T>,
+    k: usize,
+    part: &mut [Lane<T>],
+) {
+    use super::wide::Wide;
+    let per = <T as Wide>::PER;
+    let rl = Z * per;
+    let hi_set = usize::from(Z <= 4);
+    let tables = a.tables.as_ptr();
+    let mut acc = [[[T::v_zero(); Z]; 2]; S];
+    let rows = |codes: &[u8], g: usize, s: usize| {
+        let b = *codes.get_unchecked(k + s) as usize;
+        let base = tables.add(g * 2 * QUAD_ROWS * rl);
+        (
+            base.add((b & 15) * rl),
+            base.add((QUAD_ROWS + (b >> 4)) * rl),
+        )
+    };
+    for (g, plus) in a.plus.iter().enumerate() {
+        for (s, acc) in acc.iter_mut().enumerate() {
+            let (lo, hi) = rows(plus, g, s);
+            for z in 0..Z {
+                acc[0][z] = T::v_add(acc[0][z], T::v_load(lo.add(z * per)));
+                acc[hi_set][z] = T::v_add(acc[hi_set][z], T::v_load(hi.add(z * per)));
+            }
+        }
+    }
+    if let Some(minus) = a.minus {
+        for (g, minus) in minus.iter().enumerate() {
+            for (s, acc) in acc.iter_mut().enumerate() {
+                let (lo, hi) = rows(minus, g, s);
+                for z in 0..Z {
+                    acc[0][z] = T::v_sub(acc[0][z], T::v_load(lo.add(z * per)));
+                    acc[hi_set][z] = T::v_sub(acc[hi_set][z], T::v_load(hi.add(z * per)));
+                }
+            }
+        }
+    }
+    for (s, acc) in acc.iter().enumerate() {
+        let window = a.prev.as_ptr().add(a.base0 - (k + s));
+        let mut sum = T::v_zero();
+        for z in 0..Z {
+            let v = if hi_set == 1 {
+                T::v_add(acc[0][z], acc[1][z])
+            } else {
+                acc[0][z]
+            };
+            let w = T::v_load_first(window.add(z * per), a.width.saturating_sub(z * per));
+            sum = T::v_mul_add(v, w, sum);
+        }
+        let lanes = T::v_lanes8(sum);
+        let out = part.get_unchecked_mut(k + s);
+        for (o, l) in out.iter_mut().zip(lanes) {
+            *o = *o + l;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The quad forward of one block against the direct sum Σ_p s_p(k)·Σ_j x[p, j]·p[k − j], for
+    /// both alphabets, slabs of one to eight chunks (full, partial, and one that starts at bin
+    /// 64), a last group with pixels past the grid and an odd K (a last sample alone).
+    fn quad_forward_matches_the_direct_sum<T: Real>(tol: f64) {
+        let isa = Isa::best();
+        if !isa.has_quads() {
+            return;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(44);
+        let (groups, npix, kp) = (3usize, 21usize, 37usize);
+        for (ks, j0, nch) in [(5, 0, 1), (21, 0, 3), (40, 0, 5), (64, 0, 8), (70, 64, 1)] {
+            let k = kp + ks - 1;
+            let x: Vec<T> = (0..npix * ks)
+                .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
+                .collect();
+            let pulse: Vec<f64> = (0..kp)
+                .map(|_| f64::from(rng.random_range(0..2u8)))
+                .collect();
+            let pad = ks;
+            let mut prev = vec![T::zero(); pad + kp + j0 + 8 * nch];
+            for (t, &v) in pulse.iter().rev().enumerate() {
+                prev[pad + t] = T::of_f64(v);
+            }
+            let plus: Vec<Vec<u8>> = (0..groups)
+                .map(|_| (0..k).map(|_| rng.random()).collect())
+                .collect();
+            let minus: Vec<Vec<u8>> = plus
+                .iter()
+                .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
+                .collect();
+            let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
+            let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+            let width = (8 * nch).min(ks - j0);
+            for ternary in [false, true] {
+                let mut lines = vec![CacheLine::default(); quad_lines::<T>(groups, nch)];
+                let tables = lines_as_mut::<T>(&mut lines);
+                build_quad_tables(&x, (npix, ks), !ternary, 0..groups, j0, nch, tables);
+                let block = QuadBlock {
+                    tables,
+                    nch,
+                    width,
+                    plus: &plus_refs,
+                    minus: ternary.then_some(minus_refs.as_slice()),
+                    prev: &prev,
+                    base0: pad + kp - 1 + j0,
+                };
+                let mut part = vec![[T::zero(); 8]; k];
+                quad_forward(isa, &block, &mut part);
+                for (kk, lanes) in part.iter().enumerate() {
+                    let got: f64 = lanes.iter().map(|v| v.as_f64()).sum();
+                    let want: f64 = (0..npix)
+                        .map(|p| {
+                            let (g, i) = (p / 8, p % 8);
+                            let s = f64::from((plus[g][kk] >> i) & 1)
+                                - if ternary {
+                                    f64::from((minus[g][kk] >> i) & 1)
+                                } else {
+                                    f64::from(!(plus[g][kk] >> i) & 1)
+                                };
+                            let column: f64 = (j0..j0 + width)
+                                .filter(|&j| kk >= j && kk - j < kp)
+                                .map(|j| x[p * ks + j].as_f64() * pulse[kk - j])
+                                .sum();
+                            s * column
+                        })
+                        .sum();
+                    assert!(
+                        (got - want).abs() <= tol * (1.0 + want.abs()),
+                        "{} ks {ks} slab {j0}+{nch} ternary {ternary}: sample {kk}: {got} vs {want}",
+                        T::NAME
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn quad_forward_matches_the_direct_sum_f32() {
+        quad_forward_matches_the_direct_sum::<f32>(1e-4);
+    }
+
+    #[test]
+    fn quad_forward_matches_the_direct_sum_f64() {
+        quad_forward_matches_the_direct_sum::<f64>(1e-12);
+    }
+
+    #[test]
+    fn quad_forward_refuses_other_instruction_sets() {
+        let mut lines = vec![CacheLine::default(); quad_lines::<f64>(1, 1)];
+        let prev = vec![0.0f64; 16];
+        let codes = [0u8; 4];
+        let block = QuadBlock {
+            tables: lines_as_mut::<f64>(&mut lines),
+            nch: 1,
+            width: 8,
+            plus: &[&codes[..]],
+            minus: None,
+            prev: &prev,
+            base0: 7,
+        };
+        let mut part = vec![[0.0f64; 8]; 4];
+        let run = std::panic::catch_unwind(move || quad_forward(Isa::Generic, &block, &mut part));
+        assert!(run.is_err());
+    }
+}

@@ -1,0 +1,143 @@
+//! The 512-bit vector operations of the AVX-512 kernels, for `f32` (sixteen values a vector) and
+//! `f64` (eight), so that one generic kernel serves both precisions.
+
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::{
+    __m512, __m512d, _mm256_add_ps, _mm256_castpd_ps, _mm512_add_pd, _mm512_add_ps,
+    _mm512_castps512_ps256, _mm512_castps_pd, _mm512_extractf64x4_pd, _mm512_fmadd_pd,
+    _mm512_fmadd_ps, _mm512_load_pd, _mm512_load_ps, _mm512_maskz_loadu_pd, _mm512_maskz_loadu_ps,
+    _mm512_setzero_pd, _mm512_setzero_ps, _mm512_sub_pd, _mm512_sub_ps,
+};
+
+/// Vector operations on one 512-bit register of `Self` values.
+///
+/// # Safety
+/// Every function needs AVX-512F at run time (`Isa::Avx512`); the loads read what their
+/// documentation says and no more.
+pub trait Wide: Copy {
+    /// Values per vector (and per 64-byte cache line).
+    const PER: usize;
+    /// A vector of [`PER`](Wide::PER) values.
+    #[cfg(target_arch = "x86_64")]
+    type V: Copy;
+
+    /// All zeros.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_zero() -> Self::V;
+    /// The [`PER`](Wide::PER) values at `p`, which is 64-byte aligned.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_load(p: *const Self) -> Self::V;
+    /// The first `min(n, PER)` values at `p` (any alignment), zeros after: nothing past them
+    /// is read.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_load_first(p: *const Self, n: usize) -> Self::V;
+    /// a + b.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_add(a: Self::V, b: Self::V) -> Self::V;
+    /// a − b.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_sub(a: Self::V, b: Self::V) -> Self::V;
+    /// a·b + c.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_mul_add(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+    /// Eight lanes whose sum is the sum of the vector's values.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_lanes8(v: Self::V) -> [Self; 8];
+}
+
+/// The mask of the first `min(n, bits)` lanes.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn first_lanes(n: usize, bits: usize) -> u32 {
+    if n >= bits {
+        u32::MAX >> (32 - bits)
+    } else {
+        (1u32 << n) - 1
+    }
+}
+
+impl Wide for f32 {
+    const PER: usize = 16;
+    #[cfg(target_arch = "x86_64")]
+    type V = __m512;
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_zero() -> __m512 {
+        _mm512_setzero_ps()
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_load(p: *const f32) -> __m512 {
+        _mm512_load_ps(p)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_load_first(p: *const f32, n: usize) -> __m512 {
+        _mm512_maskz_loadu_ps(first_lanes(n, 16) as u16, p)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_add(a: __m512, b: __m512) -> __m512 {
+        _mm512_add_ps(a, b)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_sub(a: __m512, b: __m512) -> __m512 {
+        _mm512_sub_ps(a, b)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_mul_add(a: __m512, b: __m512, c: __m512) -> __m512 {
+        _mm512_fmadd_ps(a, b, c)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_lanes8(v: __m512) -> [f32; 8] {
+        let high = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
+        let sum = _mm256_add_ps(_mm512_castps512_ps256(v), high);
+        std::mem::transmute::<std::arch::x86_64::__m256, [f32; 8]>(sum)
+    }
+}
+
+impl Wide for f64 {
+    const PER: usize = 8;
+    #[cfg(target_arch = "x86_64")]
+    type V = __m512d;
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_zero() -> __m512d {
+        _mm512_setzero_pd()
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_load(p: *const f64) -> __m512d {
+        _mm512_load_pd(p)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_load_first(p: *const f64, n: usize) -> __m512d {
+        _mm512_maskz_loadu_pd(first_lanes(n, 8) as u8, p)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_add(a: __m512d, b: __m512d) -> __m512d {
+        _mm512_add_pd(a, b)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_sub(a: __m512d, b: __m512d) -> __m512d {
+        _mm512_sub_pd(a, b)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_mul_add(a: __m512d, b: __m512d, c: __m512d) -> __m512d {
+        _mm512_fmadd_pd(a, b, c)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_lanes8(v: __m512d) -> [f64; 8] {
+        std::mem::transmute::<__m512d, [f64; 8]>(v)
+    }
+}
