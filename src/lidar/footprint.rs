@@ -100,7 +100,7 @@ impl<T: Real> RdOperator<T> {
         };
         let size = std::mem::size_of::<T>();
         let slabs = depth_slabs(geom.ks);
-        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch);
+        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch + 8);
         let max_nch = slabs.iter().map(|s| s.1).max().unwrap_or(1);
         let block_groups = groups_per_block::<T>(BLOCK_BYTES, max_nch);
         let planes = match alphabet {
@@ -153,6 +153,11 @@ impl<T: Real> RdOperator<T> {
         let octets = self.codes().len().div_ceil(8) as f64;
         let blocks = self.codes().groups().div_ceil(self.adjoint_block_groups()) as f64;
         let adjoint_lookups = 8.0 * groups * octets * planes;
+        let adjoint_row = self
+            .slabs()
+            .iter()
+            .map(|s| 8 * self.adjoint_nch(s.1))
+            .sum::<usize>() as f64;
         let forward = if self.forward_uses_quads() {
             let row = self
                 .slabs()
@@ -175,7 +180,7 @@ impl<T: Real> RdOperator<T> {
             forward,
             adjoint: KernelWork {
                 additions: adjoint_lookups * ks + blocks * octets * 256.0 * ks,
-                table_bytes: adjoint_lookups * ks_pad * size,
+                table_bytes: adjoint_lookups * adjoint_row * size,
             },
         }
     }

@@ -636,6 +636,7 @@ pub(crate) fn gather_rows<T: Real>(
     }
 }
 
+pub(crate) mod adjoint_wide;
 pub(crate) mod quads;
 #[cfg(test)]
 mod tests;

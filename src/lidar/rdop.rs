@@ -11,6 +11,7 @@ use crate::real::Real;
 
 use super::codes::Codes;
 use super::geometry::Geometry;
+use super::kernels::adjoint_wide::{adjoint_chunk_wide, wide_adjoint_nch};
 use super::kernels::quads::{
     build_quad_tables, lines_as_mut, quad_forward, quad_groups_per_block, quad_lines, CacheLine,
     QuadBlock,
@@ -207,7 +208,8 @@ impl<T: Real> RdOperator<T> {
         }
         let ks = geom.ks;
         let slabs = depth_slabs(ks);
-        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch);
+        // One chunk more than the last slab: the wide adjoint's rows may be a chunk longer.
+        let ks_pad = slabs.last().map_or(0, |&(j0, nch)| j0 + 8 * nch + 8);
         let pad = ks;
         let kp = pulse.len();
         let mut prev = vec![T::zero(); pad + kp + ks_pad];
@@ -361,6 +363,16 @@ impl<T: Real> RdOperator<T> {
             .min(groups)
             .max(1);
         groups.div_ceil(blocks)
+    }
+
+    /// Chunks of eight values per row of the adjoint's tables for a slab of `nch` chunks: whole
+    /// 512-bit vectors on AVX-512.
+    pub(crate) fn adjoint_nch(&self, nch: usize) -> usize {
+        if self.quads {
+            wide_adjoint_nch::<T>(nch)
+        } else {
+            nch
+        }
     }
 
     /// Whether the dense forward uses the quad tables (AVX-512).
@@ -649,7 +661,9 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                 // Allocated per application rather than pooled, so that an operator that is
                 // kept does not hold them (megabytes per thread at large K_s).
                 let (mut lines, mut part, mut out) = (Vec::new(), Vec::new(), Vec::new());
-                for &(j0, nch) in &self.slabs {
+                for &(j0, width) in &self.slabs {
+                    // Rows of whole vectors for the wide kernel (the extra bins are discarded).
+                    let nch = self.adjoint_nch(width);
                     // On whole cache lines, so that rows start on a line where they can.
                     let bytes =
                         ADJ_OCTETS * octet_stride::<T>(nch) * std::mem::size_of::<Lane<T>>();
@@ -666,7 +680,11 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                             base0: self.pad + self.pulse.len() - 1 + j0,
                             first_octet: o0,
                         };
-                        adjoint_chunk(self.isa, nch, &chunk, tables, &mut part);
+                        if self.quads {
+                            adjoint_chunk_wide(self.isa, nch, &chunk, tables, &mut part);
+                        } else {
+                            adjoint_chunk(self.isa, nch, &chunk, tables, &mut part);
+                        }
                         if c % ADJ_FLUSH_CHUNKS == ADJ_FLUSH_CHUNKS - 1 || o0 + ADJ_OCTETS >= octets
                         {
                             for (d, s) in out.iter_mut().zip(part.iter_mut()) {
@@ -679,7 +697,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                     }
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
                     for (i, o) in out.chunks_exact(nch).take(pixels).enumerate() {
-                        for jj in 0..(8 * nch).min(ks - j0) {
+                        for jj in 0..(8 * width).min(ks - j0) {
                             xb[i * ks + j0 + jj] = T::of_f64(o[jj / 8][jj % 8]);
                         }
                     }

@@ -2,12 +2,7 @@
 //! `f64` (eight), so that one generic kernel serves both precisions.
 
 #[cfg(target_arch = "x86_64")]
-use std::arch::x86_64::{
-    __m512, __m512d, _mm256_add_ps, _mm256_castpd_ps, _mm512_add_pd, _mm512_add_ps,
-    _mm512_castps512_ps256, _mm512_castps_pd, _mm512_extractf64x4_pd, _mm512_fmadd_pd,
-    _mm512_fmadd_ps, _mm512_load_pd, _mm512_load_ps, _mm512_maskz_loadu_pd, _mm512_maskz_loadu_ps,
-    _mm512_setzero_pd, _mm512_setzero_ps, _mm512_sub_pd, _mm512_sub_ps,
-};
+use std::arch::x86_64::*;
 
 /// Vector operations on one 512-bit register of `Self` values.
 ///
@@ -27,6 +22,12 @@ pub trait Wide: Copy {
     /// The [`PER`](Wide::PER) values at `p`, which is 64-byte aligned.
     #[cfg(target_arch = "x86_64")]
     unsafe fn v_load(p: *const Self) -> Self::V;
+    /// The [`PER`](Wide::PER) values at `p` (any alignment).
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_loadu(p: *const Self) -> Self::V;
+    /// Stores `v` at `p` (any alignment).
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_storeu(p: *mut Self, v: Self::V);
     /// The first `min(n, PER)` values at `p` (any alignment), zeros after: nothing past them
     /// is read.
     #[cfg(target_arch = "x86_64")]
@@ -73,6 +74,16 @@ impl Wide for f32 {
     }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
+    unsafe fn v_loadu(p: *const f32) -> __m512 {
+        _mm512_loadu_ps(p)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_storeu(p: *mut f32, v: __m512) {
+        _mm512_storeu_ps(p, v)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
     unsafe fn v_load_first(p: *const f32, n: usize) -> __m512 {
         _mm512_maskz_loadu_ps(first_lanes(n, 16) as u16, p)
     }
@@ -114,6 +125,16 @@ impl Wide for f64 {
     #[inline(always)]
     unsafe fn v_load(p: *const f64) -> __m512d {
         _mm512_load_pd(p)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_loadu(p: *const f64) -> __m512d {
+        _mm512_loadu_pd(p)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_storeu(p: *mut f64, v: __m512d) {
+        _mm512_storeu_pd(p, v)
     }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]

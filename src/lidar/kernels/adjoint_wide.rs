@@ -1,0 +1,233 @@
+//! The adjoint's per-pixel sums on AVX-512, in 512-bit vectors.
+//!
+//! The chunk's tables are those of the generic kernel ([`adj_tables`]), with rows widened to whole
+//! vectors (an even number of chunks of eight `f32` values) and starting on cache lines; each
+//! pixel then adds its eight rows (one per octet) in vectors of sixteen `f32` or eight `f64`
+//! values instead of chunks of eight, in the same order, lane by lane, as the generic kernel:
+//! the sums are the same to the last bit.
+
+use super::wide::Wide;
+use super::{adj_tables, octet_bits, octet_stride, AdjChunk, Isa, Lane, ADJ_OCTETS};
+use crate::real::Real;
+
+/// Chunks of eight values per row of the wide adjoint's tables for a slab of `nch` chunks: whole
+/// vectors (an even number for `f32`).
+pub(crate) fn wide_adjoint_nch<T: Real>(nch: usize) -> usize {
+    let per_vector = <T as Wide>::PER / 8;
+    nch.div_ceil(per_vector) * per_vector
+}
+
+/// [`adjoint_chunk`](super::adjoint_chunk) on AVX-512 for rows of `nch` chunks, `nch` from
+/// [`wide_adjoint_nch`]: the chunk's tables into `tables` (64-byte aligned), each pixel's sum
+/// added to `out[(g·8 + i)·nch ..]`.
+///
+/// # Panics
+/// If `isa` is not AVX-512, `nch` is not whole vectors, or the buffers are too short (checked
+/// before the unchecked loops).
+pub(crate) fn adjoint_chunk_wide<T: Real>(
+    isa: Isa,
+    nch: usize,
+    a: &AdjChunk<'_, T>,
+    tables: &mut [Lane<T>],
+    out: &mut [Lane<T>],
+) {
+    assert!(
+        (1..=8).contains(&nch) && wide_adjoint_nch::<T>(nch) == nch,
+        "row width"
+    );
+    assert!(
+        tables.len() >= ADJ_OCTETS * octet_stride::<T>(nch),
+        "tables"
+    );
+    assert_eq!(tables.as_ptr() as usize % 64, 0, "tables' alignment");
+    assert_eq!(out.len(), a.plus.len() * 8 * nch, "partial sums");
+    assert!(
+        a.minus.is_none_or(|m| m.len() == a.plus.len()),
+        "code planes"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if isa == Isa::Avx512 {
+        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, AVX-512VL and FMA; the
+        // rows read are within the chunk's tables (a code byte selects one of 256 rows of an
+        // octet's table) and the sums written are within `out`, as asserted above.
+        unsafe {
+            match (nch, <T as Wide>::PER) {
+                (2, 16) => adj_wide::<T, 2, 1>(a, tables, out),
+                (4, 16) => adj_wide::<T, 4, 2>(a, tables, out),
+                (6, 16) => adj_wide::<T, 6, 3>(a, tables, out),
+                (8, 16) => adj_wide::<T, 8, 4>(a, tables, out),
+                (1, 8) => adj_wide::<T, 1, 1>(a, tables, out),
+                (2, 8) => adj_wide::<T, 2, 2>(a, tables, out),
+                (3, 8) => adj_wide::<T, 3, 3>(a, tables, out),
+                (4, 8) => adj_wide::<T, 4, 4>(a, tables, out),
+                (5, 8) => adj_wide::<T, 5, 5>(a, tables, out),
+                (6, 8) => adj_wide::<T, 6, 6>(a, tables, out),
+                (7, 8) => adj_wide::<T, 7, 7>(a, tables, out),
+                (8, 8) => adj_wide::<T, 8, 8>(a, tables, out),
+                _ => unreachable!("rows of whole vectors"),
+            }
+        }
+        return;
+    }
+    panic!("the wide adjoint runs on AVX-512 only, not {}", isa.name());
+}
+
+/// The chunk's tables, then every pixel's rows, `Z` vectors a row.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+// The accumulators are indexed in step with the vectors' offsets in the rows.
+#[allow(clippy::needless_range_loop)]
+unsafe fn adj_wide<T: Real, const NCH: usize, const Z: usize>(
+    a: &AdjChunk<'_, T>,
+    tables: &mut [Lane<T>],
+    out: &mut [Lane<T>],
+) {
+    adj_tables::<T, NCH>(a, tables);
+    let per = <T as Wide>::PER;
+    let stride = octet_stride::<T>(NCH) * 8;
+    let base = tables.as_ptr().cast::<T>();
+    let row = |o: usize, b: u64| base.add(o * stride + (b & 0xFF) as usize * NCH * 8);
+    let (mut bp, mut bm) = ([0u64; ADJ_OCTETS], [0u64; ADJ_OCTETS]);
+    let o0 = a.first_octet;
+    for (g, og) in out.chunks_exact_mut(8 * NCH).enumerate() {
+        for (oi, b) in bp.iter_mut().enumerate() {
+            *b = octet_bits(a.plus[g], o0 + oi);
+        }
+        if let Some(minus) = a.minus {
+            for (oi, b) in bm.iter_mut().enumerate() {
+                *b = octet_bits(minus[g], o0 + oi);
+            }
+        }
+        for (i, oi) in og.chunks_exact_mut(NCH).enumerate() {
+            let shift = 8 * i;
+            let mut acc = [T::v_zero(); Z];
+            if a.minus.is_none() {
+                for o in 0..ADJ_OCTETS {
+                    let r = row(o, bp[o] >> shift);
+                    for z in 0..Z {
+                        acc[z] = T::v_add(acc[z], T::v_load(r.add(z * per)));
+                    }
+                }
+            } else {
+                for o in 0..ADJ_OCTETS {
+                    let (rp, rm) = (row(o, bp[o] >> shift), row(o, bm[o] >> shift));
+                    for z in 0..Z {
+                        let d = T::v_sub(T::v_load(rp.add(z * per)), T::v_load(rm.add(z * per)));
+                        acc[z] = T::v_add(acc[z], d);
+                    }
+                }
+            }
+            let dst = oi.as_mut_ptr().cast::<T>();
+            for z in 0..Z {
+                let d = dst.add(z * per);
+                T::v_storeu(d, T::v_add(T::v_loadu(d), acc[z]));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lidar::kernels::quads::{lines_as_mut, CacheLine};
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The wide chunk kernel against the direct sum Σ_k s_i(k)·y[k]·p[k − j] and, to the last
+    /// bit, against the generic kernel, for both alphabets, a slab of three chunks (widened to
+    /// four for `f32`), a K that is not a multiple of eight and two chunks of octets.
+    fn wide_adjoint_matches_the_direct_sum<T: Real>(tol: f64) {
+        let isa = Isa::best();
+        if !isa.has_quads() {
+            return;
+        }
+        const SLAB: usize = 3;
+        let nch = wide_adjoint_nch::<T>(SLAB);
+        let mut rng = ChaCha8Rng::seed_from_u64(61);
+        let (groups, k) = (3usize, 8 * ADJ_OCTETS + 13);
+        let kp = k + 1 - 8 * SLAB;
+        let y: Vec<T> = (0..k)
+            .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
+            .collect();
+        let pulse: Vec<f64> = (0..kp)
+            .map(|_| f64::from(rng.random_range(0..2u8)))
+            .collect();
+        let pad = 8 * SLAB;
+        let mut prev = vec![T::zero(); pad + kp + 8 * nch];
+        for (t, &v) in pulse.iter().rev().enumerate() {
+            prev[pad + t] = T::of_f64(v);
+        }
+        let plus: Vec<Vec<u8>> = (0..groups)
+            .map(|_| (0..k).map(|_| rng.random()).collect())
+            .collect();
+        let minus: Vec<Vec<u8>> = plus
+            .iter()
+            .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
+            .collect();
+        let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
+        let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+        for ternary in [false, true] {
+            let bytes = ADJ_OCTETS * octet_stride::<T>(nch) * std::mem::size_of::<Lane<T>>();
+            let mut lines = vec![CacheLine::default(); bytes.div_ceil(64)];
+            let tables = lines_as_mut::<T>(&mut lines).as_chunks_mut::<8>().0;
+            let mut out = vec![[T::zero(); 8]; groups * 8 * nch];
+            let mut generic_tables = vec![[T::zero(); 8]; ADJ_OCTETS * octet_stride::<T>(nch)];
+            let mut generic_out = out.clone();
+            for o0 in (0..k.div_ceil(8)).step_by(ADJ_OCTETS) {
+                let a = AdjChunk {
+                    plus: &plus_refs,
+                    minus: ternary.then_some(minus_refs.as_slice()),
+                    y: &y,
+                    prev: &prev,
+                    base0: pad + kp - 1,
+                    first_octet: o0,
+                };
+                adjoint_chunk_wide(isa, nch, &a, tables, &mut out);
+                let generic = &mut generic_tables;
+                super::super::adjoint_chunk(Isa::Generic, nch, &a, generic, &mut generic_out);
+            }
+            // The same additions in the same order as the generic kernel.
+            assert!(out == generic_out, "{} ternary {ternary}", T::NAME);
+            for (g, (p, m)) in plus.iter().zip(&minus).enumerate() {
+                for i in 0..8 {
+                    for j in 0..8 * SLAB {
+                        let want: f64 = (j..k.min(j + kp))
+                            .map(|kk| {
+                                let s = f64::from((p[kk] >> i) & 1)
+                                    - if ternary {
+                                        f64::from((m[kk] >> i) & 1)
+                                    } else {
+                                        f64::from(!(p[kk] >> i) & 1)
+                                    };
+                                s * y[kk].as_f64() * pulse[kk - j]
+                            })
+                            .sum();
+                        let got = out[(g * 8 + i) * nch + j / 8][j % 8].as_f64();
+                        assert!(
+                            (got - want).abs() <= tol * (1.0 + want.abs()),
+                            "{} ternary {ternary}: pixel {g}/{i} bin {j}: {got} vs {want}",
+                            T::NAME
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn wide_adjoint_matches_the_direct_sum_f32() {
+        wide_adjoint_matches_the_direct_sum::<f32>(1e-4);
+    }
+
+    #[test]
+    fn wide_adjoint_matches_the_direct_sum_f64() {
+        wide_adjoint_matches_the_direct_sum::<f64>(1e-12);
+    }
+
+    #[test]
+    fn rows_are_whole_vectors() {
+        assert_eq!(wide_adjoint_nch::<f32>(5), 6);
+        assert_eq!(wide_adjoint_nch::<f32>(8), 8);
+        assert_eq!(wide_adjoint_nch::<f64>(5), 5);
+    }
+}
