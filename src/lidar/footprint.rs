@@ -13,7 +13,7 @@ use crate::real::Real;
 
 use super::codes::CodeAlphabet;
 use super::geometry::Geometry;
-use super::kernels::quads::{quad_row_len, QUAD_ROWS};
+use super::kernels::quads::{gather_rows_wide, lines_as_mut, quad_row_len, CacheLine, QUAD_ROWS};
 use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
 use super::rdop::{
     adjoint_groups_per_block, depth_slabs, groups_per_block, RdOperator, ADJ_BLOCK_BYTES,
@@ -221,9 +221,11 @@ pub fn gather_limit<T: Real>(
         return Err(Error::param("repeats", "must be at least 1"));
     }
     let isa = Isa::chosen()?;
+    if isa.has_quads() {
+        return gather_limit_wide::<T>(isa, nch, table_bytes, repeats);
+    }
     let row_bytes = nch * std::mem::size_of::<Lane<T>>();
     let rows = (table_bytes / row_bytes).clamp(2, 1 << 16);
-    const READS: usize = 1 << 20;
     let threads = rayon::current_num_threads().max(1);
     let setup: Vec<(Vec<Lane<T>>, Vec<u16>)> = (0..threads)
         .map(|t| {
@@ -231,14 +233,13 @@ pub fn gather_limit<T: Real>(
             let table = (0..rows * nch)
                 .map(|_| std::array::from_fn(|_| T::of_f64(rng.random_range(-1.0..1.0))))
                 .collect();
-            let index = (0..READS)
+            let index = (0..GATHER_READS)
                 .map(|_| rng.random_range(0..rows) as u16)
                 .collect();
             (table, index)
         })
         .collect();
     let run = || {
-        let t0 = Instant::now();
         let sums: Vec<f64> = setup
             .par_iter()
             .map(|(table, index)| {
@@ -248,13 +249,8 @@ pub fn gather_limit<T: Real>(
             })
             .collect();
         std::hint::black_box(sums);
-        t0.elapsed().as_secs_f64()
     };
-    run();
-    let mut times: Vec<f64> = (0..repeats).map(|_| run()).collect();
-    times.sort_by(f64::total_cmp);
-    let median = times[times.len() / 2].max(f64::MIN_POSITIVE);
-    let rows_per_s = (threads * READS) as f64 / median;
+    let rows_per_s = (threads * GATHER_READS) as f64 / median_seconds(run, repeats);
     Ok(GatherLimit {
         table_bytes: rows * row_bytes,
         row_bytes,
@@ -262,4 +258,77 @@ pub fn gather_limit<T: Real>(
         bytes_per_s: rows_per_s * row_bytes as f64,
         additions_per_s: rows_per_s * (8 * nch) as f64,
     })
+}
+
+/// Rows each thread of the gather probe reads per run.
+const GATHER_READS: usize = 1 << 20;
+
+/// The median time of `repeats` runs of `run`, after one to warm up.
+fn median_seconds(run: impl Fn(), repeats: usize) -> f64 {
+    run();
+    let mut times: Vec<f64> = (0..repeats)
+        .map(|_| {
+            let t0 = Instant::now();
+            run();
+            t0.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2].max(f64::MIN_POSITIVE)
+}
+
+/// [`gather_limit`] on AVX-512: rows of the wide kernels' width (`8·nch` values rounded up to
+/// whole 512-bit vectors, on cache lines), a power of two of them within `table_bytes`, summed in
+/// vectors ([`gather_rows_wide`]).
+fn gather_limit_wide<T: Real>(
+    isa: Isa,
+    nch: usize,
+    table_bytes: usize,
+    repeats: usize,
+) -> Result<GatherLimit> {
+    let rl = quad_row_len::<T>(nch);
+    let row_bytes = rl * std::mem::size_of::<T>();
+    let rows = prev_power_of_two((table_bytes / row_bytes).clamp(2, 1 << 16));
+    let threads = rayon::current_num_threads().max(1);
+    let mut setup: Vec<(Vec<CacheLine>, Vec<u16>)> = (0..threads)
+        .map(|t| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(t as u64);
+            let mut lines = vec![CacheLine::default(); rows * row_bytes / 64];
+            for v in lines_as_mut::<T>(&mut lines) {
+                *v = T::of_f64(rng.random_range(-1.0..1.0));
+            }
+            let index = (0..GATHER_READS)
+                .map(|_| rng.random_range(0..rows) as u16)
+                .collect();
+            (lines, index)
+        })
+        .collect();
+    let tables: Vec<(&[T], &[u16])> = setup
+        .iter_mut()
+        .map(|(lines, index)| (&*lines_as_mut::<T>(lines), index.as_slice()))
+        .collect();
+    let run = || {
+        let sums: Vec<f64> = tables
+            .par_iter()
+            .map(|&(table, index)| {
+                let mut out = vec![T::zero(); rl];
+                gather_rows_wide(isa, rl, table, index, &mut out);
+                out.iter().map(|v| v.as_f64()).sum()
+            })
+            .collect();
+        std::hint::black_box(sums);
+    };
+    let rows_per_s = (threads * GATHER_READS) as f64 / median_seconds(run, repeats);
+    Ok(GatherLimit {
+        table_bytes: rows * row_bytes,
+        row_bytes,
+        rows_per_s,
+        bytes_per_s: rows_per_s * row_bytes as f64,
+        additions_per_s: rows_per_s * (8 * nch) as f64,
+    })
+}
+
+/// The largest power of two not above `n` (n ≥ 1).
+fn prev_power_of_two(n: usize) -> usize {
+    1 << (usize::BITS - 1 - n.leading_zeros())
 }

@@ -249,6 +249,95 @@ unsafe fn quad_samples<T: Real, const Z: usize, const S: usize>(
     }
 }
 
+/// out[..rl] += Σ of the rows of `table` (rows of `rl` values on cache lines, a power of two of
+/// them) that `index` lists, each index taken modulo the rows, in four interleaved sums of 512-bit
+/// vectors: the wide kernels' memory access and additions without their bookkeeping (the probe of
+/// [`gather_limit`](crate::lidar::gather_limit) on AVX-512).
+///
+/// # Panics
+/// If `isa` is not AVX-512, or on a table that is not a power of two of aligned rows of whole
+/// vectors (one to eight), or `out` shorter than a row.
+pub(crate) fn gather_rows_wide<T: Real>(
+    isa: Isa,
+    rl: usize,
+    table: &[T],
+    index: &[u16],
+    out: &mut [T],
+) {
+    let per = <T as super::wide::Wide>::PER;
+    let z = rl / per;
+    assert!(z * per == rl && (1..=8).contains(&z), "row length");
+    assert!(
+        table.len().is_multiple_of(rl) && (table.len() / rl).is_power_of_two(),
+        "rows"
+    );
+    assert_eq!(table.as_ptr() as usize % 64, 0, "table's alignment");
+    assert!(out.len() >= rl, "output");
+    let mask = table.len() / rl - 1;
+    #[cfg(target_arch = "x86_64")]
+    if isa == Isa::Avx512 {
+        // SAFETY: AVX-512 is present (`Isa::Avx512`); every row read is `index & mask` < the
+        // table's rows, and the sums are written within `out`, as asserted above.
+        unsafe {
+            match z {
+                1 => gather_wide::<T, 1>(table, mask, index, out),
+                2 => gather_wide::<T, 2>(table, mask, index, out),
+                3 => gather_wide::<T, 3>(table, mask, index, out),
+                4 => gather_wide::<T, 4>(table, mask, index, out),
+                5 => gather_wide::<T, 5>(table, mask, index, out),
+                6 => gather_wide::<T, 6>(table, mask, index, out),
+                7 => gather_wide::<T, 7>(table, mask, index, out),
+                8 => gather_wide::<T, 8>(table, mask, index, out),
+                _ => unreachable!("rows of one to eight vectors"),
+            }
+        }
+        return;
+    }
+    let _ = mask;
+    panic!("the wide probe runs on AVX-512 only, not {}", isa.name());
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+// The accumulators are indexed in step with the vectors' offsets in the rows.
+#[allow(clippy::needless_range_loop)]
+unsafe fn gather_wide<T: Real, const Z: usize>(
+    table: &[T],
+    mask: usize,
+    index: &[u16],
+    out: &mut [T],
+) {
+    use super::wide::Wide;
+    let per = <T as Wide>::PER;
+    let base = table.as_ptr();
+    let mut acc = [[T::v_zero(); Z]; 4];
+    let quads = index.chunks_exact(4);
+    let rest = quads.remainder();
+    for quad in quads {
+        for (set, &r) in acc.iter_mut().zip(quad) {
+            let row = base.add((r as usize & mask) * Z * per);
+            for z in 0..Z {
+                set[z] = T::v_add(set[z], T::v_load(row.add(z * per)));
+            }
+        }
+    }
+    for (set, &r) in acc.iter_mut().zip(rest) {
+        let row = base.add((r as usize & mask) * Z * per);
+        for z in 0..Z {
+            set[z] = T::v_add(set[z], T::v_load(row.add(z * per)));
+        }
+    }
+    let dst = out.as_mut_ptr();
+    for z in 0..Z {
+        let sum = T::v_add(
+            T::v_add(acc[0][z], acc[1][z]),
+            T::v_add(acc[2][z], acc[3][z]),
+        );
+        let d = dst.add(z * per);
+        T::v_storeu(d, T::v_add(T::v_loadu(d), sum));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
