@@ -13,6 +13,7 @@ use crate::real::Real;
 
 use super::codes::CodeAlphabet;
 use super::geometry::Geometry;
+use super::kernels::adjoint_wide::wide_adjoint_nch;
 use super::kernels::quads::{gather_rows_wide, lines_as_mut, quad_row_len, CacheLine, QUAD_ROWS};
 use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
 use super::rdop::{
@@ -26,7 +27,8 @@ pub struct KernelWork {
     /// Additions of table values: one per depth bin of every row looked up, and one per value
     /// of every table built.
     pub additions: f64,
-    /// Bytes of table rows read by the lookups (rows padded to whole chunks of eight values).
+    /// Bytes of table rows read by the lookups (rows padded to whole chunks of eight values; on
+    /// AVX-512 to whole 512-bit vectors).
     pub table_bytes: f64,
 }
 
@@ -119,7 +121,10 @@ impl<T: Real> RdOperator<T> {
             .and_then(|v| v.checked_add(geom.ks + ks_pad))
             .and_then(|v| v.checked_mul(size))
             .ok_or_else(overflow)?;
+        // The forward's block of 256-row tables (larger than a block of quad tables); the
+        // adjoint's rows as wide as on AVX-512 (whole vectors): an upper bound for every path.
         let tables = block_groups * 256 * max_nch * 8 * size;
+        let max_nch = wide_adjoint_nch::<T>(max_nch);
         // The adjoint's block: a chunk's tables, and the block's partial sums in `T` and `f64`.
         let adjoint = ADJ_OCTETS * octet_stride::<T>(max_nch) * 8 * size
             + adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch)
@@ -187,8 +192,9 @@ impl<T: Real> RdOperator<T> {
 }
 
 /// What a cache level delivers to the table kernels' access pattern: rows of `8·nch` values of
-/// `T` read at random from a table of `table_bytes` (one per thread of the current rayon pool)
-/// and summed, with the kernels' instruction set.
+/// `T` (on AVX-512 padded to whole 512-bit vectors and summed in them, as the wide kernels do)
+/// read at random from a table of `table_bytes` (one per thread of the current rayon pool) and
+/// summed, with the kernels' instruction set. The additions count the `8·nch` values of a row.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct GatherLimit {
     /// Bytes of each thread's table.
@@ -204,7 +210,8 @@ pub struct GatherLimit {
 }
 
 /// Measures [`GatherLimit`] for rows of `nch` chunks of eight values (1 … 8) in tables of about
-/// `table_bytes` per thread, `repeats` timed runs of 2²⁰ rows per thread after a warm-up.
+/// `table_bytes` per thread (on AVX-512 a power of two of rows, between half of it and all of
+/// it), `repeats` timed runs of 2²⁰ rows per thread after a warm-up.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] (`nch`, `repeats`) for a chunk count outside 1 … 8 or no runs,

@@ -8,6 +8,10 @@
 //! samples each, along the samples) and adds one row per pixel and octet. Both only read their
 //! tables, which stay in the L2 cache. Values are held as `[T; 8]` chunks so that the compiler
 //! keeps them in vector registers.
+//!
+//! On AVX-512 the forward uses quad tables that stay in L1 instead ([`quads`]), and the adjoint
+//! sums its rows in 512-bit vectors ([`adjoint_wide`]), both written with the vector operations
+//! of [`wide`].
 
 use crate::error::{Error, Result};
 use crate::real::Real;

@@ -224,7 +224,13 @@ impl<T: Real> RdOperator<T> {
         } else {
             groups_per_block::<T>(BLOCK_BYTES, max_nch)
         };
-        let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch);
+        // The adjoint's rows are whole vectors on AVX-512 (`adjoint_nch`).
+        let adj_nch = if quads {
+            wide_adjoint_nch::<T>(max_nch)
+        } else {
+            max_nch
+        };
+        let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, adj_nch);
         Ok(RdOperator {
             geom,
             codes,
@@ -661,9 +667,9 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                 // Allocated per application rather than pooled, so that an operator that is
                 // kept does not hold them (megabytes per thread at large K_s).
                 let (mut lines, mut part, mut out) = (Vec::new(), Vec::new(), Vec::new());
-                for &(j0, width) in &self.slabs {
+                for &(j0, slab_nch) in &self.slabs {
                     // Rows of whole vectors for the wide kernel (the extra bins are discarded).
-                    let nch = self.adjoint_nch(width);
+                    let nch = self.adjoint_nch(slab_nch);
                     // On whole cache lines, so that rows start on a line where they can.
                     let bytes =
                         ADJ_OCTETS * octet_stride::<T>(nch) * std::mem::size_of::<Lane<T>>();
@@ -697,7 +703,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                     }
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
                     for (i, o) in out.chunks_exact(nch).take(pixels).enumerate() {
-                        for jj in 0..(8 * width).min(ks - j0) {
+                        for jj in 0..(8 * slab_nch).min(ks - j0) {
                             xb[i * ks + j0 + jj] = T::of_f64(o[jj / 8][jj % 8]);
                         }
                     }

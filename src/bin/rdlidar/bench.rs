@@ -25,8 +25,9 @@ use crate::common::{
 /// forward product over the nonzero voxels of the scene only.
 ///
 /// Each dense kernel's rate is also given as table additions and table bytes read per second,
-/// beside what this machine delivers to the same access pattern: random rows of the same width
-/// summed from a table in L1 (32 kB) and in L2 (512 kB) per thread ("limits").
+/// beside what this machine delivers to the same access pattern: random rows of the kernels'
+/// width summed from a table in L1 (about 32 kB) and in L2 (about 512 kB) per thread ("limits";
+/// on AVX-512 in 512-bit vectors, rows padded to whole vectors).
 ///
 /// --json prints {"forward": {"median_s": .., "min_s": ..}, "adjoint": {..},
 /// "sparse_forward": {..}, "work": .., "rates": .., "limits": .., ...} on one line instead of
@@ -86,8 +87,9 @@ struct Rate {
     table_bytes_per_s: f64,
 }
 
-/// Random rows of the kernels' width summed from a table in L1 (32 kB) and in L2 (512 kB, the
-/// forward's block of tables) per thread.
+/// Random rows of the kernels' width summed from a table in L1 (about 32 kB: the forward's block
+/// of quad tables on AVX-512) and in L2 (about 512 kB: the forward's block of 256-row tables on
+/// the other paths, and the size of the adjoint's chunk of tables) per thread.
 #[derive(Debug, Serialize)]
 struct Limits {
     l1: GatherLimit,

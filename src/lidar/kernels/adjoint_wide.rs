@@ -7,7 +7,9 @@
 //! the sums are the same to the last bit.
 
 use super::wide::Wide;
-use super::{adj_tables, octet_bits, octet_stride, AdjChunk, Isa, Lane, ADJ_OCTETS};
+#[cfg(target_arch = "x86_64")]
+use super::{adj_tables, octet_bits};
+use super::{octet_stride, AdjChunk, Isa, Lane, ADJ_OCTETS};
 use crate::real::Real;
 
 /// Chunks of eight values per row of the wide adjoint's tables for a slab of `nch` chunks: whole

@@ -1,6 +1,6 @@
 //! The dense forward with tables that stay in the L1 cache (AVX-512).
 //!
-//! A group's 256-row table (one row per code byte, 10 kB a group at 40 bins in `f32`) keeps a
+//! A group's 256-row table (one row per code byte, 40 kB a group at 40 bins in `f32`) keeps a
 //! block's tables in the L2 cache, and a row read at random from L2 costs several times one read
 //! from L1. Here each group of eight pixels is split into two *quads* of four pixels, each with a
 //! 16-row table (the signed subset sums of its four depth columns), and every sample adds two
@@ -17,8 +17,10 @@ use crate::real::Real;
 /// Rows of a quad's table: one per value of four code bits.
 pub(crate) const QUAD_ROWS: usize = 16;
 
-/// Cache budget (bytes) for the quad tables of one block of groups: the L1 data cache, whose
-/// other traffic (code bytes, the pulse window, the partial sums) streams through it.
+/// Cache budget (bytes) for the quad tables of one block of groups: the L1 data cache of recent
+/// AVX-512 CPUs (48 kB), whose other traffic (code bytes, the pulse window, the partial sums)
+/// streams through it. On such a CPU 48 kB measured 2–4% faster than 32 kB and than 72 kB; CPUs
+/// with 32 kB of L1 read part of the block from L2 (not measured).
 pub(crate) const QUAD_BLOCK_BYTES: usize = 48 * 1024;
 
 /// 64 bytes aligned to 64: the storage of the quad tables, so that every row starts on a line.
@@ -31,6 +33,11 @@ pub(crate) struct CacheLine([u64; 8]);
 pub(crate) fn quad_row_len<T>(nch: usize) -> usize {
     let per = 64 / std::mem::size_of::<T>();
     (8 * nch).div_ceil(per) * per
+}
+
+/// Values of `T` per 512-bit vector (and per cache line).
+fn per_vector<T>() -> usize {
+    64 / std::mem::size_of::<T>()
 }
 
 /// Groups whose quad tables of `max_nch` chunks fit in [`QUAD_BLOCK_BYTES`] (1 to 64).
@@ -140,7 +147,13 @@ pub(crate) fn quad_forward<T: Real>(isa: Isa, a: &QuadBlock<'_, T>, part: &mut [
         "tables"
     );
     assert_eq!(a.tables.as_ptr() as usize % 64, 0, "tables' alignment");
-    assert!(a.width <= 8 * a.nch && (1..=8).contains(&a.nch), "slab");
+    // Every vector of a row holds some of the slab's bins (so that no pointer into the pulse
+    // window goes past its end).
+    assert!(
+        (1..=8).contains(&a.nch) && rl - per_vector::<T>() < a.width,
+        "slab"
+    );
+    assert!(a.width <= 8 * a.nch, "slab");
     assert!(
         n == 0 || (a.base0 + 1 >= n && a.base0 + a.width <= a.prev.len()),
         "pulse"
@@ -293,7 +306,7 @@ pub(crate) fn gather_rows_wide<T: Real>(
         }
         return;
     }
-    let _ = mask;
+    let _ = (mask, index);
     panic!("the wide probe runs on AVX-512 only, not {}", isa.name());
 }
 

@@ -4,11 +4,13 @@
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
-/// Vector operations on one 512-bit register of `Self` values.
+/// Vector operations on one 512-bit register of `Self` values (the crate's own kernels use them;
+/// a supertrait of [`Real`](crate::Real) so that generic kernels reach them).
 ///
 /// # Safety
 /// Every function needs AVX-512F at run time (`Isa::Avx512`); the loads read what their
 /// documentation says and no more.
+#[doc(hidden)]
 pub trait Wide: Copy {
     /// Values per vector (and per 64-byte cache line).
     const PER: usize;
