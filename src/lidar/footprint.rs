@@ -209,6 +209,20 @@ pub struct GatherLimit {
     pub additions_per_s: f64,
 }
 
+impl GatherLimit {
+    /// The limit for `rows` rows of `row_bytes` each (of which `8·nch` values are added) read at
+    /// `rows_per_s`.
+    fn of(rows: usize, row_bytes: usize, nch: usize, rows_per_s: f64) -> GatherLimit {
+        GatherLimit {
+            table_bytes: rows * row_bytes,
+            row_bytes,
+            rows_per_s,
+            bytes_per_s: rows_per_s * row_bytes as f64,
+            additions_per_s: rows_per_s * (8 * nch) as f64,
+        }
+    }
+}
+
 /// Measures [`GatherLimit`] for rows of `nch` chunks of eight values (1 … 8) in tables of about
 /// `table_bytes` per thread (on AVX-512 a power of two of rows, between half of it and all of
 /// it), `repeats` timed runs of 2²⁰ rows per thread after a warm-up.
@@ -258,13 +272,7 @@ pub fn gather_limit<T: Real>(
         std::hint::black_box(sums);
     };
     let rows_per_s = (threads * GATHER_READS) as f64 / median_seconds(run, repeats);
-    Ok(GatherLimit {
-        table_bytes: rows * row_bytes,
-        row_bytes,
-        rows_per_s,
-        bytes_per_s: rows_per_s * row_bytes as f64,
-        additions_per_s: rows_per_s * (8 * nch) as f64,
-    })
+    Ok(GatherLimit::of(rows, row_bytes, nch, rows_per_s))
 }
 
 /// Rows each thread of the gather probe reads per run.
@@ -326,13 +334,7 @@ fn gather_limit_wide<T: Real>(
         std::hint::black_box(sums);
     };
     let rows_per_s = (threads * GATHER_READS) as f64 / median_seconds(run, repeats);
-    Ok(GatherLimit {
-        table_bytes: rows * row_bytes,
-        row_bytes,
-        rows_per_s,
-        bytes_per_s: rows_per_s * row_bytes as f64,
-        additions_per_s: rows_per_s * (8 * nch) as f64,
-    })
+    Ok(GatherLimit::of(rows, row_bytes, nch, rows_per_s))
 }
 
 /// The largest power of two not above `n` (n ≥ 1).

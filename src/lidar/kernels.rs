@@ -278,6 +278,25 @@ fn octet_bits(codes: &[u8], o: usize) -> u64 {
     transpose8(word)
 }
 
+/// Group `g`'s code bits for the chunk's octets, transposed ([`octet_bits`]): the +1 bits into
+/// `plus`, and the −1 bits into `minus` for ternary codes.
+#[inline(always)]
+fn chunk_bits<T>(
+    a: &AdjChunk<'_, T>,
+    g: usize,
+    plus: &mut [u64; ADJ_OCTETS],
+    minus: &mut [u64; ADJ_OCTETS],
+) {
+    for (oi, b) in plus.iter_mut().enumerate() {
+        *b = octet_bits(a.plus[g], a.first_octet + oi);
+    }
+    if let Some(m) = a.minus {
+        for (oi, b) in minus.iter_mut().enumerate() {
+            *b = octet_bits(m[g], a.first_octet + oi);
+        }
+    }
+}
+
 /// Lanes between the tables of successive octets of a chunk: 256 rows and one cache line, so
 /// that the same row of successive tables does not fall in the same cache set (a table of
 /// 256·NCH lanes is a multiple of 4 KiB).
@@ -343,18 +362,9 @@ fn adj_chunk<T: Real, const NCH: usize>(
         let r = o * octet_stride::<T>(NCH) + (b & 0xFF) as usize * NCH;
         tables[r..r + NCH].try_into().expect("NCH lanes")
     };
-    let mut bp = [0u64; ADJ_OCTETS];
-    let mut bm = [0u64; ADJ_OCTETS];
-    let o0 = a.first_octet;
+    let (mut bp, mut bm) = ([0u64; ADJ_OCTETS], [0u64; ADJ_OCTETS]);
     for (g, og) in out.chunks_exact_mut(8 * NCH).enumerate() {
-        for (oi, b) in bp.iter_mut().enumerate() {
-            *b = octet_bits(a.plus[g], o0 + oi);
-        }
-        if let Some(minus) = a.minus {
-            for (oi, b) in bm.iter_mut().enumerate() {
-                *b = octet_bits(minus[g], o0 + oi);
-            }
-        }
+        chunk_bits(a, g, &mut bp, &mut bm);
         for (i, oi) in og.chunks_exact_mut(NCH).enumerate() {
             let shift = 8 * i;
             let mut acc = [zero; NCH];
@@ -642,6 +652,7 @@ pub(crate) fn gather_rows<T: Real>(
 
 pub(crate) mod adjoint_wide;
 pub(crate) mod quads;
+pub(crate) mod tables;
 #[cfg(test)]
 mod tests;
 pub(crate) mod wide;

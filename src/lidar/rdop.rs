@@ -16,6 +16,7 @@ use super::kernels::quads::{
     build_quad_tables, lines_as_mut, quad_forward, quad_groups_per_block, quad_lines, CacheLine,
     QuadBlock,
 };
+use super::kernels::tables::build_group_tables;
 use super::kernels::{
     adjoint_chunk, forward_block, octet_stride, sparse_entry_isa, AdjChunk, FwdBlock, Isa, Lane,
     ADJ_OCTETS,
@@ -400,60 +401,6 @@ impl<T: Real> RdOperator<T> {
         self.codes.groups().div_ceil(self.block_groups)
     }
 
-    /// Builds the tables of groups `groups` for slab (j0, nch) into `tables`.
-    fn build_tables(
-        &self,
-        x: &[T],
-        groups: std::ops::Range<usize>,
-        j0: usize,
-        nch: usize,
-        tables: &mut [Lane<T>],
-    ) {
-        let (ks, npix) = (self.geom.ks, self.geom.pixels());
-        let binary = self.codes.minus_plane().is_none();
-        let two = T::one() + T::one();
-        for (gi, g) in groups.enumerate() {
-            // The group's eight depth columns restricted to the slab, as lanes.
-            let mut cols = [[[T::zero(); 8]; 8]; 8];
-            for (i, col) in cols.iter_mut().enumerate() {
-                let p = 8 * g + i;
-                if p >= npix {
-                    continue;
-                }
-                for jj in 0..(8 * nch).min(ks - j0) {
-                    col[jj / 8][jj % 8] = x[p * ks + j0 + jj];
-                }
-            }
-            let t = &mut tables[gi * 256 * nch..(gi + 1) * 256 * nch];
-            for c in 0..nch {
-                let mut first = [T::zero(); 8];
-                if binary {
-                    for col in &cols {
-                        for l in 0..8 {
-                            first[l] = first[l] - col[c][l];
-                        }
-                    }
-                }
-                t[c] = first;
-            }
-            for b in 1..256usize {
-                let prev = (b & (b - 1)) * nch;
-                let i = b.trailing_zeros() as usize;
-                for c in 0..nch {
-                    let mut row = t[prev + c];
-                    for l in 0..8 {
-                        row[l] = if binary {
-                            row[l] + two * cols[i][c][l]
-                        } else {
-                            row[l] + cols[i][c][l]
-                        };
-                    }
-                    t[b * nch + c] = row;
-                }
-            }
-        }
-    }
-
     fn group_codes(&self, groups: std::ops::Range<usize>) -> (Vec<&[u8]>, Option<Vec<&[u8]>>) {
         let plus: Vec<&[u8]> = groups.clone().map(|g| self.codes.plus_group(g)).collect();
         let minus = self.codes.minus_plane().map(|_| {
@@ -509,17 +456,16 @@ impl<T: Real> RdOperator<T> {
     fn forward_block(&self, x: &[T], b: usize, w: &mut Work<T>) {
         let groups = self.block_range(b);
         let (plus, minus) = self.group_codes(groups.clone());
+        let (shape, binary) = ((self.geom.pixels(), self.geom.ks), minus.is_none());
         for &(j0, nch) in &self.slabs {
             let base0 = self.pad + self.pulse.len() - 1 + j0;
             if self.quads {
                 let tables = lines_as_mut::<T>(&mut w.lines);
-                let (geom, binary) = (self.geom, minus.is_none());
-                let shape = (geom.pixels(), geom.ks);
                 build_quad_tables(x, shape, binary, groups.clone(), j0, nch, tables);
                 let blk = QuadBlock {
                     tables,
                     nch,
-                    width: (8 * nch).min(geom.ks - j0),
+                    width: (8 * nch).min(shape.1 - j0),
                     plus: &plus,
                     minus: minus.as_deref(),
                     prev: &self.prev,
@@ -527,7 +473,7 @@ impl<T: Real> RdOperator<T> {
                 };
                 quad_forward(self.isa, &blk, &mut w.part);
             } else {
-                self.build_tables(x, groups.clone(), j0, nch, &mut w.lanes);
+                build_group_tables(x, shape, binary, groups.clone(), j0, nch, &mut w.lanes);
                 let blk = FwdBlock {
                     tables: &w.lanes,
                     plus: &plus,

@@ -8,7 +8,7 @@
 
 use super::wide::Wide;
 #[cfg(target_arch = "x86_64")]
-use super::{adj_tables, octet_bits};
+use super::{adj_tables, chunk_bits};
 use super::{octet_stride, AdjChunk, Isa, Lane, ADJ_OCTETS};
 use crate::real::Real;
 
@@ -90,16 +90,8 @@ unsafe fn adj_wide<T: Real, const NCH: usize, const Z: usize>(
     let base = tables.as_ptr().cast::<T>();
     let row = |o: usize, b: u64| base.add(o * stride + (b & 0xFF) as usize * NCH * 8);
     let (mut bp, mut bm) = ([0u64; ADJ_OCTETS], [0u64; ADJ_OCTETS]);
-    let o0 = a.first_octet;
     for (g, og) in out.chunks_exact_mut(8 * NCH).enumerate() {
-        for (oi, b) in bp.iter_mut().enumerate() {
-            *b = octet_bits(a.plus[g], o0 + oi);
-        }
-        if let Some(minus) = a.minus {
-            for (oi, b) in bm.iter_mut().enumerate() {
-                *b = octet_bits(minus[g], o0 + oi);
-            }
-        }
+        chunk_bits(a, g, &mut bp, &mut bm);
         for (i, oi) in og.chunks_exact_mut(NCH).enumerate() {
             let shift = 8 * i;
             let mut acc = [T::v_zero(); Z];
@@ -159,13 +151,7 @@ mod tests {
         for (t, &v) in pulse.iter().rev().enumerate() {
             prev[pad + t] = T::of_f64(v);
         }
-        let plus: Vec<Vec<u8>> = (0..groups)
-            .map(|_| (0..k).map(|_| rng.random()).collect())
-            .collect();
-        let minus: Vec<Vec<u8>> = plus
-            .iter()
-            .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
-            .collect();
+        let (plus, minus) = crate::lidar::kernels::tests::random_planes(&mut rng, groups, k);
         let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
         let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
         for ternary in [false, true] {

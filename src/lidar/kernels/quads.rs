@@ -380,13 +380,7 @@ mod tests {
             for (t, &v) in pulse.iter().rev().enumerate() {
                 prev[pad + t] = T::of_f64(v);
             }
-            let plus: Vec<Vec<u8>> = (0..groups)
-                .map(|_| (0..k).map(|_| rng.random()).collect())
-                .collect();
-            let minus: Vec<Vec<u8>> = plus
-                .iter()
-                .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
-                .collect();
+            let (plus, minus) = crate::lidar::kernels::tests::random_planes(&mut rng, groups, k);
             let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
             let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
             let width = (8 * nch).min(ks - j0);

@@ -4,6 +4,23 @@ use super::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+/// Random code bytes of `groups` groups over `k` samples: the +1 plane, and a −1 plane that is
+/// zero wherever the +1 plane is set (ternary codes).
+pub(super) fn random_planes(
+    rng: &mut ChaCha8Rng,
+    groups: usize,
+    k: usize,
+) -> (Vec<Vec<u8>>, Vec<Vec<u8>>) {
+    let plus: Vec<Vec<u8>> = (0..groups)
+        .map(|_| (0..k).map(|_| rng.random()).collect())
+        .collect();
+    let minus = plus
+        .iter()
+        .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
+        .collect();
+    (plus, minus)
+}
+
 #[test]
 fn transpose8_swaps_samples_and_pixels() {
     let mut rng = ChaCha8Rng::seed_from_u64(8);
@@ -39,13 +56,7 @@ fn adjoint_chunk_matches_the_direct_sum() {
         prev[pad + t] = v;
     }
     let base0 = pad + kp - 1;
-    let plus: Vec<Vec<u8>> = (0..groups)
-        .map(|_| (0..k).map(|_| rng.random()).collect())
-        .collect();
-    let minus: Vec<Vec<u8>> = plus
-        .iter()
-        .map(|p| p.iter().map(|&b| !b & rng.random::<u8>()).collect())
-        .collect();
+    let (plus, minus) = random_planes(&mut rng, groups, k);
     let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
     let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
     let mut isas = vec![Isa::Generic, Isa::best()];
