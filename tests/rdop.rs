@@ -221,6 +221,58 @@ proptest! {
     }
 }
 
+/// With a pulse longer than the restricted adjoint's spans of samples (2048) and segments of
+/// the sparse forward that have a core all voxels cover and fringes some do not: the support
+/// operator equals the composition A·Rᵀ in both directions, in `f64` and `f32`, for pixels with
+/// one voxel and with several, both code alphabets.
+#[test]
+fn support_operator_matches_the_composition_with_a_long_pulse() {
+    use rdlidar::lidar::SupportOperator;
+    use rdlidar::operator::{OperatorExt, Restriction};
+    let g = Geometry::new(3, 5, 24).unwrap();
+    let kp = 4700;
+    let k = g.samples(kp);
+    // Pixel 0: five voxels across the depths; pixel 7: one at the last bin; pixel 14: two; every
+    // other pixel of the grid: one at its own depth.
+    let mut voxels = vec![0, 3, 11, 12, 23, 7 * 24 + 23, 14 * 24 + 5, 14 * 24 + 6];
+    voxels.extend((1..14).filter(|&p| p != 7).map(|p| p * 24 + (p * 5) % 24));
+    for ternary in [false, true] {
+        let codes = Arc::new(if ternary {
+            Codes::random_ternary(g.pixels(), k, 0.3, 41).unwrap()
+        } else {
+            Codes::random_binary(g.pixels(), k, 41).unwrap()
+        });
+        let pulse = Pulse::<f64>::bernoulli(kp, 40).unwrap().into_inner();
+        let op = RdOperator::new(g, pulse.clone(), codes.clone()).unwrap();
+        let sup = SupportOperator::new(&op, voxels.clone()).unwrap();
+        let restriction = Restriction::<f64>::new(g.voxels(), voxels.clone()).unwrap();
+        let reference = (&op).compose(restriction.adjoint()).unwrap();
+        let a = random_vec(voxels.len(), 42);
+        let (mut y1, mut y2) = (vec![0.0; k], vec![0.0; k]);
+        sup.apply(&a, &mut y1);
+        reference.apply(&a, &mut y2);
+        assert!(rel(&y1, &y2) <= 1e-12, "forward, ternary {ternary}");
+        let y = random_vec(k, 43);
+        let (mut x1, mut x2) = (vec![0.0; voxels.len()], vec![0.0; voxels.len()]);
+        sup.apply_adjoint(&y, &mut x1);
+        reference.apply_adjoint(&y, &mut x2);
+        assert!(rel(&x1, &x2) <= 1e-12, "adjoint, ternary {ternary}");
+        let p32: Vec<f32> = pulse.iter().map(|&v| v as f32).collect();
+        let op32 = RdOperator::new(g, p32, codes).unwrap();
+        let sup32 = SupportOperator::new(&op32, voxels.clone()).unwrap();
+        let a32: Vec<f32> = a.iter().map(|&v| v as f32).collect();
+        let mut y32 = vec![0.0f32; k];
+        sup32.apply(&a32, &mut y32);
+        let y32_64: Vec<f64> = y32.iter().map(|&v| f64::from(v)).collect();
+        assert!(rel(&y32_64, &y1) <= 1e-5, "f32 forward, ternary {ternary}");
+        let yin: Vec<f32> = y.iter().map(|&v| v as f32).collect();
+        let mut x32 = vec![0.0f32; voxels.len()];
+        sup32.apply_adjoint(&yin, &mut x32);
+        let x32_64: Vec<f64> = x32.iter().map(|&v| f64::from(v)).collect();
+        assert!(rel(&x32_64, &x1) <= 1e-5, "f32 adjoint, ternary {ternary}");
+    }
+}
+
 proptest! {
     #![proptest_config(crate::common::config(32))]
 

@@ -40,6 +40,7 @@ impl Isa {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512bw")
                 && std::arch::is_x86_feature_detected!("avx512vl")
                 && std::arch::is_x86_feature_detected!("fma")
             {
@@ -583,10 +584,10 @@ macro_rules! multiversion {
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
 multiversion!(fn gather_rows_isa<T, const NCH: usize>(table: &[Lane<T>], index: &[u16], out: &mut [Lane<T>]) => gather_rows_n);
 multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>]) => adj_chunk);
-multiversion!(pub(crate) fn sparse_entry_isa<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
-multiversion!(pub(crate) fn signed_copy_isa<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
-multiversion!(pub(crate) fn signed_dot_isa<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], p: &[T], out: &mut f64) => signed_dot);
-multiversion!(pub(crate) fn lane_dot_isa<T>(a: &[T], b: &[T], out: &mut f64) => lane_dot);
+multiversion!(fn sparse_entry_narrow<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
+multiversion!(fn signed_copy_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
+multiversion!(fn signed_dot_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], p: &[T], out: &mut f64) => signed_dot);
+multiversion!(fn lane_dot_narrow<T>(a: &[T], b: &[T], out: &mut f64) => lane_dot);
 
 /// Runs the forward block kernel for a slab of `8·nch` bins.
 pub(crate) fn forward_block<T: Real>(
@@ -652,7 +653,12 @@ pub(crate) fn gather_rows<T: Real>(
 
 pub(crate) mod adjoint_wide;
 pub(crate) mod quads;
+pub(crate) mod support_wide;
 pub(crate) mod tables;
 #[cfg(test)]
 mod tests;
 pub(crate) mod wide;
+
+pub(crate) use support_wide::{
+    lane_dot_isa, signed_copy_isa, signed_dot_isa, sparse_entries_isa, sparse_entry_isa, Entry,
+};

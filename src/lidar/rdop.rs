@@ -18,8 +18,8 @@ use super::kernels::quads::{
 };
 use super::kernels::tables::build_group_tables;
 use super::kernels::{
-    adjoint_chunk, forward_block, octet_stride, sparse_entry_isa, AdjChunk, FwdBlock, Isa, Lane,
-    ADJ_OCTETS,
+    adjoint_chunk, forward_block, octet_stride, sparse_entries_isa, sparse_entry_isa, AdjChunk,
+    Entry, FwdBlock, Isa, Lane, ADJ_OCTETS,
 };
 
 /// Largest slab of depth bins a kernel handles at once (8 lanes × 8 chunks).
@@ -508,25 +508,39 @@ impl<T: Real> RdOperator<T> {
             let k1 = k0 + yseg.len();
             let mut acc = vec![0.0f64; yseg.len()];
             let mut buf = vec![T::zero(); yseg.len()];
+            // Every voxel covers the samples [K − K_p, K_p) of the segment (its core): there the
+            // entries go four at a time, on either side one by one.
+            let (c0, c1) = (k0.max(k - kp), k1.min(kp));
+            let mut core = Vec::with_capacity(BATCH);
             for batch in entries.chunks(BATCH) {
+                core.clear();
                 for &(p, j, amp) in batch {
-                    let lo = k0.max(j);
-                    let hi = k1.min(j + kp);
-                    if lo >= hi {
-                        continue;
-                    }
-                    let g = p / 8;
-                    let plus = &self.codes.plus_group(g)[lo..hi];
-                    let minus = self.codes.minus_group(g).map(|m| &m[lo..hi]);
-                    sparse_entry_isa(
-                        self.isa,
+                    let (g, bit) = (p / 8, (p % 8) as u32);
+                    let entry = |lo: usize, hi: usize| Entry {
                         amp,
-                        (p % 8) as u32,
-                        plus,
-                        minus,
-                        &self.pulse[lo - j..hi - j],
-                        &mut buf[lo - k0..hi - k0],
-                    );
+                        bit,
+                        plus: &self.codes.plus_group(g)[lo..hi],
+                        minus: self.codes.minus_group(g).map(|m| &m[lo..hi]),
+                        pw: &self.pulse[lo - j..hi - j],
+                    };
+                    let (lo, hi) = (k0.max(j), k1.min(j + kp));
+                    let mut single = |lo: usize, hi: usize| {
+                        if lo < hi {
+                            let e = entry(lo, hi);
+                            let out = &mut buf[lo - k0..hi - k0];
+                            sparse_entry_isa(self.isa, amp, bit, e.plus, e.minus, e.pw, out);
+                        }
+                    };
+                    if c0 < c1 {
+                        single(lo, c0);
+                        single(c1, hi);
+                        core.push(entry(c0, c1));
+                    } else {
+                        single(lo, hi);
+                    }
+                }
+                if c0 < c1 {
+                    sparse_entries_isa(self.isa, &core, &mut buf[c0 - k0..c1 - k0]);
                 }
                 for (a, b) in acc.iter_mut().zip(buf.iter_mut()) {
                     *a += b.as_f64();

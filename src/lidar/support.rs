@@ -89,8 +89,12 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
         let kp = pulse.len();
         let codes = self.op.codes();
         let isa = self.op.isa_kind();
+        let depth = |i: usize| self.voxels[i] % ks;
         // Per pixel: its codes applied to y once (z = s ⊙ y), then one windowed dot product with
-        // the pulse per voxel of that pixel; a pixel with one voxel does both in one pass.
+        // the pulse per voxel of that pixel; a pixel with one voxel does both in one pass. The
+        // pulse is taken in spans of `SPAN` samples, every pixel of a thread's share in turn, so
+        // that the span of the pulse, of y and of z stays in L1 while the codes stream.
+        const SPAN: usize = 2048;
         let out: Vec<(usize, T)> = self
             .by_pixel
             .par_chunks(
@@ -101,53 +105,50 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
             )
             .flat_map_iter(|runs| {
                 let mut z = vec![T::zero(); y.len()];
-                let mut res = Vec::new();
-                for run in runs {
-                    let (p, ref members) = *run;
-                    let (g, bit) = (p / 8, (p % 8) as u32);
-                    if let [i] = members[..] {
-                        // One voxel: codes, measurements and pulse in one pass.
-                        let j = self.voxels[i] % ks;
+                let mut sums: Vec<Vec<f64>> = runs.iter().map(|r| vec![0.0; r.1.len()]).collect();
+                for t0 in (0..kp).step_by(SPAN) {
+                    let t1 = (t0 + SPAN).min(kp);
+                    for (run, sums) in runs.iter().zip(&mut sums) {
+                        let (p, ref members) = *run;
+                        let (g, bit) = (p / 8, (p % 8) as u32);
+                        let (plus, minus) = (codes.plus_group(g), codes.minus_group(g));
                         let mut acc = 0.0;
-                        signed_dot_isa(
+                        if let [i] = members[..] {
+                            // One voxel: codes, measurements and pulse in one pass.
+                            let (lo, hi) = (depth(i) + t0, depth(i) + t1);
+                            signed_dot_isa(
+                                isa,
+                                bit,
+                                &plus[lo..hi],
+                                minus.map(|m| &m[lo..hi]),
+                                &y[lo..hi],
+                                &pulse[t0..t1],
+                                &mut acc,
+                            );
+                            sums[0] += acc;
+                            continue;
+                        }
+                        let lo = members.iter().map(|&i| depth(i)).min().unwrap_or(0) + t0;
+                        let hi = members.iter().map(|&i| depth(i)).max().unwrap_or(0) + t1;
+                        signed_copy_isa(
                             isa,
                             bit,
-                            &codes.plus_group(g)[j..j + kp],
-                            codes.minus_group(g).map(|m| &m[j..j + kp]),
-                            &y[j..j + kp],
-                            pulse,
-                            &mut acc,
+                            &plus[lo..hi],
+                            minus.map(|m| &m[lo..hi]),
+                            &y[lo..hi],
+                            &mut z[lo..hi],
                         );
-                        res.push((i, T::of_f64(acc)));
-                        continue;
-                    }
-                    let lo = members
-                        .iter()
-                        .map(|&i| self.voxels[i] % ks)
-                        .min()
-                        .unwrap_or(0);
-                    let hi = members
-                        .iter()
-                        .map(|&i| self.voxels[i] % ks)
-                        .max()
-                        .unwrap_or(0)
-                        + kp;
-                    signed_copy_isa(
-                        isa,
-                        bit,
-                        &codes.plus_group(g)[lo..hi],
-                        codes.minus_group(g).map(|m| &m[lo..hi]),
-                        &y[lo..hi],
-                        &mut z[lo..hi],
-                    );
-                    for &i in members {
-                        let j = self.voxels[i] % ks;
-                        let mut acc = 0.0;
-                        lane_dot_isa(isa, &z[j..j + kp], pulse, &mut acc);
-                        res.push((i, T::of_f64(acc)));
+                        for (&i, sum) in members.iter().zip(sums.iter_mut()) {
+                            let j = depth(i);
+                            lane_dot_isa(isa, &z[j + t0..j + t1], &pulse[t0..t1], &mut acc);
+                            *sum += acc;
+                        }
                     }
                 }
-                res
+                runs.iter()
+                    .zip(sums)
+                    .flat_map(|(run, sums)| run.1.iter().zip(sums).map(|(&i, v)| (i, T::of_f64(v))))
+                    .collect::<Vec<_>>()
             })
             .collect();
         for (i, v) in out {

@@ -104,43 +104,145 @@ fn adjoint_chunk_matches_the_direct_sum() {
     }
 }
 
+/// Every instruction set this CPU has, and the generic kernels.
+fn every_isa() -> Vec<Isa> {
+    let mut all = vec![Isa::Generic];
+    #[cfg(target_arch = "x86_64")]
+    if Isa::best() >= Isa::Avx2 {
+        all.push(Isa::Avx2);
+    }
+    if Isa::best() > *all.last().expect("generic") {
+        all.push(Isa::best());
+    }
+    all
+}
+
+/// The code of sample `k` for the pixel at bit `bit`: ±1, or −1/0/+1 with a −1 plane.
+fn code_of(plus: &[u8], minus: Option<&[u8]>, bit: u32, k: usize) -> f64 {
+    let p = f64::from((plus[k] >> bit) & 1);
+    match minus {
+        None => 2.0 * p - 1.0,
+        Some(m) => p - f64::from((m[k] >> bit) & 1),
+    }
+}
+
 /// The one-pass restricted adjoint equals the signed copy followed by the windowed dot
-/// product, for both alphabets, on every instruction set, with lengths that leave tails.
-#[test]
-fn signed_dot_equals_the_copy_then_the_dot() {
+/// product and the direct sum, the signed copy equals s·y exactly, for both alphabets and
+/// precisions, on every instruction set, with lengths that leave tails.
+fn signed_dot_equals_the_copy_then_the_dot<T: Real>(tol: f64) {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    for n in [1usize, 7, 8, 255, 256, 257, 1000] {
-        let y: Vec<f32> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let p: Vec<f32> = (0..n)
-            .map(|_| f32::from(rng.random_range(0..2u8)))
+    for n in [1usize, 7, 8, 15, 17, 255, 256, 257, 1000] {
+        let y: Vec<T> = (0..n)
+            .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
             .collect();
-        let plus: Vec<u8> = (0..n).map(|_| rng.random()).collect();
-        let minus: Vec<u8> = plus.iter().map(|&b| !b & rng.random::<u8>()).collect();
-        for minus in [None, Some(minus.as_slice())] {
-            for isa in [Isa::Generic, Isa::best()] {
+        let p: Vec<T> = (0..n)
+            .map(|_| T::of_f64(f64::from(rng.random_range(0..2u8))))
+            .collect();
+        let (plus, minus) = random_planes(&mut rng, 1, n);
+        for minus in [None, Some(minus[0].as_slice())] {
+            for isa in every_isa() {
                 for bit in [0, 3, 7] {
-                    let mut z = vec![0.0f32; n];
-                    signed_copy_isa(isa, bit, &plus, minus, &y, &mut z);
+                    let mut z = vec![T::zero(); n];
+                    signed_copy_isa(isa, bit, &plus[0], minus, &y, &mut z);
+                    for k in 0..n {
+                        let want = T::of_f64(code_of(&plus[0], minus, bit, k)) * y[k];
+                        assert!(z[k] == want, "{isa:?} {n} {bit}: copy at {k}");
+                    }
                     let (mut want, mut got) = (0.0, 0.0);
                     lane_dot_isa(isa, &z, &p, &mut want);
-                    signed_dot_isa(isa, bit, &plus, minus, &y, &p, &mut got);
+                    signed_dot_isa(isa, bit, &plus[0], minus, &y, &p, &mut got);
                     let direct: f64 = (0..n)
-                        .map(|k| {
-                            let s = f64::from((plus[k] >> bit) & 1)
-                                - match minus {
-                                    None => f64::from(!(plus[k] >> bit) & 1),
-                                    Some(m) => f64::from((m[k] >> bit) & 1),
-                                };
-                            s * f64::from(y[k]) * f64::from(p[k])
-                        })
+                        .map(|k| code_of(&plus[0], minus, bit, k) * y[k].as_f64() * p[k].as_f64())
                         .sum();
-                    assert!((got - want).abs() <= 1e-5 * (1.0 + want.abs()), "{n} {bit}");
-                    assert!(
-                        (got - direct).abs() <= 1e-5 * (1.0 + direct.abs()),
-                        "{n} {bit}"
-                    );
+                    let ctx = format!("{} {isa:?} n {n} bit {bit}", T::NAME);
+                    assert!((got - want).abs() <= tol * (1.0 + want.abs()), "{ctx}");
+                    assert!((got - direct).abs() <= tol * (1.0 + direct.abs()), "{ctx}");
                 }
             }
         }
     }
+}
+
+#[test]
+fn signed_dot_equals_the_copy_then_the_dot_f32() {
+    signed_dot_equals_the_copy_then_the_dot::<f32>(1e-5);
+}
+
+#[test]
+fn signed_dot_equals_the_copy_then_the_dot_f64() {
+    signed_dot_equals_the_copy_then_the_dot::<f64>(1e-12);
+}
+
+/// The sparse forward's entries four at a time equal one at a time to the last bit, and the
+/// direct sum Σ_e a_e·s_e(k)·p_e[k], for 1 to 9 entries (whole quads and a rest), both alphabets
+/// and precisions, on every instruction set, with lengths that leave tails.
+fn entries_four_at_a_time_equal_one_at_a_time<T: Real>(tol: f64) {
+    let mut rng = ChaCha8Rng::seed_from_u64(14);
+    for n in [3usize, 16, 40, 263] {
+        let (plus, minus) = random_planes(&mut rng, 9, n);
+        let pulses: Vec<Vec<T>> = (0..9)
+            .map(|_| {
+                (0..n)
+                    .map(|_| T::of_f64(f64::from(rng.random_range(0..2u8))))
+                    .collect()
+            })
+            .collect();
+        let amps: Vec<T> = (0..9)
+            .map(|_| T::of_f64(rng.random_range(0.1..1.0)))
+            .collect();
+        let start: Vec<T> = (0..n)
+            .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
+            .collect();
+        for ternary in [false, true] {
+            for count in 1..=9usize {
+                let entries: Vec<Entry<'_, T>> = (0..count)
+                    .map(|e| Entry {
+                        amp: amps[e],
+                        bit: (e % 8) as u32,
+                        plus: &plus[e],
+                        minus: ternary.then_some(minus[e].as_slice()),
+                        pw: &pulses[e],
+                    })
+                    .collect();
+                for isa in every_isa() {
+                    let mut quads = start.clone();
+                    sparse_entries_isa(isa, &entries, &mut quads);
+                    let mut single = start.clone();
+                    for e in &entries {
+                        sparse_entry_isa(isa, e.amp, e.bit, e.plus, e.minus, e.pw, &mut single);
+                    }
+                    let ctx = format!(
+                        "{} {isa:?} n {n} ternary {ternary} entries {count}",
+                        T::NAME
+                    );
+                    assert!(quads == single, "{ctx}");
+                    for k in 0..n {
+                        let direct = start[k].as_f64()
+                            + entries
+                                .iter()
+                                .map(|e| {
+                                    let s = code_of(e.plus, e.minus, e.bit, k);
+                                    e.amp.as_f64() * s * e.pw[k].as_f64()
+                                })
+                                .sum::<f64>();
+                        let got = quads[k].as_f64();
+                        assert!(
+                            (got - direct).abs() <= tol * (1.0 + direct.abs()),
+                            "{ctx} at {k}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn entries_four_at_a_time_equal_one_at_a_time_f32() {
+    entries_four_at_a_time_equal_one_at_a_time::<f32>(1e-5);
+}
+
+#[test]
+fn entries_four_at_a_time_equal_one_at_a_time_f64() {
+    entries_four_at_a_time_equal_one_at_a_time::<f64>(1e-12);
 }

@@ -46,6 +46,24 @@ pub trait Wide: Copy {
     /// Eight lanes whose sum is the sum of the vector's values.
     #[cfg(target_arch = "x86_64")]
     unsafe fn v_lanes8(v: Self::V) -> [Self; 8];
+    /// `a` in every lane.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_splat(a: Self) -> Self::V;
+
+    /// A mask of one bit per lane.
+    #[cfg(target_arch = "x86_64")]
+    type M: Copy;
+    /// The lanes whose code byte, of the [`PER`](Wide::PER) bytes at `codes`, has bit `bit`
+    /// (0 to 7) set (needs AVX-512BW).
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn m_bit(codes: *const u8, bit: u32) -> Self::M;
+    /// `a` in the lanes of `plus`, −a in the others: a binary code applied.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_sign(plus: Self::M, a: Self::V) -> Self::V;
+    /// `a` in the lanes of `plus` only, −a in those of `minus` only, zero elsewhere: a ternary
+    /// code applied.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn v_ternary(plus: Self::M, minus: Self::M, a: Self::V) -> Self::V;
 }
 
 /// The mask of the first `min(n, bits)` lanes.
@@ -111,6 +129,30 @@ impl Wide for f32 {
         let sum = _mm256_add_ps(_mm512_castps512_ps256(v), high);
         std::mem::transmute::<std::arch::x86_64::__m256, [f32; 8]>(sum)
     }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_splat(a: f32) -> __m512 {
+        _mm512_set1_ps(a)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    type M = __mmask16;
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn m_bit(codes: *const u8, bit: u32) -> __mmask16 {
+        _mm_test_epi8_mask(_mm_loadu_si128(codes.cast()), _mm_set1_epi8(1 << bit))
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_sign(plus: __mmask16, a: __m512) -> __m512 {
+        _mm512_mask_sub_ps(a, !plus, _mm512_setzero_ps(), a)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_ternary(plus: __mmask16, minus: __mmask16, a: __m512) -> __m512 {
+        let gated = _mm512_maskz_mov_ps(plus, a);
+        _mm512_mask_sub_ps(gated, minus, gated, a)
+    }
 }
 
 impl Wide for f64 {
@@ -162,5 +204,29 @@ impl Wide for f64 {
     #[inline(always)]
     unsafe fn v_lanes8(v: __m512d) -> [f64; 8] {
         std::mem::transmute::<__m512d, [f64; 8]>(v)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_splat(a: f64) -> __m512d {
+        _mm512_set1_pd(a)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    type M = __mmask8;
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn m_bit(codes: *const u8, bit: u32) -> __mmask8 {
+        _mm_test_epi8_mask(_mm_loadl_epi64(codes.cast()), _mm_set1_epi8(1 << bit)) as __mmask8
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_sign(plus: __mmask8, a: __m512d) -> __m512d {
+        _mm512_mask_sub_pd(a, !plus, _mm512_setzero_pd(), a)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn v_ternary(plus: __mmask8, minus: __mmask8, a: __m512d) -> __m512d {
+        let gated = _mm512_maskz_mov_pd(plus, a);
+        _mm512_mask_sub_pd(gated, minus, gated, a)
     }
 }
