@@ -117,8 +117,8 @@ fn the_surface_rule_does_not_cycle_where_the_data_suffice() {
     // instead of 15). Joins and departures must settle within a small multiple of the per-pixel
     // tests' count: the fit that ends the run stops on the residual tolerance, which a change in
     // the last bits of the operator's sums can meet one round later or earlier (seed 10: 15
-    // iterations with one order of the sparse forward's additions, 39 with another), whereas a
-    // cycle runs the whole budget.
+    // iterations with the sparse forward's products rounded before they are added, 39 with
+    // fused multiply-adds), whereas a cycle runs the whole budget.
     let g = Geometry::new(16, 16, 16).unwrap();
     for seed in [0, 10] {
         let (op, y) = measured(g, 8192, Some(20.0), seed);

@@ -526,9 +526,7 @@ impl<T: Real> RdOperator<T> {
                     let (lo, hi) = (k0.max(j), k1.min(j + kp));
                     let mut single = |lo: usize, hi: usize| {
                         if lo < hi {
-                            let e = entry(lo, hi);
-                            let out = &mut buf[lo - k0..hi - k0];
-                            sparse_entry_isa(self.isa, amp, bit, e.plus, e.minus, e.pw, out);
+                            sparse_entry_isa(self.isa, &entry(lo, hi), &mut buf[lo - k0..hi - k0]);
                         }
                     };
                     if c0 < c1 {

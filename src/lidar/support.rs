@@ -93,7 +93,8 @@ impl<T: Real> LinearOperator<T> for SupportOperator<'_, T> {
         // Per pixel: its codes applied to y once (z = s ⊙ y), then one windowed dot product with
         // the pulse per voxel of that pixel; a pixel with one voxel does both in one pass. The
         // pulse is taken in spans of `SPAN` samples, every pixel of a thread's share in turn, so
-        // that the span of the pulse, of y and of z stays in L1 while the codes stream.
+        // that the span of the pulse, of y and of z stays in the nearest caches while the codes
+        // stream (24 kB for `f32`, within L1; 48 kB for `f64`).
         const SPAN: usize = 2048;
         let out: Vec<(usize, T)> = self
             .by_pixel

@@ -2,11 +2,12 @@
 //! copies and windowed dot products) on AVX-512, and the entry points that choose them or the
 //! narrow kernels by instruction set.
 //!
-//! A code byte's bit becomes a lane mask (the bytes widened to lanes and tested), the mask signs
-//! the values in one masked subtraction, and the dot products run in four independent 512-bit
-//! accumulators: the narrow kernels' eight-lane sums wait on one addition after another and
-//! decode the codes byte by byte. Dot products keep the narrow kernels' rounding structure:
-//! blocks of 256 products summed in `T`, the block sums added in `f64`.
+//! A code byte's bit becomes a lane mask (AVX-512BW's byte test), the mask signs the values in
+//! one masked subtraction, and the dot products run in four independent 512-bit accumulators:
+//! the narrow kernels' eight-lane sums wait on one addition after another and decode the codes
+//! byte by byte. Dot products are summed in blocks of 256 products in `T`, the block sums in
+//! `f64`, as the narrow kernels do; within a block the products are fused multiply-adds in 64
+//! partial sums (32 for `f64`), so the last bits differ from the narrow kernels'.
 
 #[cfg(target_arch = "x86_64")]
 use super::wide::Wide;
@@ -23,26 +24,25 @@ fn check_planes(plus: &[u8], minus: Option<&[u8]>, n: usize) {
     assert!(minus.is_none_or(|m| m.len() == n), "code planes");
 }
 
-/// y[k] += a·s(k)·p[k] over the entry's window: one sparse entry of the forward, `plus` and
-/// `minus` the entry's group bytes, `pw` the pulse and `out` the measurements on the same window.
+/// out[k] += a·s(k)·p[k] over the entry's window: one sparse entry of the forward, `out` the
+/// measurements on the entry's window.
 ///
 /// # Panics
-/// If the slices differ in length.
-pub(crate) fn sparse_entry_isa<T: Real>(
-    isa: Isa,
-    amp: T,
-    bit: u32,
-    plus: &[u8],
-    minus: Option<&[u8]>,
-    pw: &[T],
-    out: &mut [T],
-) {
+/// If the entry's slices differ in length from `out`.
+pub(crate) fn sparse_entry_isa<T: Real>(isa: Isa, e: &Entry<'_, T>, out: &mut [T]) {
+    let Entry {
+        amp,
+        bit,
+        plus,
+        minus,
+        pw,
+    } = *e;
     assert_eq!(pw.len(), out.len(), "pulse window");
     check_planes(plus, minus, out.len());
     #[cfg(target_arch = "x86_64")]
     if isa == Isa::Avx512 {
-        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F and BW; every slice holds the
-        // window's length (asserted above) and the kernel reads and writes within it.
+        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, BW and VL; every slice
+        // holds the window's length (asserted above) and the kernel reads and writes within it.
         unsafe {
             match minus {
                 None => entry_wide::<T, false>(amp, bit, plus, plus, pw, out),
@@ -55,7 +55,8 @@ pub(crate) fn sparse_entry_isa<T: Real>(
 }
 
 /// One voxel's term of the sparse forward on a window of samples: its amplitude, its pixel's bit
-/// in the code bytes and its group's code planes and the pulse on the window.
+/// in the code bytes, its group's code planes and the pulse on the window (all of the window's
+/// length).
 #[derive(Clone, Copy)]
 pub(crate) struct Entry<'a, T> {
     pub amp: T,
@@ -70,7 +71,8 @@ pub(crate) struct Entry<'a, T> {
 /// the same order as one entry at a time).
 ///
 /// # Panics
-/// If an entry's slices differ in length from `out`, or the entries mix code alphabets.
+/// If an entry's slices differ in length from `out`; on AVX-512 also if the entries mix code
+/// alphabets (binary and ternary).
 pub(crate) fn sparse_entries_isa<T: Real>(isa: Isa, entries: &[Entry<'_, T>], out: &mut [T]) {
     #[cfg(target_arch = "x86_64")]
     if isa == Isa::Avx512 {
@@ -94,12 +96,12 @@ pub(crate) fn sparse_entries_isa<T: Real>(isa: Isa, entries: &[Entry<'_, T>], ou
             }
         }
         for e in rest {
-            sparse_entry_isa(isa, e.amp, e.bit, e.plus, e.minus, e.pw, out);
+            sparse_entry_isa(isa, e, out);
         }
         return;
     }
     for e in entries {
-        sparse_entry_isa(isa, e.amp, e.bit, e.plus, e.minus, e.pw, out);
+        sparse_entry_isa(isa, e, out);
     }
 }
 

@@ -209,7 +209,7 @@ fn entries_four_at_a_time_equal_one_at_a_time<T: Real>(tol: f64) {
                     sparse_entries_isa(isa, &entries, &mut quads);
                     let mut single = start.clone();
                     for e in &entries {
-                        sparse_entry_isa(isa, e.amp, e.bit, e.plus, e.minus, e.pw, &mut single);
+                        sparse_entry_isa(isa, e, &mut single);
                     }
                     let ctx = format!(
                         "{} {isa:?} n {n} ternary {ternary} entries {count}",

@@ -8,8 +8,8 @@ use std::arch::x86_64::*;
 /// a supertrait of [`Real`](crate::Real) so that generic kernels reach them).
 ///
 /// # Safety
-/// Every function needs AVX-512F at run time (`Isa::Avx512`); the loads read what their
-/// documentation says and no more.
+/// Every function needs AVX-512F at run time, [`m_bit`](Wide::m_bit) also AVX-512BW and VL
+/// (`Isa::Avx512` has all three); the loads read what their documentation says and no more.
 #[doc(hidden)]
 pub trait Wide: Copy {
     /// Values per vector (and per 64-byte cache line).
@@ -54,7 +54,7 @@ pub trait Wide: Copy {
     #[cfg(target_arch = "x86_64")]
     type M: Copy;
     /// The lanes whose code byte, of the [`PER`](Wide::PER) bytes at `codes`, has bit `bit`
-    /// (0 to 7) set (needs AVX-512BW).
+    /// (0 to 7) set (needs AVX-512BW and VL).
     #[cfg(target_arch = "x86_64")]
     unsafe fn m_bit(codes: *const u8, bit: u32) -> Self::M;
     /// `a` in the lanes of `plus`, −a in the others: a binary code applied.
