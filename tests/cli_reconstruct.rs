@@ -356,3 +356,55 @@ fn the_same_file_for_two_outputs_is_refused() {
     assert!(stderr(&out).contains("--png"), "{}", stderr(&out));
     assert!(outputs(&dir).is_empty());
 }
+
+#[test]
+fn clipped_samples_are_censored_and_bad_levels_refused() {
+    // The noise-free scene at K_p 300 (compressive): censoring each ADC's largest sample or
+    // every sample beyond a level leaves enough to recover it exactly.
+    let dir = TempDir::new("clipped");
+    let sim = simulate(&dir, 300);
+    let truth = sim.join("scene.npy");
+    let meas: ndarray::Array1<f64> = read_npy(sim.join("meas.npy")).unwrap();
+    let top = meas.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let level = format!("{}", 0.9 * top);
+    let beyond = meas.iter().filter(|v| v.abs() >= 0.9 * top).count();
+    for (clipped, count) in [("top", 1), (level.as_str(), beyond)] {
+        let out = reconstruct(
+            &dir,
+            &sim,
+            "auto",
+            &["--truth", s(&truth), "--clipped", clipped],
+        );
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = stdout(&out);
+        let k = meas.len();
+        assert!(
+            text.contains(&format!("censored {count} of {k} samples")),
+            "{text}"
+        );
+        assert!(text.contains("exact depth 100.0%"), "{text}");
+    }
+    // Bad levels are usage errors naming the flag; a level at or below every sample leaves
+    // nothing to fit. No output is written.
+    let _ = std::fs::remove_file(dir.path("depth.npy"));
+    let _ = std::fs::remove_file(dir.path("xh.npy"));
+    for bad in ["abc", "0", "-1", "nan", "inf"] {
+        let flag = format!("--clipped={bad}");
+        let out = reconstruct(&dir, &sim, "auto", &[&flag]);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {}", stderr(&out));
+        assert!(
+            stderr(&out).contains("--clipped"),
+            "{bad}: {}",
+            stderr(&out)
+        );
+    }
+    let out = reconstruct(&dir, &sim, "auto", &["--clipped", "1e-300"]);
+    let err = stderr(&out);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("--clipped") && err.contains("nothing would be left"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(outputs(&dir).is_empty());
+}

@@ -8,6 +8,7 @@ mod architectures;
 mod argmin_solvers;
 mod auto;
 mod blocks;
+mod censor;
 mod cli;
 mod cli_adjoint;
 mod cli_architecture_variants;

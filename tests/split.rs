@@ -829,7 +829,10 @@ fn one_parts_observer_ends_every_parts_run_at_the_same_iteration() {
 }
 
 /// `run` in each of `parts` parts, each in its own thread with its space, in part order.
-fn in_spaces<R: Send>(parts: usize, run: &(dyn Fn(Arc<dyn Space>) -> R + Sync)) -> Vec<R> {
+pub(crate) fn in_spaces<R: Send>(
+    parts: usize,
+    run: &(dyn Fn(Arc<dyn Space>) -> R + Sync),
+) -> Vec<R> {
     let shared = Shared::new(parts);
     thread::scope(|s| {
         let handles: Vec<_> = (0..parts)

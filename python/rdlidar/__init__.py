@@ -541,6 +541,20 @@ def _optional_path(value, name):
     return os.fspath(value)
 
 
+def _clipped(clipped) -> Optional[str]:
+    """``clipped=``: None, "top" or a level > 0, as the text the library parses."""
+    if clipped is None:
+        return None
+    if isinstance(clipped, str):
+        if clipped != "top":
+            raise ValueError(f"clipped: expected 'top' or a level > 0, got {clipped!r:.40}")
+        return clipped
+    level = _float(clipped, "clipped")
+    if not (np.isfinite(level) and level > 0):
+        raise ValueError(f"clipped: the clipping level must be finite and > 0, got {level}")
+    return repr(level)
+
+
 def _callback(callback):
     if callback is not None and not callable(callback):
         raise TypeError("callback: expected a callable or None")
@@ -560,6 +574,7 @@ def reconstruct(
     tiles=None,
     fill_unobserved: bool = False,
     stream_codes: bool = False,
+    clipped=None,
 ):
     """Reconstructs a scene from the measurements of any architecture, as
     ``rdlidar reconstruct`` does.
@@ -582,6 +597,10 @@ def reconstruct(
     seed : the seed of the randomized parts (FISTA's power iteration).
     fill_unobserved : fill the depth of pixels that reach no ADC (a coded aperture's blocked
         pixels, -2) from their neighbours, as ``--fill-unobserved`` does.
+    clipped : samples the ADC clipped, left out of the data term as ``--clipped`` does: a
+        level (samples with ``|meas| >= clipped`` are censored), ``"top"`` (each ADC's samples
+        at its largest ``|meas|``) or None. The report then gives ``censored`` (the count) and
+        ``censored_levels`` (per ADC row).
 
     Returns ``(depth, scene, report)``: ``depth`` (M, N) int32 depth bins (-1 where no return,
     -2 for pixels no code reaches), ``scene`` (M, N, K_s) with every return found, and
@@ -610,7 +629,7 @@ def reconstruct(
         raise ValueError(f"meas: expected shape {op.meas_shape}, got {y.shape}")
     depth, scene, report = _rdlidar.reconstruct(
         op._core, y.reshape(-1), solver, max_iter, callback, _int(seed, "seed"),
-        bool(fill_unobserved),
+        bool(fill_unobserved), _clipped(clipped),
     )
     return depth, scene.reshape(op.scene_shape), report
 

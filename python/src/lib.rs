@@ -20,7 +20,7 @@ use pyo3::types::{PyDict, PyList};
 
 use rdlidar::acquisition::{
     check_finite, check_finite_result, check_pulse, pulse_in, simulation_meta, write_simulation,
-    Acquisition, AcquisitionFiles, CodeStore, CodesFormat, InputNames, Reconstructed,
+    Acquisition, AcquisitionFiles, Clipping, CodeStore, CodesFormat, InputNames, Reconstructed,
     SimulationRequest, Streaming, Use,
 };
 use rdlidar::lidar::{
@@ -822,7 +822,7 @@ fn run_fista<'py, T: Real + numpy::Element>(
 
 /// Runs a reconstruction method on any architecture; returns (depth, scene, report).
 #[pyfunction]
-#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false))]
+#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false, clipped=None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct<'py>(
     py: Python<'py>,
@@ -833,10 +833,15 @@ fn reconstruct<'py>(
     callback: Option<Py<PyAny>>,
     seed: u64,
     fill_unobserved: bool,
+    clipped: Option<&str>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let method: Method = solver
         .parse()
         .map_err(|e: rdlidar::Error| PyValueError::new_err(format!("solver: {e}")))?;
+    let clipped = clipped
+        .map(str::parse::<Clipping>)
+        .transpose()
+        .map_err(value_error)?;
     if max_iter == Some(0) {
         return Err(PyValueError::new_err("max_iter: must be at least 1"));
     }
@@ -855,6 +860,7 @@ fn reconstruct<'py>(
         method,
         options,
         fill_unobserved,
+        clipped,
     };
     match &operator.op {
         Op::F32(_) => run_reconstruct::<f32>(py, &operator.acq, meas, &job, callback),
@@ -867,6 +873,8 @@ struct Job {
     method: Method,
     options: ReconstructOptions,
     fill_unobserved: bool,
+    /// The samples to censor, if any.
+    clipped: Option<Clipping>,
 }
 
 fn run_reconstruct<'py, T: Real + numpy::Element>(
@@ -880,6 +888,14 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
     acq.solver_memory_plan::<T>(10)
         .check("reconstruct", "use a smaller acquisition or free memory")
         .map_err(value_error)?;
+    let censored = match job.clipped {
+        Some(c) => Some(acq.censor(&y, c).map_err(value_error)?),
+        None => None,
+    };
+    let (acq, y) = match &censored {
+        Some((acq, y, _)) => (acq, y.as_slice()),
+        None => (acq, y.as_slice()),
+    };
     let observer = PyObserver::new(callback);
     let tiled = matches!(acq.architecture(), Architecture::Tiles(_));
     let result = observer.watch(py, || {
@@ -887,7 +903,7 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
             observer.observe(tiled.then_some(tile), info)
         };
         acq.reconstruct_cancellable(
-            &y,
+            y,
             job.method,
             &job.options,
             &observe,
@@ -909,6 +925,10 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
     report.set_item("architecture", acq.architecture().kind())?;
     report.set_item("seconds", r.elapsed().as_secs_f64())?;
     report.set_item("filled", filled)?;
+    if let Some((_, _, c)) = &censored {
+        report.set_item("censored", c.total())?;
+        report.set_item("censored_levels", c.levels.clone())?;
+    }
     let (f, a, s) = r.applies();
     match &r {
         Reconstructed::Single(r) => {

@@ -38,6 +38,7 @@
 //! # }
 //! ```
 
+mod censor;
 mod files;
 mod plan;
 mod reconstructed;
@@ -65,6 +66,7 @@ use crate::recon::{
 };
 use crate::solver::{Control, IterationInfo};
 
+pub use censor::{Censoring, Clipping};
 pub use files::{AcquisitionFiles, InputNames};
 pub use plan::Use;
 pub(crate) use plan::{held, plan, streams};

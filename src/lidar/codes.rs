@@ -372,6 +372,79 @@ impl Codes {
         out
     }
 
+    /// These codes with s[p, k] = 0 wherever `zero[row_of(p)][k]` holds: the samples that one
+    /// ADC's measurements cannot use (e.g. clipped ones) removed from the pixels that ADC sums.
+    /// The result is ternary (±1 codes gain their −1 plane). `row_of(p)` names the mask of
+    /// pixel `p` (its ADC: 0 for one ADC, the tile of a tiled array).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`codes`) when a mask does not have `len` samples or
+    /// `row_of` names a mask that does not exist.
+    pub fn zero_samples(
+        &self,
+        zero: &[Vec<bool>],
+        row_of: &dyn Fn(usize) -> usize,
+    ) -> Result<Self> {
+        if let Some(bad) = zero.iter().find(|z| z.len() != self.len) {
+            return Err(Error::param(
+                "codes",
+                format!("a mask of {} samples for codes of {}", bad.len(), self.len),
+            ));
+        }
+        let len = self.len;
+        let mut plus = self.plus.clone();
+        let tail = tail_mask(self.pixels);
+        let groups = self.groups();
+        let mut minus = match &self.minus {
+            Some(m) => m.clone(),
+            None => plus
+                .chunks_exact(len)
+                .enumerate()
+                .flat_map(|(g, bytes)| {
+                    let valid = if g + 1 == groups { tail } else { 0xff };
+                    bytes.iter().map(move |b| !b & valid)
+                })
+                .collect(),
+        };
+        for g in 0..groups {
+            let width = (self.pixels - 8 * g).min(8);
+            let mut rows = [0usize; 8];
+            for (i, r) in rows.iter_mut().enumerate().take(width) {
+                *r = row_of(8 * g + i);
+                if *r >= zero.len() {
+                    return Err(Error::param(
+                        "codes",
+                        format!("pixel {} names mask {r} of {}", 8 * g + i, zero.len()),
+                    ));
+                }
+            }
+            let (p, m) = (
+                &mut plus[g * len..(g + 1) * len],
+                &mut minus[g * len..(g + 1) * len],
+            );
+            let same = rows[..width].iter().all(|&r| r == rows[0]);
+            for k in 0..len {
+                let clear = if same {
+                    if zero[rows[0]][k] {
+                        0xff
+                    } else {
+                        0
+                    }
+                } else {
+                    (0..width).fold(0u8, |acc, i| acc | (u8::from(zero[rows[i]][k]) << i))
+                };
+                p[k] &= !clear;
+                m[k] &= !clear;
+            }
+        }
+        Ok(Codes {
+            pixels: self.pixels,
+            len,
+            plus,
+            minus: Some(minus),
+        })
+    }
+
     /// The codes as a dense `(pixels, len)` array (for small problems and file output).
     pub fn to_dense(&self) -> Array2<i8> {
         Array2::from_shape_fn((self.pixels, self.len), |(p, k)| self.get(p, k))

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
-use rdlidar::acquisition::{observe_nothing, pulse_in, Acquisition, Reconstructed, Use};
+use rdlidar::acquisition::{observe_nothing, pulse_in, Acquisition, Clipping, Reconstructed, Use};
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
     depth_bin_m, Architecture, DepthMap, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED,
@@ -102,6 +102,21 @@ pub struct ReconstructArgs {
     /// application instead of holding them (automatic when holding them would take over 1 GiB).
     #[arg(long)]
     pub stream_codes: bool,
+    /// Samples the ADC clipped, left out of the data term (censored): those with |y| ≥ LEVEL,
+    /// or with top those at each ADC's largest |y| (the top code of an ADC that saturated).
+    /// A clipped sample only bounds the scene; fitting its value pulls the amplitudes down
+    /// and leaves returns to explain the rest. The codes of the pixels each ADC sums become 0
+    /// at its censored samples (ternary codes), held in memory.
+    #[arg(long, value_name = "LEVEL|top", value_parser = parse_clipping)]
+    pub clipped: Option<Clipping>,
+}
+
+/// A `--clipped` value: top or a level > 0.
+fn parse_clipping(text: &str) -> Result<Clipping, String> {
+    text.parse::<Clipping>().map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { reason, .. } => reason,
+        e => e.to_string(),
+    })
 }
 
 /// A `--returns` value: a count, or `None` for auto.
@@ -204,6 +219,16 @@ fn reconstruct_files<T: Real + WritableElement>(
 ) -> CliResult {
     // Every process reads its inputs; they agree on any failure before solving together.
     let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
+    let (acq, y, censoring) = match a.clipped {
+        None => (acq, y, None),
+        Some(clipping) => {
+            let censored = acq
+                .censor(&y, clipping)
+                .map_err(|e| format!("--clipped ({clipping}): {e}").into());
+            let (acq, y, c) = ranks.agree(censored)?;
+            (acq, y, Some(c))
+        }
+    };
     let g = acq.whole_geometry();
     let options = ReconstructOptions {
         max_iter: a.max_iter,
@@ -314,6 +339,9 @@ fn reconstruct_files<T: Real + WritableElement>(
         files.join(", "),
         npy_dtype::<T>()
     );
+    if let Some(c) = &censoring {
+        outln!("  {}", c.describe());
+    }
     for line in &r.details {
         outln!("  {line}");
     }
