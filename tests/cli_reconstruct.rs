@@ -384,6 +384,34 @@ fn clipped_samples_are_censored_and_bad_levels_refused() {
         );
         assert!(text.contains("exact depth 100.0%"), "{text}");
     }
+    // Noise-free samples: no hint of clipping. An ADC that clips at 30% of the largest sample:
+    // the hint without --clipped.
+    let out = reconstruct(&dir, &sim, "auto", &[]);
+    assert!(!stdout(&out).contains("sit at"), "{}", stdout(&out));
+    let clipped = dir.path("clipped");
+    let full_scale = format!("{}", 0.3 * top);
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "8x8x8",
+        "--pulse-len",
+        "300",
+        "--seed",
+        "0",
+        "--adc-bits",
+        "8",
+        "--full-scale",
+        &full_scale,
+        "--out",
+        s(&clipped),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = reconstruct(&dir, &clipped, "auto", &[]);
+    let text = stdout(&out);
+    assert!(text.contains("sit at their ADC's largest |y|") && text.contains("--clipped top"));
+    std::fs::remove_dir_all(&clipped).unwrap();
     // Bad levels are usage errors naming the flag; a level at or below every sample leaves
     // nothing to fit. No output is written.
     let _ = std::fs::remove_file(dir.path("depth.npy"));

@@ -86,6 +86,15 @@ impl Clipping {
     }
 }
 
+/// The samples of `y` (rows of `samples` values, one per ADC) at their row's largest |y|
+/// (within four units of rounding), which [`Clipping::Top`] would censor: one or two in a row
+/// whose ADC did not clip, many where it saturated.
+pub fn at_top<T: Real>(y: &[T], samples: usize) -> usize {
+    y.chunks(samples.max(1))
+        .map(|row| Clipping::Top.mask(row).0.iter().filter(|&&c| c).count())
+        .sum()
+}
+
 /// What [`Acquisition::censor`] left out.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Censoring {

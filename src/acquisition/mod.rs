@@ -66,7 +66,7 @@ use crate::recon::{
 };
 use crate::solver::{Control, IterationInfo};
 
-pub use censor::{Censoring, Clipping};
+pub use censor::{at_top, Censoring, Clipping};
 pub use files::{AcquisitionFiles, InputNames};
 pub use plan::Use;
 pub(crate) use plan::{held, plan, streams};

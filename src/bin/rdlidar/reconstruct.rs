@@ -3,7 +3,9 @@
 use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
-use rdlidar::acquisition::{observe_nothing, pulse_in, Acquisition, Clipping, Reconstructed, Use};
+use rdlidar::acquisition::{
+    at_top, observe_nothing, pulse_in, Acquisition, Clipping, Reconstructed, Use,
+};
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
     depth_bin_m, Architecture, DepthMap, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED,
@@ -339,8 +341,19 @@ fn reconstruct_files<T: Real + WritableElement>(
         files.join(", "),
         npy_dtype::<T>()
     );
-    if let Some(c) = &censoring {
-        outln!("  {}", c.describe());
+    match &censoring {
+        Some(c) => outln!("  {}", c.describe()),
+        None => {
+            // Many samples at the top code: the ADC probably saturated.
+            let top = at_top(&y, acq.samples());
+            if top >= (y.len() / 100).max(3) {
+                outln!(
+                    "  {top} of {} samples sit at their ADC's largest |y|: if it clipped, \
+                     --clipped top leaves them out of the fit",
+                    y.len()
+                );
+            }
+        }
     }
     for line in &r.details {
         outln!("  {line}");
