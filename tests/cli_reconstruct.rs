@@ -436,3 +436,34 @@ fn clipped_samples_are_censored_and_bad_levels_refused() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(outputs(&dir).is_empty());
 }
+
+#[test]
+fn a_false_rate_runs_the_detection_test_and_bad_rates_are_refused() {
+    let dir = TempDir::new("false-rate");
+    let sim = simulate(&dir, 300);
+    let truth = sim.join("scene.npy");
+    let out = reconstruct(
+        &dir,
+        &sim,
+        "auto",
+        &["--truth", s(&truth), "--false-rate", "0.01"],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("false-detection test at α = 0.01"), "{text}");
+    assert!(text.contains("dropped 0 of"), "{text}");
+    assert!(text.contains("exact depth 100.0%"), "{text}");
+    let _ = std::fs::remove_file(dir.path("depth.npy"));
+    let _ = std::fs::remove_file(dir.path("xh.npy"));
+    for bad in ["0", "1", "-0.1", "abc", "nan", "inf"] {
+        let flag = format!("--false-rate={bad}");
+        let out = reconstruct(&dir, &sim, "auto", &[&flag]);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {}", stderr(&out));
+        assert!(
+            stderr(&out).contains("--false-rate"),
+            "{bad}: {}",
+            stderr(&out)
+        );
+    }
+    assert!(outputs(&dir).is_empty());
+}

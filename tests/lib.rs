@@ -31,6 +31,7 @@ mod cli_usage;
 mod codes;
 mod convolution;
 mod degenerate;
+mod detection;
 mod end_to_end;
 mod errors;
 mod experiments;

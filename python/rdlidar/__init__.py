@@ -575,6 +575,7 @@ def reconstruct(
     fill_unobserved: bool = False,
     stream_codes: bool = False,
     clipped=None,
+    false_rate: Optional[float] = None,
 ):
     """Reconstructs a scene from the measurements of any architecture, as
     ``rdlidar reconstruct`` does.
@@ -601,6 +602,11 @@ def reconstruct(
         level (samples with ``|meas| >= clipped`` are censored), ``"top"`` (each ADC's samples
         at its largest ``|meas|``) or None. The report then gives ``censored`` (the count) and
         ``censored_levels`` (per ADC row).
+    false_rate : a false-detection rate in (0, 1), as ``--false-rate``: each return is kept only
+        if its least-squares amplitude passes the test at which an empty pixel shows a false
+        return with probability at most ``false_rate`` under white Gaussian noise (it holds the
+        rate where the residual is noise, not with a few measurements per lit pixel). The
+        report then gives ``detection`` (false_rate, bar, sigma, tested, dropped, skipped).
 
     Returns ``(depth, scene, report)``: ``depth`` (M, N) int32 depth bins (-1 where no return,
     -2 for pixels no code reaches), ``scene`` (M, N, K_s) with every return found, and
@@ -629,7 +635,7 @@ def reconstruct(
         raise ValueError(f"meas: expected shape {op.meas_shape}, got {y.shape}")
     depth, scene, report = _rdlidar.reconstruct(
         op._core, y.reshape(-1), solver, max_iter, callback, _int(seed, "seed"),
-        bool(fill_unobserved), _clipped(clipped),
+        bool(fill_unobserved), _clipped(clipped), _optional_float(false_rate, "false_rate"),
     )
     return depth, scene.reshape(op.scene_shape), report
 

@@ -822,7 +822,7 @@ fn run_fista<'py, T: Real + numpy::Element>(
 
 /// Runs a reconstruction method on any architecture; returns (depth, scene, report).
 #[pyfunction]
-#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false, clipped=None))]
+#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false, clipped=None, false_rate=None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct<'py>(
     py: Python<'py>,
@@ -834,6 +834,7 @@ fn reconstruct<'py>(
     seed: u64,
     fill_unobserved: bool,
     clipped: Option<&str>,
+    false_rate: Option<f64>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let method: Method = solver
         .parse()
@@ -850,9 +851,13 @@ fn reconstruct<'py>(
             "operator: reconstruct needs the operator of the physical pulse, not debiased",
         ));
     }
+    if let Some(alpha) = false_rate {
+        rdlidar::recon::check_false_rate(alpha).map_err(value_error)?;
+    }
     let options = ReconstructOptions {
         max_iter,
         seed,
+        false_rate,
         ..ReconstructOptions::default()
     };
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
@@ -999,6 +1004,16 @@ fn single_report<'py, T>(
         stages.append(d)?;
     }
     report.set_item("stages", stages)?;
+    if let Some(t) = &r.detection {
+        let d = PyDict::new(py);
+        d.set_item("false_rate", t.false_rate)?;
+        d.set_item("bar", t.bar)?;
+        d.set_item("sigma", t.sigma)?;
+        d.set_item("tested", t.tested)?;
+        d.set_item("dropped", t.dropped)?;
+        d.set_item("skipped", t.skipped)?;
+        report.set_item("detection", d)?;
+    }
     Ok(())
 }
 

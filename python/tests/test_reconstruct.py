@@ -140,3 +140,18 @@ def test_clipped_samples_are_censored_as_on_the_command_line():
                        ([1.0], TypeError), (True, TypeError)]:
         with pytest.raises(error, match="clipped"):
             rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16, clipped=bad)
+
+
+def test_a_false_rate_tests_each_return_and_is_reported():
+    sim = rdlidar.simulate("paper", size=(16, 16, 16), pulse_len=1200, seed=5)
+    depth, scene, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16,
+                                               false_rate=0.01)
+    d = report["detection"]
+    assert d["false_rate"] == 0.01 and d["dropped"] == 0 and d["skipped"] is None
+    assert abs(d["bar"] - 3.227218425963163) < 1e-9 and d["tested"] == int((sim.scene > 0).sum())
+    assert rdlidar.metrics(sim.scene, scene)["exact_fraction"] == 1.0
+    assert "detection" not in rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16)[2]
+    for bad, error in [(0.0, ValueError), (1.0, ValueError), (float("nan"), ValueError),
+                       (-0.5, ValueError), ("0.1", TypeError), (True, TypeError)]:
+        with pytest.raises(error, match="false_rate"):
+            rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16, false_rate=bad)

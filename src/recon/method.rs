@@ -132,7 +132,7 @@ impl FromStr for Method {
 }
 
 /// Settings of [`reconstruct`](super::reconstruct) shared by every method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReconstructOptions {
     /// Overrides the method's iteration limit (ignored by the backprojections).
     pub max_iter: Option<usize>,
@@ -157,6 +157,13 @@ pub struct ReconstructOptions {
     /// one-reflector model), or `None` to estimate k from the data (from a support pursuit,
     /// [`estimate_returns`]).
     pub max_returns: Option<usize>,
+    /// A false-detection rate α in (0, 1): after the method, each return is kept only if its
+    /// least-squares amplitude passes the test at which an empty pixel shows a false return
+    /// with probability at most α under white Gaussian noise, and the returns kept are
+    /// refitted by least squares ([`DetectionTest`](super::DetectionTest); it holds the rate
+    /// where the residual is noise, not with a few measurements per lit pixel). `None`
+    /// (default): no test.
+    pub false_rate: Option<f64>,
 }
 
 impl Default for ReconstructOptions {
@@ -169,6 +176,7 @@ impl Default for ReconstructOptions {
             threshold: PeakThreshold::Paper,
             debias: true,
             max_returns: Some(1),
+            false_rate: None,
         }
     }
 }

@@ -5,6 +5,7 @@
 
 mod auto;
 mod coarse;
+mod detect;
 mod method;
 mod metrics;
 mod names;
@@ -16,6 +17,7 @@ mod tiled;
 
 pub use auto::{Stage, COARSE_RESIDUAL, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
 pub use coarse::COARSE_BLOCK;
+pub use detect::{check_false_rate, normal_upper_quantile, DetectionTest};
 pub use method::{estimate_returns, Method, ReconstructOptions, MAX_RETURNS_ESTIMATE};
 pub use metrics::{
     compare, compare_depth, compare_observed, relative_error, Metrics, ObservedComparison,

@@ -16,6 +16,7 @@ use crate::real::Real;
 use crate::solver::{Observer, Report};
 
 use super::auto::{auto, Stage};
+use super::detect::{check_false_rate, false_rate_test, DetectionTest};
 use super::method::{run, Method, ReconstructOptions};
 use super::peaks::returns;
 
@@ -49,6 +50,9 @@ pub struct Reconstruction<T> {
     pub stages: Vec<Stage>,
     /// Wall-clock time of the whole reconstruction, peak extraction included.
     pub elapsed: Duration,
+    /// What the false-detection test did, when [`ReconstructOptions::false_rate`] asked for it
+    /// (`None` otherwise, and for a tile solved by another process).
+    pub detection: Option<DetectionTest>,
 }
 
 /// Reconstructs a scene from the measurements `y = A x` of the lidar operator `op`.
@@ -125,6 +129,9 @@ pub fn reconstruct_observed<T: Real>(
     if options.power_iterations == Some(0) {
         return Err(Error::param("power_iterations", "must be at least 1"));
     }
+    if let Some(alpha) = options.false_rate {
+        check_false_rate(alpha)?;
+    }
     if y.len() != op.nrows() {
         return Err(Error::shape(
             "reconstruct: measurements vs operator rows",
@@ -134,7 +141,7 @@ pub fn reconstruct_observed<T: Real>(
     }
     let g = op.geometry();
     let regime = op.regime();
-    let (x, method_used, report, stages) = if method == Method::Auto {
+    let (mut x, method_used, mut report, stages) = if method == Method::Auto {
         let a = auto(op, y, options, observer)?;
         (a.x, a.method_used, a.report, a.stages)
     } else {
@@ -146,6 +153,10 @@ pub fn reconstruct_observed<T: Real>(
             x
         };
         (x, method, report, Vec::new())
+    };
+    let detection = match options.false_rate {
+        Some(alpha) => Some(false_rate_test(op, y, &mut x, alpha, &mut report)?),
+        None => None,
     };
     let scene = Scene::from_vec(g, x)?;
     let mut depth = scene.depth_map();
@@ -160,6 +171,7 @@ pub fn reconstruct_observed<T: Real>(
         report,
         stages,
         elapsed: start.elapsed(),
+        detection,
     })
 }
 

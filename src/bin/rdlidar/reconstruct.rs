@@ -111,6 +111,25 @@ pub struct ReconstructArgs {
     /// at its censored samples (ternary codes), held in memory.
     #[arg(long, value_name = "LEVEL|top", value_parser = parse_clipping)]
     pub clipped: Option<Clipping>,
+    /// A false-detection rate α in (0, 1): after the solver, keep only the returns whose
+    /// least-squares amplitude passes the test at which an empty pixel shows a false return
+    /// with probability at most α under white Gaussian noise (the bar Q⁻¹(α/K_s) standard
+    /// errors), refitted by least squares. It holds the rate where the residual is noise
+    /// (several measurements per return); with a few per lit pixel it does not.
+    #[arg(long, value_name = "ALPHA", value_parser = parse_false_rate)]
+    pub false_rate: Option<f64>,
+}
+
+/// A `--false-rate` value: a number strictly between 0 and 1.
+fn parse_false_rate(text: &str) -> Result<f64, String> {
+    let alpha: f64 = text
+        .parse()
+        .map_err(|_| format!("expected a number between 0 and 1, got {text:?}"))?;
+    rdlidar::recon::check_false_rate(alpha).map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { reason, .. } => reason,
+        e => e.to_string(),
+    })?;
+    Ok(alpha)
 }
 
 /// A `--clipped` value: top or a level > 0.
@@ -240,6 +259,7 @@ fn reconstruct_files<T: Real + WritableElement>(
         threshold: a.threshold,
         debias: !a.no_debias,
         max_returns: a.returns.0,
+        false_rate: a.false_rate,
     };
     let kp = acq.pulse_len();
     let count = acq.rows().unwrap_or(1);
@@ -420,6 +440,7 @@ impl<T: Real> Outcome<T> {
             .iter()
             .enumerate()
             .map(|(i, stage)| format!("auto stage {}: {stage}", i + 1))
+            .chain(r.detection.as_ref().map(|t| t.describe()))
             .collect();
         Outcome {
             method: r.method_used.to_string(),
