@@ -118,11 +118,13 @@ fn a_censored_acquisition_is_the_original_with_the_censored_rows_zeroed() {
             let (censored, yc, report) = acq.censor(&y, clipping).unwrap();
             let mask: Vec<bool> = match clipping {
                 Clipping::Level(l) => y.iter().map(|v| v.abs() >= l).collect(),
+                // Each row's largest and smallest values: its top and bottom codes.
                 Clipping::Top => y
                     .chunks_exact(k)
                     .flat_map(|row| {
-                        let t = row.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-                        row.iter().map(move |v| v.abs() == t)
+                        let t = row.iter().fold(0.0f64, |m, &v| m.max(v));
+                        let b = row.iter().fold(0.0f64, |m, &v| m.min(v));
+                        row.iter().map(move |&v| v == t || v == b)
                     })
                     .collect(),
             };
@@ -183,6 +185,33 @@ fn each_process_censors_its_band_of_a_tiled_array_as_the_whole_does() {
 }
 
 #[test]
+fn top_censors_both_codes_of_an_asymmetric_adc() {
+    // A two's-complement ADC saturates at −8 and +7 codes of its step: both sides clipped.
+    let g = Geometry::new(4, 4, 3).unwrap();
+    let acq = acquisition(g, 30, (1, false), None, 2);
+    let mut y = apply(&acq, &random_vec(g.voxels(), 3));
+    let top = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let step = top / 6.0;
+    for v in &mut y {
+        *v = (*v / step).round().clamp(-3.0, 2.0) * step;
+    }
+    let (_, yc, report) = acq.censor(&y, Clipping::Top).unwrap();
+    let at = |code: f64| y.iter().filter(|&&v| v == code * step).count();
+    let (low, high) = (at(-3.0), at(2.0));
+    assert!(low > 1 && high > 1, "{low} {high}");
+    assert_eq!(report.total(), low + high);
+    assert!(yc.iter().all(|&v| v > -3.0 * step && v < 2.0 * step));
+    assert_eq!(report.levels.len(), 1);
+    let (b, t) = report.levels[0];
+    assert!(b > -3.0 * step && b < -2.9 * step && t > 1.9 * step && t < 2.0 * step);
+    let line = report.describe();
+    assert!(line.contains("y ≤ ") && line.contains(" or y ≥ "), "{line}");
+    // A level censors |y| at or beyond it on both sides alike: here the bottom code only.
+    let (_, _, level) = acq.censor(&y, Clipping::Level(2.5 * step)).unwrap();
+    assert_eq!(level.total(), low);
+}
+
+#[test]
 fn bad_censoring_requests_are_refused_naming_clipped() {
     let g = Geometry::new(4, 4, 3).unwrap();
     let acq = acquisition(g, 30, (1, false), None, 2);
@@ -200,9 +229,15 @@ fn bad_censoring_requests_are_refused_naming_clipped() {
         let e = refused(acq.censor(&flat, clipping), "everything censored");
         assert!(e.contains("nothing would be left"), "{e}");
     }
-    // An ADC that saw no light has nothing clipped.
+    // An ADC that saw no light has nothing clipped; a level no sample reaches says so.
     let (_, _, none) = acq.censor(&vec![0.0; y.len()], Clipping::Top).unwrap();
     assert_eq!(none.total(), 0);
+    let (_, _, none) = acq.censor(&y, Clipping::Level(1e300)).unwrap();
+    assert!(
+        none.describe().contains("no sample reaches the level"),
+        "{}",
+        none.describe()
+    );
     for text in ["", "abc", "0", "-2", "nan", "inf", "Top"] {
         assert!(text.parse::<Clipping>().is_err(), "{text:?}");
     }

@@ -368,7 +368,11 @@ fn clipped_samples_are_censored_and_bad_levels_refused() {
     let top = meas.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let level = format!("{}", 0.9 * top);
     let beyond = meas.iter().filter(|v| v.abs() >= 0.9 * top).count();
-    for (clipped, count) in [("top", 1), (level.as_str(), beyond)] {
+    let (hi, lo) = meas
+        .iter()
+        .fold((0.0f64, 0.0f64), |(h, l), &v| (h.max(v), l.min(v)));
+    let extremes = meas.iter().filter(|&&v| v == hi || v == lo).count();
+    for (clipped, count) in [("top", extremes), (level.as_str(), beyond)] {
         let out = reconstruct(
             &dir,
             &sim,
@@ -410,7 +414,11 @@ fn clipped_samples_are_censored_and_bad_levels_refused() {
     assert!(out.status.success(), "{}", stderr(&out));
     let out = reconstruct(&dir, &clipped, "auto", &[]);
     let text = stdout(&out);
-    assert!(text.contains("sit at their ADC's largest |y|") && text.contains("--clipped top"));
+    assert!(
+        text.contains("sit at their ADC's largest or smallest y"),
+        "{text}"
+    );
+    assert!(text.contains("--clipped top"), "{text}");
     std::fs::remove_dir_all(&clipped).unwrap();
     // Bad levels are usage errors naming the flag; a level at or below every sample leaves
     // nothing to fit. No output is written.

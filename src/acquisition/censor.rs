@@ -18,10 +18,12 @@ use super::*;
 /// Which samples an ADC clipped.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Clipping {
-    /// Samples with |y| ≥ the level (finite, > 0): the ADC's largest output.
+    /// Samples with |y| ≥ the level (finite, > 0): the ADC's largest output, its top code (for
+    /// a mid-rise ADC of full scale F and step Δ, F − Δ/2: a level of F censors nothing).
     Level(f64),
-    /// In each ADC's row, the samples at its largest |y| (within a few units of rounding): the
-    /// top code of an ADC that saturated.
+    /// In each ADC's row, the samples at its largest y and at its smallest (within a few units
+    /// of rounding): the top and bottom codes of an ADC that saturated, whether or not its
+    /// range is symmetric.
     Top,
 }
 
@@ -47,7 +49,7 @@ impl fmt::Display for Clipping {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Clipping::Level(level) => write!(f, "|y| ≥ {level}"),
-            Clipping::Top => write!(f, "each ADC's largest |y|"),
+            Clipping::Top => write!(f, "each ADC's top and bottom codes"),
         }
     }
 }
@@ -67,28 +69,39 @@ impl Clipping {
         }
     }
 
-    /// Which of one ADC's samples `y` are censored, and the level that decided it.
-    fn mask<T: Real>(self, y: &[T]) -> (Vec<bool>, f64) {
-        let level = match self {
-            Clipping::Level(level) => level,
+    /// Which of one ADC's samples `y` are censored, and the bounds that decided it: samples
+    /// ≤ the first or ≥ the second (infinite where a side censors nothing).
+    fn mask<T: Real>(self, y: &[T]) -> (Vec<bool>, (f64, f64)) {
+        let bounds = match self {
+            Clipping::Level(level) => (-level, level),
             Clipping::Top => {
-                let top = y.iter().fold(0.0f64, |m, v| m.max(v.as_f64().abs()));
-                if top == 0.0 {
-                    // No light reached this ADC: nothing saturated.
-                    return (vec![false; y.len()], 0.0);
-                }
-                // Within four units of rounding in `T`: the top code read back from any file.
-                top * (1.0 - 4.0 * T::epsilon().as_f64())
+                // Within four units of rounding in `T`: the codes read back from any file.
+                let near = 1.0 - 4.0 * T::epsilon().as_f64();
+                let (lo, hi) = y.iter().fold((0.0f64, 0.0f64), |(lo, hi), v| {
+                    (lo.min(v.as_f64()), hi.max(v.as_f64()))
+                });
+                // A side that no sample reaches (no light, or one sign only) censors nothing.
+                let side = |v: f64| {
+                    if v == 0.0 {
+                        f64::INFINITY
+                    } else {
+                        v.abs() * near
+                    }
+                };
+                (-side(lo), side(hi))
             }
         };
-        let mask = y.iter().map(|v| v.as_f64().abs() >= level).collect();
-        (mask, level)
+        let mask = y
+            .iter()
+            .map(|v| v.as_f64() <= bounds.0 || v.as_f64() >= bounds.1)
+            .collect();
+        (mask, bounds)
     }
 }
 
-/// The samples of `y` (rows of `samples` values, one per ADC) at their row's largest |y|
-/// (within four units of rounding), which [`Clipping::Top`] would censor: one or two in a row
-/// whose ADC did not clip, many where it saturated.
+/// The samples of `y` (rows of `samples` values, one per ADC) at their row's largest or
+/// smallest value (within four units of rounding), which [`Clipping::Top`] would censor: about
+/// two in a row whose ADC did not clip, many where it saturated.
 pub fn at_top<T: Real>(y: &[T], samples: usize) -> usize {
     y.chunks(samples.max(1))
         .map(|row| Clipping::Top.mask(row).0.iter().filter(|&&c| c).count())
@@ -100,8 +113,9 @@ pub fn at_top<T: Real>(y: &[T], samples: usize) -> usize {
 pub struct Censoring {
     /// Per ADC row: the censored samples' count.
     pub censored: Vec<usize>,
-    /// Per ADC row: the level at and beyond which samples were censored.
-    pub levels: Vec<f64>,
+    /// Per ADC row: the bounds (b, t) at and beyond which samples were censored (y ≤ b or
+    /// y ≥ t; infinite where a side censored nothing).
+    pub levels: Vec<(f64, f64)>,
     /// Samples per row (K).
     pub samples: usize,
 }
@@ -112,23 +126,44 @@ impl Censoring {
         self.censored.iter().sum()
     }
 
-    /// One line: how many samples were censored, and at what level.
+    /// One line: how many samples were censored, and where.
     pub fn describe(&self) -> String {
-        let rows = self.censored.len();
-        let all = rows * self.samples;
-        let (lo, hi) = self
+        let all = self.censored.len() * self.samples;
+        if self.total() == 0 {
+            return format!(
+                "censored none of {all} samples: no sample reaches the level (give the ADC's \
+                 top code, or top)"
+            );
+        }
+        // The rows that censored something, as one bound per side or a range per ADC.
+        let used: Vec<(f64, f64)> = self
             .levels
             .iter()
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &l| {
-                (lo.min(l), hi.max(l))
-            });
-        let level = if rows == 1 || lo == hi {
-            format!("{lo:.6e}")
-        } else {
-            format!("{lo:.6e} … {hi:.6e} (per ADC)")
+            .zip(&self.censored)
+            .filter(|(_, &n)| n > 0)
+            .map(|(&l, _)| l)
+            .collect();
+        let side = |pick: &dyn Fn(&(f64, f64)) -> f64| {
+            let v: Vec<f64> = used.iter().map(pick).filter(|v| v.is_finite()).collect();
+            let (lo, hi) = v
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                    (a.min(x), b.max(x))
+                });
+            match v.len() {
+                0 => None,
+                _ if lo == hi => Some(format!("{lo:.6e}")),
+                _ => Some(format!("{lo:.6e} … {hi:.6e}")),
+            }
+        };
+        let bounds = match (side(&|l| l.0), side(&|l| l.1)) {
+            (Some(b), Some(t)) => format!("y ≤ {b} or y ≥ {t}"),
+            (Some(b), None) => format!("y ≤ {b}"),
+            (None, Some(t)) => format!("y ≥ {t}"),
+            (None, None) => "nothing".to_string(),
         };
         format!(
-            "censored {} of {all} samples ({:.1}%) at |y| ≥ {level}: the solvers fit the others",
+            "censored {} of {all} samples ({:.1}%) at {bounds}: the solvers fit the others",
             self.total(),
             100.0 * self.total() as f64 / all.max(1) as f64
         )
@@ -163,20 +198,20 @@ impl Acquisition {
             samples: k,
         };
         for (r, row) in y.chunks_exact(k).enumerate() {
-            let (mask, level) = clipping.mask(row);
+            let (mask, bounds) = clipping.mask(row);
             let count = mask.iter().filter(|&&c| c).count();
             let signal_left = row.iter().zip(&mask).any(|(v, &c)| !c && *v != T::zero());
             if count > 0 && !signal_left {
                 return Err(Error::param(
                     "clipped",
                     format!(
-                        "every nonzero sample of ADC row {r} is at or beyond |y| = {level:e}: \
-                         nothing would be left to fit"
+                        "every nonzero sample of ADC row {r} is at or beyond its level \
+                         ({clipping}): nothing would be left to fit"
                     ),
                 ));
             }
             censoring.censored.push(count);
-            censoring.levels.push(level);
+            censoring.levels.push(bounds);
             masks.push(mask);
         }
         if censoring.total() == 0 {
@@ -186,8 +221,8 @@ impl Acquisition {
             return Err(Error::param(
                 "clipped",
                 "censoring clipped samples needs the codes held in memory; these are \
-                 regenerated from their seed on every application (streamed or tiled seeded \
-                 codes): give them as a codes file",
+                 regenerated from their seed on every application (streamed, or the seeded \
+                 codes of a tiled array)",
             ));
         };
         let sets = match self.architecture {
@@ -195,13 +230,16 @@ impl Acquisition {
                 let row_of = self.tile_of_pixels(t)?;
                 vec![Arc::new(sets[0].zero_samples(&masks, &|p| row_of[p])?)]
             }
+            // A code set whose ADC censored nothing keeps its codes (binary stays binary).
             _ => sets
                 .iter()
                 .zip(&masks)
-                .map(|(codes, mask)| {
-                    codes
+                .zip(&censoring.censored)
+                .map(|((codes, mask), &n)| match n {
+                    0 => Ok(Arc::clone(codes)),
+                    _ => codes
                         .zero_samples(std::slice::from_ref(mask), &|_| 0)
-                        .map(Arc::new)
+                        .map(Arc::new),
                 })
                 .collect::<Result<Vec<_>>>()?,
         };

@@ -51,7 +51,8 @@ pub struct Reconstruction<T> {
     /// Wall-clock time of the whole reconstruction, peak extraction included.
     pub elapsed: Duration,
     /// What the false-detection test did, when [`ReconstructOptions::false_rate`] asked for it
-    /// (`None` otherwise, and for a tile solved by another process).
+    /// (`None` otherwise, and for the tiles of an array whose tiles were dealt to several
+    /// processes: their summaries are not gathered).
     pub detection: Option<DetectionTest>,
 }
 

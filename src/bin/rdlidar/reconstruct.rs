@@ -104,8 +104,9 @@ pub struct ReconstructArgs {
     /// application instead of holding them (automatic when holding them would take over 1 GiB).
     #[arg(long)]
     pub stream_codes: bool,
-    /// Samples the ADC clipped, left out of the data term (censored): those with |y| ≥ LEVEL,
-    /// or with top those at each ADC's largest |y| (the top code of an ADC that saturated).
+    /// Samples the ADC clipped, left out of the data term (censored): those with |y| ≥ LEVEL
+    /// (the ADC's top code, half a step below a mid-rise ADC's full scale), or with top those
+    /// at each ADC's largest and smallest y (its top and bottom codes).
     /// A clipped sample only bounds the scene; fitting its value pulls the amplitudes down
     /// and leaves returns to explain the rest. The codes of the pixels each ADC sums become 0
     /// at its censored samples (ternary codes), held in memory.
@@ -246,6 +247,8 @@ fn reconstruct_files<T: Real + WritableElement>(
             let censored = acq
                 .censor(&y, clipping)
                 .map_err(|e| format!("--clipped ({clipping}): {e}").into());
+            // The censored copies replace the originals.
+            drop((acq, y));
             let (acq, y, c) = ranks.agree(censored)?;
             (acq, y, Some(c))
         }
@@ -364,12 +367,14 @@ fn reconstruct_files<T: Real + WritableElement>(
     match &censoring {
         Some(c) => outln!("  {}", c.describe()),
         None => {
-            // Many samples at the top code: the ADC probably saturated.
+            // Many samples at the top or bottom code (beyond the two extremes every row has):
+            // the ADC probably saturated.
             let top = at_top(&y, acq.samples());
-            if top >= (y.len() / 100).max(3) {
+            let rows = acq.rows().unwrap_or(1);
+            if top >= 2 * rows + (y.len() / 100).max(1) {
                 outln!(
-                    "  {top} of {} samples sit at their ADC's largest |y|: if it clipped, \
-                     --clipped top leaves them out of the fit",
+                    "  {top} of {} samples sit at their ADC's largest or smallest y: if it \
+                     clipped, --clipped top leaves them out of the fit",
                     y.len()
                 );
             }
@@ -476,12 +481,31 @@ impl<T: Real> Outcome<T> {
         );
         let (f, adj, s) = r.applies();
         let iterations = format!("{f} forward, {adj} adjoint and {s} support applications in all");
+        // The false-detection test ran in each tile: its sums over the tiles that report it.
+        let tests: Vec<_> = r
+            .tiles
+            .iter()
+            .filter_map(|t| t.reconstruction.detection.as_ref())
+            .collect();
+        let details = match tests.first() {
+            None => Vec::new(),
+            Some(first) => vec![format!(
+                "false-detection test at α = {} in {} of {} tiles: dropped {} of {} returns \
+                 ({} tiles not tested)",
+                first.false_rate,
+                tests.len(),
+                r.tiles.len(),
+                tests.iter().map(|t| t.dropped).sum::<usize>(),
+                tests.iter().map(|t| t.tested).sum::<usize>(),
+                tests.iter().filter(|t| t.skipped.is_some()).count()
+            )],
+        };
         Outcome {
             method,
             chosen,
             iterations,
             seconds: r.elapsed.as_secs_f64(),
-            details: Vec::new(),
+            details,
             scene: r.scene,
             depth: r.depth,
         }
