@@ -357,6 +357,16 @@ fn the_same_file_for_two_outputs_is_refused() {
     assert!(outputs(&dir).is_empty());
 }
 
+/// Each of `values` given to `flag` is a usage error (status 2) naming the flag.
+fn refused_values(dir: &TempDir, sim: &Path, flag: &str, values: &[&str]) {
+    for bad in values {
+        let arg = format!("{flag}={bad}");
+        let out = reconstruct(dir, sim, "auto", &[&arg]);
+        assert_eq!(out.status.code(), Some(2), "{arg}: {}", stderr(&out));
+        assert!(stderr(&out).contains(flag), "{arg}: {}", stderr(&out));
+    }
+}
+
 #[test]
 fn clipped_samples_are_censored_and_bad_levels_refused() {
     // The noise-free scene at K_p 300 (compressive): censoring each ADC's largest sample or
@@ -424,16 +434,7 @@ fn clipped_samples_are_censored_and_bad_levels_refused() {
     // nothing to fit. No output is written.
     let _ = std::fs::remove_file(dir.path("depth.npy"));
     let _ = std::fs::remove_file(dir.path("xh.npy"));
-    for bad in ["abc", "0", "-1", "nan", "inf"] {
-        let flag = format!("--clipped={bad}");
-        let out = reconstruct(&dir, &sim, "auto", &[&flag]);
-        assert_eq!(out.status.code(), Some(2), "{bad}: {}", stderr(&out));
-        assert!(
-            stderr(&out).contains("--clipped"),
-            "{bad}: {}",
-            stderr(&out)
-        );
-    }
+    refused_values(&dir, &sim, "--clipped", &["abc", "0", "-1", "nan", "inf"]);
     let out = reconstruct(&dir, &sim, "auto", &["--clipped", "1e-300"]);
     let err = stderr(&out);
     assert!(!out.status.success());
@@ -463,15 +464,11 @@ fn a_false_rate_runs_the_detection_test_and_bad_rates_are_refused() {
     assert!(text.contains("exact depth 100.0%"), "{text}");
     let _ = std::fs::remove_file(dir.path("depth.npy"));
     let _ = std::fs::remove_file(dir.path("xh.npy"));
-    for bad in ["0", "1", "-0.1", "abc", "nan", "inf"] {
-        let flag = format!("--false-rate={bad}");
-        let out = reconstruct(&dir, &sim, "auto", &[&flag]);
-        assert_eq!(out.status.code(), Some(2), "{bad}: {}", stderr(&out));
-        assert!(
-            stderr(&out).contains("--false-rate"),
-            "{bad}: {}",
-            stderr(&out)
-        );
-    }
+    refused_values(
+        &dir,
+        &sim,
+        "--false-rate",
+        &["0", "1", "-0.1", "abc", "nan", "inf"],
+    );
     assert!(outputs(&dir).is_empty());
 }

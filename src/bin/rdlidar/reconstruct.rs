@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
 use rdlidar::acquisition::{
-    at_top, observe_nothing, pulse_in, Acquisition, Clipping, Reconstructed, Use,
+    at_top, observe_nothing, pulse_in, Acquisition, Censoring, Clipping, Reconstructed, Use,
 };
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
@@ -241,18 +241,7 @@ fn reconstruct_files<T: Real + WritableElement>(
 ) -> CliResult {
     // Every process reads its inputs; they agree on any failure before solving together.
     let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
-    let (acq, y, censoring) = match a.clipped {
-        None => (acq, y, None),
-        Some(clipping) => {
-            let censored = acq
-                .censor(&y, clipping)
-                .map_err(|e| format!("--clipped ({clipping}): {e}").into());
-            // The censored copies replace the originals.
-            drop((acq, y));
-            let (acq, y, c) = ranks.agree(censored)?;
-            (acq, y, Some(c))
-        }
-    };
+    let (acq, y, censoring) = censor_inputs(a.clipped, ranks, acq, y)?;
     let g = acq.whole_geometry();
     let options = ReconstructOptions {
         max_iter: a.max_iter,
@@ -364,21 +353,8 @@ fn reconstruct_files<T: Real + WritableElement>(
         files.join(", "),
         npy_dtype::<T>()
     );
-    match &censoring {
-        Some(c) => outln!("  {}", c.describe()),
-        None => {
-            // Many samples at the top or bottom code (beyond the two extremes every row has):
-            // the ADC probably saturated.
-            let top = at_top(&y, acq.samples());
-            let rows = acq.rows().unwrap_or(1);
-            if top >= 2 * rows + (y.len() / 100).max(1) {
-                outln!(
-                    "  {top} of {} samples sit at their ADC's largest or smallest y: if it \
-                     clipped, --clipped top leaves them out of the fit",
-                    y.len()
-                );
-            }
-        }
+    if let Some(line) = clipping_line(censoring.as_ref(), &acq, &y) {
+        outln!("  {line}");
     }
     for line in &r.details {
         outln!("  {line}");
@@ -390,6 +366,47 @@ fn reconstruct_files<T: Real + WritableElement>(
         outln!("{line}");
     }
     Ok(())
+}
+
+/// The acquisition and measurements with the samples `--clipped` names censored (the
+/// censored copies replace the originals), and what was censored.
+fn censor_inputs<T: Real>(
+    clipped: Option<Clipping>,
+    ranks: &Ranks,
+    acq: Acquisition,
+    y: Vec<T>,
+) -> CliResult<(Acquisition, Vec<T>, Option<Censoring>)> {
+    let Some(clipping) = clipped else {
+        return Ok((acq, y, None));
+    };
+    let censored = acq
+        .censor(&y, clipping)
+        .map_err(|e| format!("--clipped ({clipping}): {e}").into());
+    drop((acq, y));
+    let (acq, y, c) = ranks.agree(censored)?;
+    Ok((acq, y, Some(c)))
+}
+
+/// The line on clipping: what was censored, or, without `--clipped`, a hint where many
+/// samples sit at the top or bottom code (beyond the two extremes every row has): the ADC
+/// probably saturated.
+fn clipping_line<T: Real>(
+    censoring: Option<&Censoring>,
+    acq: &Acquisition,
+    y: &[T],
+) -> Option<String> {
+    if let Some(c) = censoring {
+        return Some(c.describe());
+    }
+    let top = at_top(y, acq.samples());
+    let rows = acq.rows().unwrap_or(1);
+    (top >= 2 * rows + (y.len() / 100).max(1)).then(|| {
+        format!(
+            "{top} of {} samples sit at their ADC's largest or smallest y: if it clipped, \
+             --clipped top leaves them out of the fit",
+            y.len()
+        )
+    })
 }
 
 /// What `reconstruct` reports of a reconstruction, whatever the architecture.
