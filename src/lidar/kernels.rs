@@ -103,6 +103,16 @@ impl Isa {
         false
     }
 
+    /// Whether the adjoint ([`adjoint_wide`]) and the support kernels ([`support_wide`]) run in
+    /// vectors: 512-bit on AVX-512, 256-bit on AVX2.
+    pub(crate) fn has_wide(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self >= Isa::Avx2 {
+            return true;
+        }
+        false
+    }
+
     pub(crate) fn name(self) -> &'static str {
         match self {
             Isa::Generic => "generic",

@@ -11,7 +11,7 @@ use crate::real::Real;
 
 use super::codes::Codes;
 use super::geometry::Geometry;
-use super::kernels::adjoint_wide::{adjoint_chunk_wide, wide_adjoint_nch};
+use super::kernels::adjoint_wide::{adjoint_chunk_wide, adjoint_row_nch};
 use super::kernels::quads::{
     build_quad_tables, lines_as_mut, quad_forward, quad_groups_per_block, quad_lines, CacheLine,
     QuadBlock,
@@ -226,11 +226,7 @@ impl<T: Real> RdOperator<T> {
             groups_per_block::<T>(BLOCK_BYTES, max_nch)
         };
         // The adjoint's rows are whole vectors on AVX-512 (`adjoint_nch`).
-        let adj_nch = if quads {
-            wide_adjoint_nch::<T>(max_nch)
-        } else {
-            max_nch
-        };
+        let adj_nch = adjoint_row_nch::<T>(isa, max_nch);
         let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, adj_nch);
         Ok(RdOperator {
             geom,
@@ -375,11 +371,7 @@ impl<T: Real> RdOperator<T> {
     /// Chunks of eight values per row of the adjoint's tables for a slab of `nch` chunks: whole
     /// 512-bit vectors on AVX-512.
     pub(crate) fn adjoint_nch(&self, nch: usize) -> usize {
-        if self.quads {
-            wide_adjoint_nch::<T>(nch)
-        } else {
-            nch
-        }
+        adjoint_row_nch::<T>(self.isa, nch)
     }
 
     /// Whether the dense forward uses the quad tables (AVX-512).
@@ -644,7 +636,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                             base0: self.pad + self.pulse.len() - 1 + j0,
                             first_octet: o0,
                         };
-                        if self.quads {
+                        if self.isa.has_wide() {
                             adjoint_chunk_wide(self.isa, nch, &chunk, tables, &mut part);
                         } else {
                             adjoint_chunk(self.isa, nch, &chunk, tables, &mut part);

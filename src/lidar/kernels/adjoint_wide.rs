@@ -1,31 +1,46 @@
-//! The adjoint's per-pixel sums on AVX-512, in 512-bit vectors.
+//! The adjoint's per-pixel sums in vectors: 512-bit on AVX-512, 256-bit on AVX2.
 //!
 //! The chunk's tables are those of the generic kernel ([`adj_tables`]), with rows widened to whole
-//! vectors (an even number of chunks of eight `f32` values) and starting on cache lines; each
-//! pixel then adds its eight rows (one per octet) in vectors of sixteen `f32` or eight `f64`
-//! values instead of chunks of eight, in the same order, lane by lane, as the generic kernel:
-//! the sums are the same to the last bit.
+//! vectors on AVX-512 (an even number of chunks of eight `f32` values) and starting on cache lines;
+//! each pixel then adds its eight rows (one per octet) in vectors of sixteen `f32` or eight `f64`
+//! values (eight or four on AVX2) instead of chunks of eight, in the same order, lane by lane, as
+//! the generic kernel: the sums are the same to the last bit.
 
 use super::wide::Wide;
+#[cfg(target_arch = "x86_64")]
+use super::wide::{wide_pair, Simd};
 #[cfg(target_arch = "x86_64")]
 use super::{adj_tables, chunk_bits};
 use super::{octet_stride, AdjChunk, Isa, Lane, ADJ_OCTETS};
 use crate::real::Real;
 
-/// Chunks of eight values per row of the wide adjoint's tables for a slab of `nch` chunks: whole
-/// vectors (an even number for `f32`).
+/// Chunks of eight values per row of the wide adjoint's tables on AVX-512 for a slab of `nch`
+/// chunks: whole 512-bit vectors (an even number for `f32`). The widest rows of any instruction
+/// set.
 pub(crate) fn wide_adjoint_nch<T: Real>(nch: usize) -> usize {
     let per_vector = <T as Wide>::PER / 8;
     nch.div_ceil(per_vector) * per_vector
 }
 
-/// [`adjoint_chunk`](super::adjoint_chunk) on AVX-512 for rows of `nch` chunks, `nch` from
-/// [`wide_adjoint_nch`]: the chunk's tables into `tables` (64-byte aligned), each pixel's sum
+/// Chunks of eight values per row of the adjoint's tables on `isa`: whole 512-bit vectors on
+/// AVX-512 ([`wide_adjoint_nch`]); on AVX2 a chunk is a whole 256-bit vector of `f32` and two of
+/// `f64`, and generic rows are chunks.
+pub(crate) fn adjoint_row_nch<T: Real>(isa: Isa, nch: usize) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if isa == Isa::Avx512 {
+        return wide_adjoint_nch::<T>(nch);
+    }
+    let _ = isa;
+    nch
+}
+
+/// [`adjoint_chunk`](super::adjoint_chunk) in vectors for rows of `nch` chunks, `nch` from
+/// [`adjoint_row_nch`]: the chunk's tables into `tables` (64-byte aligned), each pixel's sum
 /// added to `out[(g·8 + i)·nch ..]`.
 ///
 /// # Panics
-/// If `isa` is not AVX-512, `nch` is not whole vectors, or the buffers are too short (checked
-/// before the unchecked loops).
+/// If `isa` has no wide kernels ([`Isa::has_wide`]), `nch` is not whole vectors, or the buffers
+/// are too short (checked before the unchecked loops).
 pub(crate) fn adjoint_chunk_wide<T: Real>(
     isa: Isa,
     nch: usize,
@@ -34,7 +49,7 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
     out: &mut [Lane<T>],
 ) {
     assert!(
-        (1..=8).contains(&nch) && wide_adjoint_nch::<T>(nch) == nch,
+        (1..=8).contains(&nch) && adjoint_row_nch::<T>(isa, nch) == nch,
         "row width"
     );
     assert!(
@@ -48,44 +63,65 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
         "code planes"
     );
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 {
-        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, AVX-512VL and FMA; the
-        // rows read are within the chunk's tables (a code byte selects one of 256 rows of an
-        // octet's table) and the sums written are within `out`, as asserted above.
-        unsafe {
-            match (nch, <T as Wide>::PER) {
-                (2, 16) => adj_wide::<T, 2, 1>(a, tables, out),
-                (4, 16) => adj_wide::<T, 4, 2>(a, tables, out),
-                (6, 16) => adj_wide::<T, 6, 3>(a, tables, out),
-                (8, 16) => adj_wide::<T, 8, 4>(a, tables, out),
-                (1, 8) => adj_wide::<T, 1, 1>(a, tables, out),
-                (2, 8) => adj_wide::<T, 2, 2>(a, tables, out),
-                (3, 8) => adj_wide::<T, 3, 3>(a, tables, out),
-                (4, 8) => adj_wide::<T, 4, 4>(a, tables, out),
-                (5, 8) => adj_wide::<T, 5, 5>(a, tables, out),
-                (6, 8) => adj_wide::<T, 6, 6>(a, tables, out),
-                (7, 8) => adj_wide::<T, 7, 7>(a, tables, out),
-                (8, 8) => adj_wide::<T, 8, 8>(a, tables, out),
-                _ => unreachable!("rows of whole vectors"),
-            }
+    // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, BW, VL and FMA, and
+    // `Isa::Avx2` on one with AVX2 and FMA; the rows read are within the chunk's tables (a code
+    // byte selects one of 256 rows of an octet's table) and the sums written are within `out`,
+    // as asserted above.
+    unsafe {
+        match (isa, nch, <T as Wide>::PER) {
+            (Isa::Avx512, 2, 16) => adj_512::<T, 2, 1>(a, tables, out),
+            (Isa::Avx512, 4, 16) => adj_512::<T, 4, 2>(a, tables, out),
+            (Isa::Avx512, 6, 16) => adj_512::<T, 6, 3>(a, tables, out),
+            (Isa::Avx512, 8, 16) => adj_512::<T, 8, 4>(a, tables, out),
+            (Isa::Avx512, 1, 8) => adj_512::<T, 1, 1>(a, tables, out),
+            (Isa::Avx512, 2, 8) => adj_512::<T, 2, 2>(a, tables, out),
+            (Isa::Avx512, 3, 8) => adj_512::<T, 3, 3>(a, tables, out),
+            (Isa::Avx512, 4, 8) => adj_512::<T, 4, 4>(a, tables, out),
+            (Isa::Avx512, 5, 8) => adj_512::<T, 5, 5>(a, tables, out),
+            (Isa::Avx512, 6, 8) => adj_512::<T, 6, 6>(a, tables, out),
+            (Isa::Avx512, 7, 8) => adj_512::<T, 7, 7>(a, tables, out),
+            (Isa::Avx512, 8, 8) => adj_512::<T, 8, 8>(a, tables, out),
+            // On AVX2 a chunk is one vector of `f32`, two of `f64`.
+            (Isa::Avx2, 1, 16) => adj_256::<T, 1, 1>(a, tables, out),
+            (Isa::Avx2, 2, 16) => adj_256::<T, 2, 2>(a, tables, out),
+            (Isa::Avx2, 3, 16) => adj_256::<T, 3, 3>(a, tables, out),
+            (Isa::Avx2, 4, 16) => adj_256::<T, 4, 4>(a, tables, out),
+            (Isa::Avx2, 5, 16) => adj_256::<T, 5, 5>(a, tables, out),
+            (Isa::Avx2, 6, 16) => adj_256::<T, 6, 6>(a, tables, out),
+            (Isa::Avx2, 7, 16) => adj_256::<T, 7, 7>(a, tables, out),
+            (Isa::Avx2, 8, 16) => adj_256::<T, 8, 8>(a, tables, out),
+            (Isa::Avx2, 1, 8) => adj_256::<T, 1, 2>(a, tables, out),
+            (Isa::Avx2, 2, 8) => adj_256::<T, 2, 4>(a, tables, out),
+            (Isa::Avx2, 3, 8) => adj_256::<T, 3, 6>(a, tables, out),
+            (Isa::Avx2, 4, 8) => adj_256::<T, 4, 8>(a, tables, out),
+            (Isa::Avx2, 5, 8) => adj_256::<T, 5, 10>(a, tables, out),
+            (Isa::Avx2, 6, 8) => adj_256::<T, 6, 12>(a, tables, out),
+            (Isa::Avx2, 7, 8) => adj_256::<T, 7, 14>(a, tables, out),
+            (Isa::Avx2, 8, 8) => adj_256::<T, 8, 16>(a, tables, out),
+            _ => panic!("the wide adjoint has no kernel for {}", isa.name()),
         }
-        return;
     }
-    panic!("the wide adjoint runs on AVX-512 only, not {}", isa.name());
+    #[cfg(not(target_arch = "x86_64"))]
+    panic!("the wide adjoint has no kernel for {}", isa.name());
 }
+
+#[cfg(target_arch = "x86_64")]
+wide_pair!(adj_512, adj_256, adj_wide<const NCH: usize, const Z: usize>(
+    a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>]
+));
 
 /// The chunk's tables, then every pixel's rows, `Z` vectors a row.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+#[inline(always)]
 // The accumulators are indexed in step with the vectors' offsets in the rows.
 #[allow(clippy::needless_range_loop)]
-unsafe fn adj_wide<T: Real, const NCH: usize, const Z: usize>(
+unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize>(
     a: &AdjChunk<'_, T>,
     tables: &mut [Lane<T>],
     out: &mut [Lane<T>],
 ) {
     adj_tables::<T, NCH>(a, tables);
-    let per = <T as Wide>::PER;
+    let per = S::PER;
     let stride = octet_stride::<T>(NCH) * 8;
     let base = tables.as_ptr().cast::<T>();
     let row = |o: usize, b: u64| base.add(o * stride + (b & 0xFF) as usize * NCH * 8);
@@ -94,27 +130,27 @@ unsafe fn adj_wide<T: Real, const NCH: usize, const Z: usize>(
         chunk_bits(a, g, &mut bp, &mut bm);
         for (i, oi) in og.chunks_exact_mut(NCH).enumerate() {
             let shift = 8 * i;
-            let mut acc = [T::v_zero(); Z];
+            let mut acc = [S::v_zero(); Z];
             if a.minus.is_none() {
                 for o in 0..ADJ_OCTETS {
                     let r = row(o, bp[o] >> shift);
                     for z in 0..Z {
-                        acc[z] = T::v_add(acc[z], T::v_load(r.add(z * per)));
+                        acc[z] = S::v_add(acc[z], S::v_load(r.add(z * per)));
                     }
                 }
             } else {
                 for o in 0..ADJ_OCTETS {
                     let (rp, rm) = (row(o, bp[o] >> shift), row(o, bm[o] >> shift));
                     for z in 0..Z {
-                        let d = T::v_sub(T::v_load(rp.add(z * per)), T::v_load(rm.add(z * per)));
-                        acc[z] = T::v_add(acc[z], d);
+                        let d = S::v_sub(S::v_load(rp.add(z * per)), S::v_load(rm.add(z * per)));
+                        acc[z] = S::v_add(acc[z], d);
                     }
                 }
             }
             let dst = oi.as_mut_ptr().cast::<T>();
             for z in 0..Z {
                 let d = dst.add(z * per);
-                T::v_storeu(d, T::v_add(T::v_loadu(d), acc[z]));
+                S::v_storeu(d, S::v_add(S::v_loadu(d), acc[z]));
             }
         }
     }
@@ -131,12 +167,16 @@ mod tests {
     /// bit, against the generic kernel, for both alphabets, a slab of three chunks (widened to
     /// four for `f32`), a K that is not a multiple of eight and two chunks of octets.
     fn wide_adjoint_matches_the_direct_sum<T: Real>(tol: f64) {
-        let isa = Isa::best();
-        if !isa.has_quads() {
-            return;
+        for isa in crate::lidar::kernels::tests::every_isa() {
+            if isa.has_wide() {
+                wide_adjoint_on::<T>(isa, tol);
+            }
         }
+    }
+
+    fn wide_adjoint_on<T: Real>(isa: Isa, tol: f64) {
         const SLAB: usize = 3;
-        let nch = wide_adjoint_nch::<T>(SLAB);
+        let nch = adjoint_row_nch::<T>(isa, SLAB);
         let mut rng = ChaCha8Rng::seed_from_u64(61);
         let (groups, k) = (3usize, 8 * ADJ_OCTETS + 13);
         let kp = k + 1 - 8 * SLAB;
@@ -175,7 +215,12 @@ mod tests {
                 super::super::adjoint_chunk(Isa::Generic, nch, &a, generic, &mut generic_out);
             }
             // The same additions in the same order as the generic kernel.
-            assert!(out == generic_out, "{} ternary {ternary}", T::NAME);
+            assert!(
+                out == generic_out,
+                "{} {} ternary {ternary}",
+                T::NAME,
+                isa.name()
+            );
             for (g, (p, m)) in plus.iter().zip(&minus).enumerate() {
                 for i in 0..8 {
                     for j in 0..8 * SLAB {
@@ -193,8 +238,9 @@ mod tests {
                         let got = out[(g * 8 + i) * nch + j / 8][j % 8].as_f64();
                         assert!(
                             (got - want).abs() <= tol * (1.0 + want.abs()),
-                            "{} ternary {ternary}: pixel {g}/{i} bin {j}: {got} vs {want}",
-                            T::NAME
+                            "{} {} ternary {ternary}: pixel {g}/{i} bin {j}: {got} vs {want}",
+                            T::NAME,
+                            isa.name()
                         );
                     }
                 }
@@ -217,5 +263,11 @@ mod tests {
         assert_eq!(wide_adjoint_nch::<f32>(5), 6);
         assert_eq!(wide_adjoint_nch::<f32>(8), 8);
         assert_eq!(wide_adjoint_nch::<f64>(5), 5);
+        assert_eq!(adjoint_row_nch::<f32>(Isa::Generic, 5), 5);
+        #[cfg(target_arch = "x86_64")]
+        {
+            assert_eq!(adjoint_row_nch::<f32>(Isa::Avx2, 5), 5);
+            assert_eq!(adjoint_row_nch::<f32>(Isa::Avx512, 5), 6);
+        }
     }
 }

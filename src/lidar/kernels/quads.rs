@@ -11,6 +11,8 @@
 
 use std::ops::Range;
 
+#[cfg(target_arch = "x86_64")]
+use super::wide::{by_vectors, Simd};
 use super::{Isa, Lane};
 use crate::real::Real;
 
@@ -128,11 +130,12 @@ pub(crate) struct QuadBlock<'a, T> {
 
 /// part\[k\] += Σ_j p[k − j]·Σ_g (T_g,lo[b & 15] + T_g,hi[b >> 4])[j] lane by lane, b the code byte
 /// of group g at sample k (the +1 rows minus the −1 rows for ternary codes): the forward of one
-/// block and slab with the quad tables, on AVX-512.
+/// block and slab with the quad tables, on AVX-512 (written for any vector flavour; with AVX2's
+/// 256-bit vectors it measured no faster than the 256-row tables, which AVX2 keeps).
 ///
 /// # Panics
-/// If `isa` is not AVX-512, or on buffers too short for the block (checked once, before the
-/// unchecked loops).
+/// If `isa` is not AVX-512 ([`Isa::has_quads`]), or on buffers too short for the block (checked
+/// once, before the unchecked loops).
 pub(crate) fn quad_forward<T: Real>(isa: Isa, a: &QuadBlock<'_, T>, part: &mut [Lane<T>]) {
     let rl = quad_row_len::<T>(a.nch);
     let n = part.len();
@@ -160,22 +163,12 @@ pub(crate) fn quad_forward<T: Real>(isa: Isa, a: &QuadBlock<'_, T>, part: &mut [
     );
     #[cfg(target_arch = "x86_64")]
     if isa == Isa::Avx512 {
-        let z = rl / <T as super::wide::Wide>::PER;
-        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, AVX-512VL and FMA; the
+        let z = rl / <T::W512 as Simd>::PER;
+        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, BW, VL and FMA; the
         // assertions above bound every unchecked read (code bytes below `part.len()`, table
         // rows within the block's tables, the pulse window within `prev`).
         unsafe {
-            match z {
-                1 => quad_kernel::<T, 1>(a, part),
-                2 => quad_kernel::<T, 2>(a, part),
-                3 => quad_kernel::<T, 3>(a, part),
-                4 => quad_kernel::<T, 4>(a, part),
-                5 => quad_kernel::<T, 5>(a, part),
-                6 => quad_kernel::<T, 6>(a, part),
-                7 => quad_kernel::<T, 7>(a, part),
-                8 => quad_kernel::<T, 8>(a, part),
-                _ => unreachable!("rows of one to eight vectors"),
-            }
+            by_vectors!(z, quad_kernel_512::<T>(a, part), [1, 2, 3, 4, 5, 6, 7, 8]);
         }
         return;
     }
@@ -183,37 +176,51 @@ pub(crate) fn quad_forward<T: Real>(isa: Isa, a: &QuadBlock<'_, T>, part: &mut [
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-unsafe fn quad_kernel<T: Real, const Z: usize>(a: &QuadBlock<'_, T>, part: &mut [Lane<T>]) {
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
+unsafe fn quad_kernel_512<T: Real, const Z: usize>(a: &QuadBlock<'_, T>, part: &mut [Lane<T>]) {
+    quad_kernel::<T, T::W512, Z>(a, part)
+}
+
+/// The samples of [`quad_forward`], two at a time while both samples' sums fit in the registers
+/// (always with 512-bit vectors; rows of up to six vectors with 256-bit ones).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn quad_kernel<T: Real, S: Simd<T = T>, const Z: usize>(
+    a: &QuadBlock<'_, T>,
+    part: &mut [Lane<T>],
+) {
     let n = part.len();
     let mut k = 0;
-    while k + 2 <= n {
-        quad_samples::<T, Z, 2>(a, k, part);
-        k += 2;
+    if 2 * Z + 4 <= S::REGS {
+        while k + 2 <= n {
+            quad_samples::<T, S, Z, 2>(a, k, part);
+            k += 2;
+        }
     }
-    if k < n {
-        quad_samples::<T, Z, 1>(a, k, part);
+    while k < n {
+        quad_samples::<T, S, Z, 1>(a, k, part);
+        k += 1;
     }
 }
 
-/// Samples `k .. k + S` of [`quad_forward`]. While rows are short (up to four vectors) each
-/// sample sums its low and its high rows in separate registers, so that two chains of additions
-/// run side by side; longer rows share one set, to stay within the 32 vector registers.
+/// Samples `k .. k + N` of [`quad_forward`]. While rows are short (up to a quarter of the
+/// registers for two samples: four 512-bit vectors, two 256-bit ones) each sample sums its low
+/// and its high rows in separate registers, so that two chains of additions run side by side;
+/// longer rows share one set, to stay within the vector registers.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 // The accumulators are indexed in step with the vectors' offsets in the rows.
 #[allow(clippy::needless_range_loop)]
-unsafe fn quad_samples<T: Real, const Z: usize, const S: usize>(
+unsafe fn quad_samples<T: Real, S: Simd<T = T>, const Z: usize, const N: usize>(
     a: &QuadBlock<'_, T>,
     k: usize,
     part: &mut [Lane<T>],
 ) {
-    use super::wide::Wide;
-    let per = <T as Wide>::PER;
+    let per = S::PER;
     let rl = Z * per;
-    let hi_set = usize::from(Z <= 4);
+    let hi_set = usize::from(8 * Z <= S::REGS);
     let tables = a.tables.as_ptr();
-    let mut acc = [[[T::v_zero(); Z]; 2]; S];
+    let mut acc = [[[S::v_zero(); Z]; 2]; N];
     let rows = |codes: &[u8], g: usize, s: usize| {
         let b = *codes.get_unchecked(k + s) as usize;
         let base = tables.add(g * 2 * QUAD_ROWS * rl);
@@ -226,8 +233,8 @@ unsafe fn quad_samples<T: Real, const Z: usize, const S: usize>(
         for (s, acc) in acc.iter_mut().enumerate() {
             let (lo, hi) = rows(plus, g, s);
             for z in 0..Z {
-                acc[0][z] = T::v_add(acc[0][z], T::v_load(lo.add(z * per)));
-                acc[hi_set][z] = T::v_add(acc[hi_set][z], T::v_load(hi.add(z * per)));
+                acc[0][z] = S::v_add(acc[0][z], S::v_load(lo.add(z * per)));
+                acc[hi_set][z] = S::v_add(acc[hi_set][z], S::v_load(hi.add(z * per)));
             }
         }
     }
@@ -236,25 +243,25 @@ unsafe fn quad_samples<T: Real, const Z: usize, const S: usize>(
             for (s, acc) in acc.iter_mut().enumerate() {
                 let (lo, hi) = rows(minus, g, s);
                 for z in 0..Z {
-                    acc[0][z] = T::v_sub(acc[0][z], T::v_load(lo.add(z * per)));
-                    acc[hi_set][z] = T::v_sub(acc[hi_set][z], T::v_load(hi.add(z * per)));
+                    acc[0][z] = S::v_sub(acc[0][z], S::v_load(lo.add(z * per)));
+                    acc[hi_set][z] = S::v_sub(acc[hi_set][z], S::v_load(hi.add(z * per)));
                 }
             }
         }
     }
     for (s, acc) in acc.iter().enumerate() {
         let window = a.prev.as_ptr().add(a.base0 - (k + s));
-        let mut sum = T::v_zero();
+        let mut sum = S::v_zero();
         for z in 0..Z {
             let v = if hi_set == 1 {
-                T::v_add(acc[0][z], acc[1][z])
+                S::v_add(acc[0][z], acc[1][z])
             } else {
                 acc[0][z]
             };
-            let w = T::v_load_first(window.add(z * per), a.width.saturating_sub(z * per));
-            sum = T::v_mul_add(v, w, sum);
+            let w = S::v_load_first(window.add(z * per), a.width.saturating_sub(z * per));
+            sum = S::v_mul_add(v, w, sum);
         }
-        let lanes = T::v_lanes8(sum);
+        let lanes = S::v_lanes8(sum);
         let out = part.get_unchecked_mut(k + s);
         for (o, l) in out.iter_mut().zip(lanes) {
             *o = *o + l;
@@ -263,13 +270,13 @@ unsafe fn quad_samples<T: Real, const Z: usize, const S: usize>(
 }
 
 /// out[..rl] += Σ of the rows of `table` (rows of `rl` values on cache lines, a power of two of
-/// them) that `index` lists, each index taken modulo the rows, in four interleaved sums of 512-bit
-/// vectors: the wide kernels' memory access and additions without their bookkeeping (the probe of
-/// [`gather_limit`](crate::lidar::gather_limit) on AVX-512).
+/// them) that `index` lists, each index taken modulo the rows, in four interleaved sums of
+/// vectors: the wide kernels' memory access and additions without their bookkeeping (the probe
+/// of [`gather_limit`](crate::lidar::gather_limit) on AVX-512).
 ///
 /// # Panics
-/// If `isa` is not AVX-512, or on a table that is not a power of two of aligned rows of whole
-/// vectors (one to eight), or `out` shorter than a row.
+/// If `isa` is not AVX-512, or on a table that is not a power of two of aligned rows of
+/// whole 512-bit vectors (one to eight), or `out` shorter than a row.
 pub(crate) fn gather_rows_wide<T: Real>(
     isa: Isa,
     rl: usize,
@@ -277,7 +284,7 @@ pub(crate) fn gather_rows_wide<T: Real>(
     index: &[u16],
     out: &mut [T],
 ) {
-    let per = <T as super::wide::Wide>::PER;
+    let per = per_vector::<T>();
     let z = rl / per;
     assert!(z * per == rl && (1..=8).contains(&z), "row length");
     assert!(
@@ -289,20 +296,15 @@ pub(crate) fn gather_rows_wide<T: Real>(
     let mask = table.len() / rl - 1;
     #[cfg(target_arch = "x86_64")]
     if isa == Isa::Avx512 {
+        let z = rl / <T::W512 as Simd>::PER;
         // SAFETY: AVX-512 is present (`Isa::Avx512`); every row read is `index & mask` < the
         // table's rows, and the sums are written within `out`, as asserted above.
         unsafe {
-            match z {
-                1 => gather_wide::<T, 1>(table, mask, index, out),
-                2 => gather_wide::<T, 2>(table, mask, index, out),
-                3 => gather_wide::<T, 3>(table, mask, index, out),
-                4 => gather_wide::<T, 4>(table, mask, index, out),
-                5 => gather_wide::<T, 5>(table, mask, index, out),
-                6 => gather_wide::<T, 6>(table, mask, index, out),
-                7 => gather_wide::<T, 7>(table, mask, index, out),
-                8 => gather_wide::<T, 8>(table, mask, index, out),
-                _ => unreachable!("rows of one to eight vectors"),
-            }
+            by_vectors!(
+                z,
+                gather_512::<T>(table, mask, index, out),
+                [1, 2, 3, 4, 5, 6, 7, 8]
+            );
         }
         return;
     }
@@ -311,43 +313,53 @@ pub(crate) fn gather_rows_wide<T: Real>(
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-// The accumulators are indexed in step with the vectors' offsets in the rows.
-#[allow(clippy::needless_range_loop)]
-unsafe fn gather_wide<T: Real, const Z: usize>(
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
+unsafe fn gather_512<T: Real, const Z: usize>(
     table: &[T],
     mask: usize,
     index: &[u16],
     out: &mut [T],
 ) {
-    use super::wide::Wide;
-    let per = <T as Wide>::PER;
+    gather_wide::<T, T::W512, Z>(table, mask, index, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+// The accumulators are indexed in step with the vectors' offsets in the rows.
+#[allow(clippy::needless_range_loop)]
+unsafe fn gather_wide<T: Real, S: Simd<T = T>, const Z: usize>(
+    table: &[T],
+    mask: usize,
+    index: &[u16],
+    out: &mut [T],
+) {
+    let per = S::PER;
     let base = table.as_ptr();
-    let mut acc = [[T::v_zero(); Z]; 4];
+    let mut acc = [[S::v_zero(); Z]; 4];
     let quads = index.chunks_exact(4);
     let rest = quads.remainder();
     for quad in quads {
         for (set, &r) in acc.iter_mut().zip(quad) {
             let row = base.add((r as usize & mask) * Z * per);
             for z in 0..Z {
-                set[z] = T::v_add(set[z], T::v_load(row.add(z * per)));
+                set[z] = S::v_add(set[z], S::v_load(row.add(z * per)));
             }
         }
     }
     for (set, &r) in acc.iter_mut().zip(rest) {
         let row = base.add((r as usize & mask) * Z * per);
         for z in 0..Z {
-            set[z] = T::v_add(set[z], T::v_load(row.add(z * per)));
+            set[z] = S::v_add(set[z], S::v_load(row.add(z * per)));
         }
     }
     let dst = out.as_mut_ptr();
     for z in 0..Z {
-        let sum = T::v_add(
-            T::v_add(acc[0][z], acc[1][z]),
-            T::v_add(acc[2][z], acc[3][z]),
+        let sum = S::v_add(
+            S::v_add(acc[0][z], acc[1][z]),
+            S::v_add(acc[2][z], acc[3][z]),
         );
         let d = dst.add(z * per);
-        T::v_storeu(d, T::v_add(T::v_loadu(d), sum));
+        S::v_storeu(d, S::v_add(S::v_loadu(d), sum));
     }
 }
 
@@ -361,10 +373,14 @@ mod tests {
     /// both alphabets, slabs of one to eight chunks (full, partial, and one that starts at bin
     /// 64), a last group with pixels past the grid and an odd K (a last sample alone).
     fn quad_forward_matches_the_direct_sum<T: Real>(tol: f64) {
-        let isa = Isa::best();
-        if !isa.has_quads() {
-            return;
+        for isa in crate::lidar::kernels::tests::every_isa() {
+            if isa.has_quads() {
+                quad_forward_on::<T>(isa, tol);
+            }
         }
+    }
+
+    fn quad_forward_on<T: Real>(isa: Isa, tol: f64) {
         let mut rng = ChaCha8Rng::seed_from_u64(44);
         let (groups, npix, kp) = (3usize, 21usize, 37usize);
         for (ks, j0, nch) in [(5, 0, 1), (21, 0, 3), (40, 0, 5), (64, 0, 8), (70, 64, 1)] {
@@ -419,8 +435,9 @@ mod tests {
                         .sum();
                     assert!(
                         (got - want).abs() <= tol * (1.0 + want.abs()),
-                        "{} ks {ks} slab {j0}+{nch} ternary {ternary}: sample {kk}: {got} vs {want}",
-                        T::NAME
+                        "{} {} ks {ks} slab {j0}+{nch} ternary {ternary}: sample {kk}: {got} vs {want}",
+                        T::NAME,
+                        isa.name()
                     );
                 }
             }

@@ -1,16 +1,18 @@
 //! The support-restricted kernels (the sparse forward's entries, the restricted adjoint's signed
-//! copies and windowed dot products) on AVX-512, and the entry points that choose them or the
-//! narrow kernels by instruction set.
+//! copies and windowed dot products) in vectors (512-bit on AVX-512, 256-bit on AVX2), and the
+//! entry points that choose them or the narrow kernels by instruction set.
 //!
-//! A code byte's bit becomes a lane mask (AVX-512BW's byte test), the mask signs the values in
-//! one masked subtraction, and the dot products run in four independent 512-bit accumulators:
-//! the narrow kernels' eight-lane sums wait on one addition after another and decode the codes
-//! byte by byte. Dot products are summed in blocks of 256 products in `T`, the block sums in
-//! `f64`, as the narrow kernels do; within a block the products are fused multiply-adds in 64
-//! partial sums (32 for `f64`), so the last bits differ from the narrow kernels'.
+//! A code byte's bit becomes a lane mask (AVX-512BW's byte test; on AVX2 the bytes widened to
+//! the lanes and shifted so that the bit lands on the sign that the blends read), the mask signs
+//! the values (a masked subtraction, or a blend), and the dot products run in four independent
+//! accumulators: the narrow kernels' eight-lane sums wait on one addition after another and
+//! decode the codes byte by byte. Dot products are summed in blocks of 256 products in `T`, the
+//! block sums in `f64`, as the narrow kernels do; within a block the products are fused
+//! multiply-adds in four vectors' partial sums (64 for `f32` on AVX-512, 32 on AVX2), so the
+//! last bits differ from the narrow kernels'.
 
 #[cfg(target_arch = "x86_64")]
-use super::wide::Wide;
+use super::wide::{wide_pair, Simd};
 use super::{lane_dot_narrow, signed_copy_narrow, signed_dot_narrow, sparse_entry_narrow, Isa};
 use crate::real::Real;
 
@@ -40,13 +42,17 @@ pub(crate) fn sparse_entry_isa<T: Real>(isa: Isa, e: &Entry<'_, T>, out: &mut [T
     assert_eq!(pw.len(), out.len(), "pulse window");
     check_planes(plus, minus, out.len());
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 {
-        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, BW and VL; every slice
-        // holds the window's length (asserted above) and the kernel reads and writes within it.
+    if isa.has_wide() {
+        let (m, ternary) = (minus.unwrap_or(plus), minus.is_some());
+        // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, BW, VL and FMA, and
+        // `Isa::Avx2` on one with AVX2 and FMA; every slice holds the window's length (asserted
+        // above) and the kernel reads and writes within it.
         unsafe {
-            match minus {
-                None => entry_wide::<T, false>(amp, bit, plus, plus, pw, out),
-                Some(m) => entry_wide::<T, true>(amp, bit, plus, m, pw, out),
+            match (isa == Isa::Avx512, ternary) {
+                (true, false) => entry_512::<T, false>(amp, bit, plus, m, pw, out),
+                (true, true) => entry_512::<T, true>(amp, bit, plus, m, pw, out),
+                (false, false) => entry_256::<T, false>(amp, bit, plus, m, pw, out),
+                (false, true) => entry_256::<T, true>(amp, bit, plus, m, pw, out),
             }
         }
         return;
@@ -66,16 +72,16 @@ pub(crate) struct Entry<'a, T> {
     pub pw: &'a [T],
 }
 
-/// [`sparse_entry_isa`] for every entry in turn, all on the window of `out`; on AVX-512 four
-/// entries at a time, so that `out` is loaded and stored once for four (the same additions in
-/// the same order as one entry at a time).
+/// [`sparse_entry_isa`] for every entry in turn, all on the window of `out`; with the wide
+/// kernels four entries at a time, so that `out` is loaded and stored once for four (the same
+/// additions in the same order as one entry at a time).
 ///
 /// # Panics
-/// If an entry's slices differ in length from `out`; on AVX-512 also if the entries mix code
-/// alphabets (binary and ternary).
+/// If an entry's slices differ in length from `out`; with the wide kernels also if the entries
+/// mix code alphabets (binary and ternary).
 pub(crate) fn sparse_entries_isa<T: Real>(isa: Isa, entries: &[Entry<'_, T>], out: &mut [T]) {
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 {
+    if isa.has_wide() {
         let ternary = entries.first().is_some_and(|e| e.minus.is_some());
         for e in entries {
             assert_eq!(e.pw.len(), out.len(), "pulse window");
@@ -88,10 +94,11 @@ pub(crate) fn sparse_entries_isa<T: Real>(isa: Isa, entries: &[Entry<'_, T>], ou
             let quad: &[Entry<'_, T>; 4] = quad.try_into().expect("four entries");
             // SAFETY: as in `sparse_entry_isa`, for each of the four entries.
             unsafe {
-                if ternary {
-                    entries4_wide::<T, true>(quad, out);
-                } else {
-                    entries4_wide::<T, false>(quad, out);
+                match (isa == Isa::Avx512, ternary) {
+                    (true, false) => entries4_512::<T, false>(quad, out),
+                    (true, true) => entries4_512::<T, true>(quad, out),
+                    (false, false) => entries4_256::<T, false>(quad, out),
+                    (false, true) => entries4_256::<T, true>(quad, out),
                 }
             }
         }
@@ -120,12 +127,15 @@ pub(crate) fn signed_copy_isa<T: Real>(
     assert_eq!(y.len(), z.len(), "measurements");
     check_planes(plus, minus, z.len());
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 {
+    if isa.has_wide() {
+        let (m, ternary) = (minus.unwrap_or(plus), minus.is_some());
         // SAFETY: as in `sparse_entry_isa`.
         unsafe {
-            match minus {
-                None => copy_wide::<T, false>(bit, plus, plus, y, z),
-                Some(m) => copy_wide::<T, true>(bit, plus, m, y, z),
+            match (isa == Isa::Avx512, ternary) {
+                (true, false) => copy_512::<T, false>(bit, plus, m, y, z),
+                (true, true) => copy_512::<T, true>(bit, plus, m, y, z),
+                (false, false) => copy_256::<T, false>(bit, plus, m, y, z),
+                (false, true) => copy_256::<T, true>(bit, plus, m, y, z),
             }
         }
         return;
@@ -150,12 +160,15 @@ pub(crate) fn signed_dot_isa<T: Real>(
     assert_eq!(y.len(), p.len(), "pulse window");
     check_planes(plus, minus, y.len());
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 {
+    if isa.has_wide() {
+        let (m, ternary) = (minus.unwrap_or(plus), minus.is_some());
         // SAFETY: as in `sparse_entry_isa`.
         *out = unsafe {
-            match minus {
-                None => dot_wide::<T, true, false>(bit, plus, plus, y, p),
-                Some(m) => dot_wide::<T, true, true>(bit, plus, m, y, p),
+            match (isa == Isa::Avx512, ternary) {
+                (true, false) => dot_512::<T, true, false>(bit, plus, m, y, p),
+                (true, true) => dot_512::<T, true, true>(bit, plus, m, y, p),
+                (false, false) => dot_256::<T, true, false>(bit, plus, m, y, p),
+                (false, true) => dot_256::<T, true, true>(bit, plus, m, y, p),
             }
         };
         return;
@@ -170,9 +183,15 @@ pub(crate) fn signed_dot_isa<T: Real>(
 pub(crate) fn lane_dot_isa<T: Real>(isa: Isa, a: &[T], b: &[T], out: &mut f64) {
     assert_eq!(a.len(), b.len(), "dot product");
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 {
+    if isa.has_wide() {
         // SAFETY: as in `sparse_entry_isa`; no codes are read.
-        *out = unsafe { dot_wide::<T, false, false>(0, &[], &[], a, b) };
+        *out = unsafe {
+            if isa == Isa::Avx512 {
+                dot_512::<T, false, false>(0, &[], &[], a, b)
+            } else {
+                dot_256::<T, false, false>(0, &[], &[], a, b)
+            }
+        };
         return;
     }
     lane_dot_narrow(isa, a, b, out);
@@ -181,21 +200,21 @@ pub(crate) fn lane_dot_isa<T: Real>(isa: Isa, a: &[T], b: &[T], out: &mut f64) {
 /// The values at `at` with the codes applied (`CODED`), or as they are.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn coded<T: Real, const CODED: bool, const TERNARY: bool>(
+unsafe fn coded<S: Simd, const CODED: bool, const TERNARY: bool>(
     bit: u32,
     plus: *const u8,
     minus: *const u8,
-    v: T::V,
+    v: S::V,
     at: usize,
-) -> T::V {
+) -> S::V {
     if !CODED {
         return v;
     }
-    let m = T::m_bit(plus.add(at), bit);
+    let m = S::m_bit(plus.add(at), bit);
     if TERNARY {
-        T::v_ternary(m, T::m_bit(minus.add(at), bit), v)
+        S::v_ternary(m, S::m_bit(minus.add(at), bit), v)
     } else {
-        T::v_sign(m, v)
+        S::v_sign(m, v)
     }
 }
 
@@ -211,40 +230,45 @@ fn code_at<const TERNARY: bool>(bit: u32, plus: &[u8], minus: &[u8], at: usize) 
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+wide_pair!(dot_512, dot_256, dot_wide<const CODED: bool, const TERNARY: bool>(
+    bit: u32, plus: &[u8], minus: &[u8], y: &[T], p: &[T]
+) -> f64);
+
 /// Σ s(k)·y[k]·p[k] (`CODED`) or Σ y[k]·p[k].
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
-unsafe fn dot_wide<T: Real, const CODED: bool, const TERNARY: bool>(
+#[inline(always)]
+unsafe fn dot_wide<T: Real, S: Simd<T = T>, const CODED: bool, const TERNARY: bool>(
     bit: u32,
     plus: &[u8],
     minus: &[u8],
     y: &[T],
     p: &[T],
 ) -> f64 {
-    let per = <T as Wide>::PER;
+    let per = S::PER;
     let n = y.len();
     let (yp, pp, cp, cm) = (y.as_ptr(), p.as_ptr(), plus.as_ptr(), minus.as_ptr());
     let mut total = 0.0f64;
     let mut start = 0;
     while start + per <= n {
         let end = (start + BLOCK).min(n);
-        let mut acc = [T::v_zero(); 4];
+        let mut acc = [S::v_zero(); 4];
         let mut at = start;
         while at + 4 * per <= end {
             for (a, sum) in acc.iter_mut().enumerate() {
                 let k = at + a * per;
-                let v = coded::<T, CODED, TERNARY>(bit, cp, cm, T::v_loadu(yp.add(k)), k);
-                *sum = T::v_mul_add(v, T::v_loadu(pp.add(k)), *sum);
+                let v = coded::<S, CODED, TERNARY>(bit, cp, cm, S::v_loadu(yp.add(k)), k);
+                *sum = S::v_mul_add(v, S::v_loadu(pp.add(k)), *sum);
             }
             at += 4 * per;
         }
         while at + per <= end {
-            let v = coded::<T, CODED, TERNARY>(bit, cp, cm, T::v_loadu(yp.add(at)), at);
-            acc[0] = T::v_mul_add(v, T::v_loadu(pp.add(at)), acc[0]);
+            let v = coded::<S, CODED, TERNARY>(bit, cp, cm, S::v_loadu(yp.add(at)), at);
+            acc[0] = S::v_mul_add(v, S::v_loadu(pp.add(at)), acc[0]);
             at += per;
         }
-        let sum = T::v_add(T::v_add(acc[0], acc[1]), T::v_add(acc[2], acc[3]));
-        total += T::v_lanes8(sum).iter().map(|v| v.as_f64()).sum::<f64>();
+        let sum = S::v_add(S::v_add(acc[0], acc[1]), S::v_add(acc[2], acc[3]));
+        total += S::v_lanes8(sum).iter().map(|v| v.as_f64()).sum::<f64>();
         start = at;
     }
     for k in start..n {
@@ -258,23 +282,28 @@ unsafe fn dot_wide<T: Real, const CODED: bool, const TERNARY: bool>(
     total
 }
 
+#[cfg(target_arch = "x86_64")]
+wide_pair!(copy_512, copy_256, copy_wide<const TERNARY: bool>(
+    bit: u32, plus: &[u8], minus: &[u8], y: &[T], z: &mut [T]
+));
+
 /// z[k] = s(k)·y[k].
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
-unsafe fn copy_wide<T: Real, const TERNARY: bool>(
+#[inline(always)]
+unsafe fn copy_wide<T: Real, S: Simd<T = T>, const TERNARY: bool>(
     bit: u32,
     plus: &[u8],
     minus: &[u8],
     y: &[T],
     z: &mut [T],
 ) {
-    let per = <T as Wide>::PER;
+    let per = S::PER;
     let n = y.len();
     let (yp, zp, cp, cm) = (y.as_ptr(), z.as_mut_ptr(), plus.as_ptr(), minus.as_ptr());
     let mut at = 0;
     while at + per <= n {
-        let v = coded::<T, true, TERNARY>(bit, cp, cm, T::v_loadu(yp.add(at)), at);
-        T::v_storeu(zp.add(at), v);
+        let v = coded::<S, true, TERNARY>(bit, cp, cm, S::v_loadu(yp.add(at)), at);
+        S::v_storeu(zp.add(at), v);
         at += per;
     }
     for k in at..n {
@@ -282,10 +311,15 @@ unsafe fn copy_wide<T: Real, const TERNARY: bool>(
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+wide_pair!(entry_512, entry_256, entry_wide<const TERNARY: bool>(
+    amp: T, bit: u32, plus: &[u8], minus: &[u8], pw: &[T], out: &mut [T]
+));
+
 /// out[k] += amp·s(k)·pw[k].
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
-unsafe fn entry_wide<T: Real, const TERNARY: bool>(
+#[inline(always)]
+unsafe fn entry_wide<T: Real, S: Simd<T = T>, const TERNARY: bool>(
     amp: T,
     bit: u32,
     plus: &[u8],
@@ -293,14 +327,14 @@ unsafe fn entry_wide<T: Real, const TERNARY: bool>(
     pw: &[T],
     out: &mut [T],
 ) {
-    let per = <T as Wide>::PER;
+    let per = S::PER;
     let n = out.len();
     let (pp, op, cp, cm) = (pw.as_ptr(), out.as_mut_ptr(), plus.as_ptr(), minus.as_ptr());
-    let a = T::v_splat(amp);
+    let a = S::v_splat(amp);
     let mut at = 0;
     while at + per <= n {
-        let v = coded::<T, true, TERNARY>(bit, cp, cm, T::v_loadu(pp.add(at)), at);
-        T::v_storeu(op.add(at), T::v_mul_add(v, a, T::v_loadu(op.add(at))));
+        let v = coded::<S, true, TERNARY>(bit, cp, cm, S::v_loadu(pp.add(at)), at);
+        S::v_storeu(op.add(at), S::v_mul_add(v, a, S::v_loadu(op.add(at))));
         at += per;
     }
     for k in at..n {
@@ -308,28 +342,36 @@ unsafe fn entry_wide<T: Real, const TERNARY: bool>(
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+wide_pair!(entries4_512, entries4_256, entries4_wide<const TERNARY: bool>(
+    e: &[Entry<'_, T>; 4], out: &mut [T]
+));
+
 /// out[k] += Σ over the four entries of amp·s(k)·pw[k], entry by entry.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
-unsafe fn entries4_wide<T: Real, const TERNARY: bool>(e: &[Entry<'_, T>; 4], out: &mut [T]) {
-    let per = <T as Wide>::PER;
+#[inline(always)]
+unsafe fn entries4_wide<T: Real, S: Simd<T = T>, const TERNARY: bool>(
+    e: &[Entry<'_, T>; 4],
+    out: &mut [T],
+) {
+    let per = S::PER;
     let n = out.len();
     let op = out.as_mut_ptr();
-    let mut amps = [T::v_zero(); 4];
+    let mut amps = [S::v_zero(); 4];
     let mut cm = [e[0].plus.as_ptr(); 4];
     for i in 0..4 {
-        amps[i] = T::v_splat(e[i].amp);
+        amps[i] = S::v_splat(e[i].amp);
         cm[i] = e[i].minus.unwrap_or(e[i].plus).as_ptr();
     }
     let mut at = 0;
     while at + per <= n {
-        let mut o = T::v_loadu(op.add(at));
+        let mut o = S::v_loadu(op.add(at));
         for i in 0..4 {
-            let p = T::v_loadu(e[i].pw.as_ptr().add(at));
-            let v = coded::<T, true, TERNARY>(e[i].bit, e[i].plus.as_ptr(), cm[i], p, at);
-            o = T::v_mul_add(v, amps[i], o);
+            let p = S::v_loadu(e[i].pw.as_ptr().add(at));
+            let v = coded::<S, true, TERNARY>(e[i].bit, e[i].plus.as_ptr(), cm[i], p, at);
+            o = S::v_mul_add(v, amps[i], o);
         }
-        T::v_storeu(op.add(at), o);
+        S::v_storeu(op.add(at), o);
         at += per;
     }
     for (k, o) in out.iter_mut().enumerate().skip(at) {

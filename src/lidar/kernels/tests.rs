@@ -105,7 +105,7 @@ fn adjoint_chunk_matches_the_direct_sum() {
 }
 
 /// Every instruction set this CPU has, and the generic kernels.
-fn every_isa() -> Vec<Isa> {
+pub(crate) fn every_isa() -> Vec<Isa> {
     let mut all = vec![Isa::Generic];
     #[cfg(target_arch = "x86_64")]
     if Isa::best() >= Isa::Avx2 {
