@@ -4,7 +4,7 @@
 use crate::cli_support::{rdlidar, stderr, stdout};
 
 #[test]
-fn bench_json_has_the_three_timings() {
+fn bench_json_has_the_four_timings() {
     let out = rdlidar(&[
         "bench",
         "--size",
@@ -17,7 +17,7 @@ fn bench_json_has_the_three_timings() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let v: serde_json::Value = serde_json::from_str(stdout(&out).trim()).unwrap();
-    for key in ["forward", "adjoint", "sparse_forward"] {
+    for key in ["forward", "adjoint", "sparse_forward", "restricted_adjoint"] {
         for stat in ["median_s", "min_s"] {
             let t = v[key][stat].as_f64().unwrap_or(-1.0);
             assert!(t >= 0.0, "{key}.{stat} in {v}");
@@ -80,6 +80,7 @@ fn bench_text_reports_memory_isa_and_threads() {
         "forward",
         "adjoint",
         "sparse forward",
+        "restricted adj.",
     ] {
         assert!(text.contains(needle), "{needle} missing from\n{text}");
     }

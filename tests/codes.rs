@@ -76,3 +76,26 @@ fn codes_with_zero_entries_cannot_be_packed_one_bit_per_entry() {
     let e = ternary.to_packbits().unwrap_err().to_string();
     assert!(e.contains("±1 entries only") && e.contains("int8"), "{e}");
 }
+
+#[test]
+fn dense_codes_are_packed_entry_for_entry_and_the_first_bad_entry_is_named() {
+    // 21 pixels (three groups, the last partial); zeros only in the last group's pixels make
+    // the whole set ternary.
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let mut s = Array2::from_shape_fn((21, 37), |_| if rng.random_bool(0.5) { 1i8 } else { -1 });
+    s[[20, 5]] = 0;
+    s[[17, 36]] = 0;
+    let codes = Codes::from_dense(s.view()).unwrap();
+    assert_eq!(codes.alphabet(), rdlidar::lidar::CodeAlphabet::Ternary);
+    assert_eq!(codes.to_dense(), s);
+    // A view that is not in row-major order (the transpose of a (len, pixels) array) packs the
+    // same.
+    let t = s.t().to_owned();
+    assert_eq!(Codes::from_dense(t.t()).unwrap(), codes);
+    // Bad entries in the third group and the first: the first in row-major order is named.
+    s[[18, 2]] = 7;
+    s[[3, 30]] = -128;
+    s[[3, 31]] = 2;
+    let e = Codes::from_dense(s.view()).unwrap_err().to_string();
+    assert!(e.contains("entry -128 at pixel 3, sample 30"), "{e}");
+}

@@ -7,9 +7,10 @@
 //! read directly: 1 bit per ±1 entry (37.5 MB at 100×100 pixels and K = 30 039), never a dense
 //! float array.
 
-use ndarray::{Array2, ArrayView2};
+use ndarray::{Array2, ArrayView2, Axis};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 
@@ -231,30 +232,66 @@ impl Codes {
     /// [`Error::InvalidParameter`] naming the first entry outside {−1, 0, 1}, or for an empty
     /// array.
     pub fn from_dense(s: ArrayView2<'_, i8>) -> Result<Self> {
+        /// A group's first entry outside {−1, 0, 1} (pixel, sample, value) and whether it holds
+        /// a 0.
+        type GroupScan = (Option<(usize, usize, i8)>, bool);
         let (pixels, len) = s.dim();
         check_dims(pixels, len)?;
-        if let Some(((p, k), v)) = s.indexed_iter().find(|(_, v)| !(-1..=1).contains(*v)) {
+        let groups = pixels.div_ceil(8);
+        let rows = move |g: usize| {
+            (8 * g..(8 * g + 8).min(pixels)).map(move |p| (p, s.index_axis_move(Axis(0), p)))
+        };
+        // Each group of eight rows in parallel: its first entry outside {−1, 0, 1} (the groups
+        // in order, so the first of the array is named) and whether it holds a 0.
+        let scans: Vec<GroupScan> = (0..groups)
+            .into_par_iter()
+            .map(|g| {
+                let mut zero = false;
+                for (p, row) in rows(g) {
+                    if let Some((k, &v)) =
+                        row.iter().enumerate().find(|(_, v)| !(-1..=1).contains(*v))
+                    {
+                        return (Some((p, k, v)), zero);
+                    }
+                    zero |= row.iter().any(|&v| v == 0);
+                }
+                (None, zero)
+            })
+            .collect();
+        if let Some((p, k, v)) = scans.iter().find_map(|scan| scan.0) {
             return Err(Error::param(
                 "codes",
                 format!("entry {v} at pixel {p}, sample {k} is not in {{-1, 0, 1}}"),
             ));
         }
-        let ternary = s.iter().any(|&v| v == 0);
-        let groups = pixels.div_ceil(8);
-        let mut plus = vec![0u8; groups * len];
-        let mut minus = ternary.then(|| vec![0u8; groups * len]);
-        for (p, row) in s.rows().into_iter().enumerate() {
-            let at = (p / 8) * len;
-            let bit = 1u8 << (p % 8);
-            let dst = &mut plus[at..at + len];
-            for (d, &v) in dst.iter_mut().zip(row.iter()) {
-                *d |= if v == 1 { bit } else { 0 };
-            }
-            if let Some(m) = minus.as_mut() {
-                for (d, &v) in m[at..at + len].iter_mut().zip(row.iter()) {
-                    *d |= if v == -1 { bit } else { 0 };
+        let ternary = scans.iter().any(|scan| scan.1);
+        // A group's bytes: bit i of byte k is pixel 8g + i's code at sample k (+1 in `plus`,
+        // −1 in `minus`).
+        let pack = |g: usize, plus: &mut [u8], mut minus: Option<&mut [u8]>| {
+            for (p, row) in rows(g) {
+                let bit = 1u8 << (p % 8);
+                for (d, &v) in plus.iter_mut().zip(row.iter()) {
+                    *d |= if v == 1 { bit } else { 0 };
+                }
+                if let Some(m) = minus.as_deref_mut() {
+                    for (d, &v) in m.iter_mut().zip(row.iter()) {
+                        *d |= if v == -1 { bit } else { 0 };
+                    }
                 }
             }
+        };
+        let mut plus = vec![0u8; groups * len];
+        let mut minus = ternary.then(|| vec![0u8; groups * len]);
+        match minus.as_mut() {
+            Some(m) => plus
+                .par_chunks_mut(len)
+                .zip(m.par_chunks_mut(len))
+                .enumerate()
+                .for_each(|(g, (pg, mg))| pack(g, pg, Some(mg))),
+            None => plus
+                .par_chunks_mut(len)
+                .enumerate()
+                .for_each(|(g, pg)| pack(g, pg, None)),
         }
         Ok(Codes {
             pixels,

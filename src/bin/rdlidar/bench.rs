@@ -16,13 +16,14 @@ use crate::common::{
     Precision,
 };
 
-/// Time the forward, adjoint and sparse forward operators on a generated problem.
+/// Time the forward, adjoint, sparse forward and restricted adjoint on a generated problem.
 ///
 /// Generates the paper scene, a Bernoulli pulse (seed SEED) and binary codes (seed SEED+1)
 /// before timing; no file is read or written. Each operation runs once as a warm-up, then
 /// --repeats times; the median and the minimum wall time are reported. "forward" is the
 /// dense table path over all pixels, "adjoint" the backprojection, "sparse forward" the
-/// forward product over the nonzero voxels of the scene only.
+/// forward product over the nonzero voxels of the scene only, "restricted adjoint" the adjoint
+/// for those voxels only (what least squares on a support applies).
 ///
 /// Each dense kernel's rate is also given as table additions and table bytes read per second,
 /// beside what this machine delivers to the same access pattern: random rows of the kernels'
@@ -30,8 +31,8 @@ use crate::common::{
 /// on AVX-512 in 512-bit vectors, rows padded to whole vectors).
 ///
 /// --json prints {"forward": {"median_s": .., "min_s": ..}, "adjoint": {..},
-/// "sparse_forward": {..}, "work": .., "rates": .., "limits": .., ...} on one line instead of
-/// the table.
+/// "sparse_forward": {..}, "restricted_adjoint": {..}, "work": .., "rates": .., "limits": ..,
+/// ...} on one line instead of the table.
 ///
 /// Example: `rdlidar bench --size 100x100x40 --pulse-len 30000 --precision f32 --json`
 #[derive(clap::Args, Debug)]
@@ -56,6 +57,7 @@ struct BenchReport {
     forward: Timing,
     adjoint: Timing,
     sparse_forward: Timing,
+    restricted_adjoint: Timing,
     size: String,
     pulse_len: usize,
     samples: usize,
@@ -147,6 +149,7 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
         forward: t.forward,
         adjoint: t.adjoint,
         sparse_forward: t.sparse_forward,
+        restricted_adjoint: t.restricted_adjoint,
         size: g.to_string(),
         pulse_len: kp,
         samples: k,
@@ -207,11 +210,13 @@ fn print_table(report: &BenchReport, g: Geometry) -> CliResult {
         Some(&report.rates.forward),
         Some(&report.rates.adjoint),
         None,
+        None,
     ];
     for ((name, t), r) in [
         ("forward", report.forward),
         ("adjoint", report.adjoint),
         ("sparse forward", report.sparse_forward),
+        ("restricted adj.", report.restricted_adjoint),
     ]
     .into_iter()
     .zip(rates)
