@@ -192,7 +192,8 @@ impl<T: Real> RdOperator<T> {
 }
 
 /// What a cache level delivers to the table kernels' access pattern: rows of `8·nch` values of
-/// `T` (on AVX-512 padded to whole 512-bit vectors and summed in them, as the wide kernels do)
+/// `T` (on AVX-512 padded to whole 512-bit vectors and summed in them, as the wide kernels do; on
+/// AVX2 summed in 256-bit vectors)
 /// read at random from a table of `table_bytes` (one per thread of the current rayon pool) and
 /// summed, with the kernels' instruction set. The additions count the `8·nch` values of a row.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -224,8 +225,8 @@ impl GatherLimit {
 }
 
 /// Measures [`GatherLimit`] for rows of `nch` chunks of eight values (1 … 8) in tables of about
-/// `table_bytes` per thread (on AVX-512 a power of two of rows, between half of it and all of
-/// it), `repeats` timed runs of 2²⁰ rows per thread after a warm-up.
+/// `table_bytes` per thread (with the wide kernels a power of two of rows, between half of it and
+/// all of it), `repeats` timed runs of 2²⁰ rows per thread after a warm-up.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] (`nch`, `repeats`) for a chunk count outside 1 … 8 or no runs,
@@ -242,7 +243,7 @@ pub fn gather_limit<T: Real>(
         return Err(Error::param("repeats", "must be at least 1"));
     }
     let isa = Isa::chosen()?;
-    if isa.has_quads() {
+    if isa.has_wide() {
         return gather_limit_wide::<T>(isa, nch, table_bytes, repeats);
     }
     let row_bytes = nch * std::mem::size_of::<Lane<T>>();
@@ -292,16 +293,21 @@ fn median_seconds(run: impl Fn(), repeats: usize) -> f64 {
     times[times.len() / 2].max(f64::MIN_POSITIVE)
 }
 
-/// [`gather_limit`] on AVX-512: rows of the wide kernels' width (`8·nch` values rounded up to
-/// whole 512-bit vectors, on cache lines), a power of two of them within `table_bytes`, summed in
-/// vectors ([`gather_rows_wide`]).
+/// [`gather_limit`] with the wide kernels: rows of their width (on AVX-512 `8·nch` values rounded
+/// up to whole 512-bit vectors, on cache lines; on AVX2 `8·nch` values, a chunk a 256-bit vector
+/// of `f32`), a power of two of them within `table_bytes`, summed in vectors
+/// ([`gather_rows_wide`]).
 fn gather_limit_wide<T: Real>(
     isa: Isa,
     nch: usize,
     table_bytes: usize,
     repeats: usize,
 ) -> Result<GatherLimit> {
-    let rl = quad_row_len::<T>(nch);
+    let rl = if isa.has_quads() {
+        quad_row_len::<T>(nch)
+    } else {
+        8 * nch
+    };
     let row_bytes = rl * std::mem::size_of::<T>();
     let rows = prev_power_of_two((table_bytes / row_bytes).clamp(2, 1 << 16));
     let threads = rayon::current_num_threads().max(1);

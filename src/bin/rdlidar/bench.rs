@@ -28,7 +28,7 @@ use crate::common::{
 /// Each dense kernel's rate is also given as table additions and table bytes read per second,
 /// beside what this machine delivers to the same access pattern: random rows of the kernels'
 /// width summed from a table in L1 (about 32 kB) and in L2 (about 512 kB) per thread ("limits";
-/// on AVX-512 in 512-bit vectors, rows padded to whole vectors).
+/// in vectors: 512-bit on AVX-512, rows padded to whole vectors, and 256-bit on AVX2).
 ///
 /// --json prints {"forward": {"median_s": .., "min_s": ..}, "adjoint": {..},
 /// "sparse_forward": {..}, "restricted_adjoint": {..}, "work": .., "rates": .., "limits": ..,

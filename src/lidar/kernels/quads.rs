@@ -12,7 +12,7 @@
 use std::ops::Range;
 
 #[cfg(target_arch = "x86_64")]
-use super::wide::{by_vectors, Simd};
+use super::wide::{by_vectors, wide_pair, Simd};
 use super::{Isa, Lane};
 use crate::real::Real;
 
@@ -269,14 +269,15 @@ unsafe fn quad_samples<T: Real, S: Simd<T = T>, const Z: usize, const N: usize>(
     }
 }
 
-/// out[..rl] += Σ of the rows of `table` (rows of `rl` values on cache lines, a power of two of
-/// them) that `index` lists, each index taken modulo the rows, in four interleaved sums of
-/// vectors: the wide kernels' memory access and additions without their bookkeeping (the probe
-/// of [`gather_limit`](crate::lidar::gather_limit) on AVX-512).
+/// out[..rl] += Σ of the rows of `table` (rows of `rl` values, a power of two of them) that
+/// `index` lists, each index taken modulo the rows, in four interleaved sums of vectors: the wide
+/// kernels' memory access and additions without their bookkeeping (the probe of
+/// [`gather_limit`](crate::lidar::gather_limit) where the wide kernels run: 512-bit vectors on
+/// AVX-512, 256-bit ones on AVX2).
 ///
 /// # Panics
-/// If `isa` is not AVX-512, or on a table that is not a power of two of aligned rows of
-/// whole 512-bit vectors (one to eight), or `out` shorter than a row.
+/// If `isa` has no wide kernels ([`Isa::has_wide`]), or on a table that is not a power of two of
+/// rows of whole vectors (one to sixteen) starting on a cache line, or `out` shorter than a row.
 pub(crate) fn gather_rows_wide<T: Real>(
     isa: Isa,
     rl: usize,
@@ -284,9 +285,16 @@ pub(crate) fn gather_rows_wide<T: Real>(
     index: &[u16],
     out: &mut [T],
 ) {
-    let per = per_vector::<T>();
+    let per = if isa.has_quads() {
+        per_vector::<T>()
+    } else {
+        per_vector::<T>() / 2
+    };
     let z = rl / per;
-    assert!(z * per == rl && (1..=8).contains(&z), "row length");
+    assert!(
+        z * per == rl && (1..=16).contains(&z) && (isa.has_quads() <= (z <= 8)),
+        "row length"
+    );
     assert!(
         table.len().is_multiple_of(rl) && (table.len() / rl).is_power_of_two(),
         "rows"
@@ -295,33 +303,37 @@ pub(crate) fn gather_rows_wide<T: Real>(
     assert!(out.len() >= rl, "output");
     let mask = table.len() / rl - 1;
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 {
-        let z = rl / <T::W512 as Simd>::PER;
-        // SAFETY: AVX-512 is present (`Isa::Avx512`); every row read is `index & mask` < the
-        // table's rows, and the sums are written within `out`, as asserted above.
-        unsafe {
-            by_vectors!(
-                z,
-                gather_512::<T>(table, mask, index, out),
-                [1, 2, 3, 4, 5, 6, 7, 8]
-            );
+    // SAFETY: the instruction set is present (`Isa::chosen`); every row read is `index & mask`
+    // < the table's rows, and the sums are written within `out`, as asserted above.
+    unsafe {
+        match isa {
+            Isa::Avx512 => {
+                by_vectors!(
+                    z,
+                    gather_512::<T>(table, mask, index, out),
+                    [1, 2, 3, 4, 5, 6, 7, 8]
+                );
+                return;
+            }
+            Isa::Avx2 => {
+                by_vectors!(
+                    z,
+                    gather_256::<T>(table, mask, index, out),
+                    [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16]
+                );
+                return;
+            }
+            Isa::Generic => {}
         }
-        return;
     }
-    let _ = (mask, index);
-    panic!("the wide probe runs on AVX-512 only, not {}", isa.name());
+    let _ = (mask, index, z);
+    panic!("the wide probe has no kernel for {}", isa.name());
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
-unsafe fn gather_512<T: Real, const Z: usize>(
-    table: &[T],
-    mask: usize,
-    index: &[u16],
-    out: &mut [T],
-) {
-    gather_wide::<T, T::W512, Z>(table, mask, index, out)
-}
+wide_pair!(gather_512, gather_256, gather_wide<const Z: usize>(
+    table: &[T], mask: usize, index: &[u16], out: &mut [T]
+));
 
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
@@ -452,6 +464,58 @@ mod tests {
     #[test]
     fn quad_forward_matches_the_direct_sum_f64() {
         quad_forward_matches_the_direct_sum::<f64>(1e-12);
+    }
+
+    /// The probe's sums of random rows against the direct sums, on every wide instruction set,
+    /// for rows of one chunk to the widest and an index count that is not a multiple of four.
+    fn gather_rows_wide_sums_the_rows<T: Real>(tol: f64) {
+        let mut rng = ChaCha8Rng::seed_from_u64(45);
+        for isa in crate::lidar::kernels::tests::every_isa() {
+            if !isa.has_wide() {
+                continue;
+            }
+            for nch in 1..=8 {
+                let rl = if isa.has_quads() {
+                    quad_row_len::<T>(nch)
+                } else {
+                    8 * nch
+                };
+                let rows = 16;
+                let mut lines =
+                    vec![CacheLine::default(); rows * rl * std::mem::size_of::<T>() / 64];
+                let table = lines_as_mut::<T>(&mut lines);
+                for v in table.iter_mut() {
+                    *v = T::of_f64(rng.random_range(-1.0..1.0));
+                }
+                let index: Vec<u16> = (0..23).map(|_| rng.random_range(0..1000)).collect();
+                let mut out = vec![T::one(); rl];
+                gather_rows_wide(isa, rl, table, &index, &mut out);
+                for (j, o) in out.iter().enumerate() {
+                    let want: f64 = 1.0
+                        + index
+                            .iter()
+                            .map(|&r| table[(r as usize % rows) * rl + j].as_f64())
+                            .sum::<f64>();
+                    assert!(
+                        (o.as_f64() - want).abs() <= tol,
+                        "{} {} nch {nch} value {j}: {} vs {want}",
+                        T::NAME,
+                        isa.name(),
+                        o.as_f64()
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn gather_rows_wide_sums_the_rows_f32() {
+        gather_rows_wide_sums_the_rows::<f32>(1e-4);
+    }
+
+    #[test]
+    fn gather_rows_wide_sums_the_rows_f64() {
+        gather_rows_wide_sums_the_rows::<f64>(1e-12);
     }
 
     #[test]
