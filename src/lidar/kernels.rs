@@ -9,9 +9,10 @@
 //! tables, which stay in the L2 cache. Values are held as `[T; 8]` chunks so that the compiler
 //! keeps them in vector registers.
 //!
-//! On AVX-512 the forward uses quad tables that stay in L1 instead ([`quads`]), and the adjoint
-//! sums its rows in 512-bit vectors ([`adjoint_wide`]), both written with the vector operations
-//! of [`wide`].
+//! On AVX-512 the forward uses quad tables that stay in L1 instead ([`quads`]). The adjoint's
+//! pixel sums ([`adjoint_wide`]) and the support-restricted kernels ([`support_wide`]) run in
+//! 512-bit vectors on AVX-512 and 256-bit ones on AVX2: one generic kernel each, written with the
+//! vector operations of [`wide`].
 
 use crate::error::{Error, Result};
 use crate::real::Real;

@@ -35,7 +35,7 @@ pub fn time_runs(repeats: usize, mut f: impl FnMut()) -> Timing {
     }
 }
 
-/// The timings of the four operations of the fused operator.
+/// The timings of the three dense and sparse operations of the fused operator.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct OperatorTimings {
     /// The dense forward over all voxels ([`RdOperator::apply_dense`]).
@@ -44,15 +44,10 @@ pub struct OperatorTimings {
     pub adjoint: Timing,
     /// The forward over the nonzero voxels only ([`RdOperator::apply_sparse`]).
     pub sparse_forward: Timing,
-    /// The adjoint for the nonzero voxels only (the operator restricted to the scene's support,
-    /// [`LinearOperator::restrict_columns`]): what the solvers' least squares on a support
-    /// apply.
-    pub restricted_adjoint: Timing,
 }
 
-/// Times the dense forward and the sparse forward on the scene `x` and the adjoint and the
-/// restricted adjoint (for `x`'s nonzero voxels) on its measurements, each once as a warm-up and
-/// then `repeats` times.
+/// Times the dense forward and the sparse forward on the scene `x` and the adjoint on its
+/// measurements, each once as a warm-up and then `repeats` times.
 ///
 /// # Panics
 /// If `x` does not have one value per column of `op`.
@@ -73,19 +68,30 @@ pub fn time_operator<T: Real>(op: &RdOperator<T>, x: &[T], repeats: usize) -> Op
         op.apply_sparse(std::hint::black_box(x), &mut y);
         std::hint::black_box(&y);
     });
+    OperatorTimings {
+        forward,
+        adjoint,
+        sparse_forward,
+    }
+}
+
+/// Times the restricted adjoint: the adjoint for the nonzero voxels of the scene `x` only (the
+/// operator restricted to its support, [`LinearOperator::restrict_columns`], what the solvers'
+/// least squares on a support apply), on the scene's measurements, once as a warm-up and then
+/// `repeats` times.
+///
+/// # Panics
+/// If `x` does not have one value per column of `op`.
+pub fn time_restricted_adjoint<T: Real>(op: &RdOperator<T>, x: &[T], repeats: usize) -> Timing {
+    let mut y = vec![T::zero(); op.nrows()];
+    op.apply(x, &mut y);
     let support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
     let mut b = vec![T::zero(); support.len()];
     let restricted = op
         .restrict_columns(support)
         .expect("the support's columns are the operator's");
-    let restricted_adjoint = time_runs(repeats, || {
-        restricted.apply_adjoint(std::hint::black_box(&y_in), &mut b);
+    time_runs(repeats, || {
+        restricted.apply_adjoint(std::hint::black_box(&y), &mut b);
         std::hint::black_box(&b);
-    });
-    OperatorTimings {
-        forward,
-        adjoint,
-        sparse_forward,
-        restricted_adjoint,
-    }
+    })
 }

@@ -7,7 +7,7 @@ use rdlidar::lidar::{
     RdOperator, Seeds,
 };
 use rdlidar::limits::MemoryPlan;
-use rdlidar::report::timing::{time_operator, Timing};
+use rdlidar::report::timing::{time_operator, time_restricted_adjoint, Timing};
 use rdlidar::Real;
 use serde::Serialize;
 
@@ -149,7 +149,7 @@ fn bench<T: Real>(a: &BenchArgs, seed: u64) -> CliResult {
         forward: t.forward,
         adjoint: t.adjoint,
         sparse_forward: t.sparse_forward,
-        restricted_adjoint: t.restricted_adjoint,
+        restricted_adjoint: time_restricted_adjoint(&op, scene.as_slice(), repeats),
         size: g.to_string(),
         pulse_len: kp,
         samples: k,

@@ -130,7 +130,8 @@ pub(crate) struct QuadBlock<'a, T> {
 
 /// part\[k\] += Σ_j p[k − j]·Σ_g (T_g,lo[b & 15] + T_g,hi[b >> 4])[j] lane by lane, b the code byte
 /// of group g at sample k (the +1 rows minus the −1 rows for ternary codes): the forward of one
-/// block and slab with the quad tables, on AVX-512 (written for any vector flavour; with AVX2's
+/// block and slab with the quad tables, on AVX-512 (the kernel is generic over the vector
+/// flavour, but the bounds asserted here hold for 512-bit vectors only; compiled for AVX2's
 /// 256-bit vectors it measured no faster than the 256-row tables, which AVX2 keeps).
 ///
 /// # Panics
@@ -347,21 +348,19 @@ unsafe fn gather_wide<T: Real, S: Simd<T = T>, const Z: usize>(
 ) {
     let per = S::PER;
     let base = table.as_ptr();
+    // Up to four interleaved sums, as many as the registers hold (all four on AVX-512 for rows
+    // of up to seven vectors; on AVX2's sixteen registers fewer for longer rows), so that the
+    // sums stay in registers.
+    let sets = ((S::REGS - 1) / Z).clamp(1, 4);
     let mut acc = [[S::v_zero(); Z]; 4];
-    let quads = index.chunks_exact(4);
-    let rest = quads.remainder();
-    for quad in quads {
-        for (set, &r) in acc.iter_mut().zip(quad) {
+    let groups = index.chunks_exact(sets);
+    let rest = groups.remainder();
+    for group in groups.chain(std::iter::once(rest)) {
+        for (set, &r) in acc.iter_mut().zip(group) {
             let row = base.add((r as usize & mask) * Z * per);
             for z in 0..Z {
                 set[z] = S::v_add(set[z], S::v_load(row.add(z * per)));
             }
-        }
-    }
-    for (set, &r) in acc.iter_mut().zip(rest) {
-        let row = base.add((r as usize & mask) * Z * per);
-        for z in 0..Z {
-            set[z] = S::v_add(set[z], S::v_load(row.add(z * per)));
         }
     }
     let dst = out.as_mut_ptr();

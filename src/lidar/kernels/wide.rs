@@ -2,10 +2,10 @@
 //! or eight `f64` values a vector) and 256-bit (AVX2, eight or four), so that one generic kernel
 //! serves both precisions and both instruction sets.
 
-use std::marker::PhantomData;
-
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
+#[cfg(target_arch = "x86_64")]
+use std::marker::PhantomData;
 
 /// The vector flavours of a value type (a supertrait of [`Real`](crate::Real), so that generic
 /// kernels reach them): [`W512`] and [`W256`].
@@ -39,11 +39,13 @@ impl Wide for f64 {
 }
 
 /// The 512-bit flavour (AVX-512F, with BW and VL for the masks).
+#[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
 #[doc(hidden)]
 pub struct W512<T>(PhantomData<T>);
 
 /// The 256-bit flavour (AVX2 and FMA).
+#[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
 #[doc(hidden)]
 pub struct W256<T>(PhantomData<T>);
