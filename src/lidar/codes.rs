@@ -248,12 +248,12 @@ impl Codes {
             .map(|g| {
                 let mut zero = false;
                 for (p, row) in rows(g) {
-                    if let Some((k, &v)) =
-                        row.iter().enumerate().find(|(_, v)| !(-1..=1).contains(*v))
-                    {
-                        return (Some((p, k, v)), zero);
+                    for (k, &v) in row.iter().enumerate() {
+                        if !(-1..=1).contains(&v) {
+                            return (Some((p, k, v)), zero);
+                        }
+                        zero |= v == 0;
                     }
-                    zero |= row.iter().any(|&v| v == 0);
                 }
                 (None, zero)
             })

@@ -13,7 +13,7 @@ use crate::real::Real;
 
 use super::codes::CodeAlphabet;
 use super::geometry::Geometry;
-use super::kernels::adjoint_wide::wide_adjoint_nch;
+use super::kernels::adjoint_wide::{adjoint_row_nch, wide_adjoint_nch};
 use super::kernels::quads::{gather_rows_wide, lines_as_mut, quad_row_len, CacheLine, QUAD_ROWS};
 use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
 use super::rdop::{
@@ -303,11 +303,8 @@ fn gather_limit_wide<T: Real>(
     table_bytes: usize,
     repeats: usize,
 ) -> Result<GatherLimit> {
-    let rl = if isa.has_quads() {
-        quad_row_len::<T>(nch)
-    } else {
-        8 * nch
-    };
+    // The wide kernels' rows: whole 512-bit vectors on AVX-512 (the quad rows' width too).
+    let rl = 8 * adjoint_row_nch::<T>(isa, nch);
     let row_bytes = rl * std::mem::size_of::<T>();
     let rows = prev_power_of_two((table_bytes / row_bytes).clamp(2, 1 << 16));
     let threads = rayon::current_num_threads().max(1);

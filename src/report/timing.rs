@@ -85,7 +85,7 @@ pub fn time_operator<T: Real>(op: &RdOperator<T>, x: &[T], repeats: usize) -> Op
 pub fn time_restricted_adjoint<T: Real>(op: &RdOperator<T>, x: &[T], repeats: usize) -> Timing {
     let mut y = vec![T::zero(); op.nrows()];
     op.apply(x, &mut y);
-    let support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
+    let support = crate::solver::support(x);
     let mut b = vec![T::zero(); support.len()];
     let restricted = op
         .restrict_columns(support)
