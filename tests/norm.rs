@@ -77,3 +77,41 @@ fn start_vector_is_independent_of_a_matrix_drawn_from_the_same_seed() {
         est.value
     );
 }
+
+/// A Gaussian matrix's top singular values crowd at the edge of its spectrum, which slows the
+/// power iteration: after as many steps, the Lanczos estimate must be far closer.
+#[test]
+fn converges_where_the_top_singular_values_cluster() {
+    let (m, n, steps) = (120, 240, 25);
+    let a = ndarray::Array2::from_shape_vec((m, n), random_vec(m * n, 11)).unwrap();
+    let s = sigma_max(&a);
+    let op = rdlidar::operator::DenseMatrix::new(a.clone()).unwrap();
+    let est = operator_norm(
+        &op,
+        &PowerIteration {
+            max_iter: steps,
+            tol: 1e-15,
+            seed: 5,
+        },
+    )
+    .unwrap();
+    // The power iteration from a start vector of its own, as many steps.
+    let mut v = ndarray::Array1::from(random_vec(n, 6));
+    let mut power = 0.0;
+    for _ in 0..steps {
+        v /= v.dot(&v).sqrt();
+        let av = a.dot(&v);
+        power = av.dot(&av).sqrt();
+        v = a.t().dot(&av);
+    }
+    let (lanczos_err, power_err) = (1.0 - est.value / s, 1.0 - power / s);
+    assert!(
+        est.value <= s * (1.0 + 1e-12),
+        "{} above σ_max {s}",
+        est.value
+    );
+    assert!(
+        lanczos_err <= 1e-4 && lanczos_err <= power_err / 100.0,
+        "after {steps} steps: Lanczos {lanczos_err:e}, power iteration {power_err:e} below σ_max"
+    );
+}

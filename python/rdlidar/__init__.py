@@ -595,7 +595,7 @@ def reconstruct(
         the reconstruction between iterations.
     dtype : the precision (default: the measurements' dtype if float32 or float64, else
         float64).
-    seed : the seed of the randomized parts (FISTA's power iteration).
+    seed : the seed of the randomized parts (FISTA's norm estimate).
     fill_unobserved : fill the depth of pixels that reach no ADC (a coded aperture's blocked
         pixels, -2) from their neighbours, as ``--fill-unobserved`` does.
     clipped : samples the ADC clipped, left out of the data term as ``--clipped`` does: a
@@ -655,7 +655,7 @@ def fista(
 
     Each iteration is ``x = soft(z - step * A^T (A z - y), lam * step)`` followed by the usual
     momentum step, for ``niter`` iterations (or until the relative change of x falls below
-    ``tol``). ``step`` is 1/L; by default L is a power-iteration estimate of ||A||^2 (times
+    ``tol``). ``step`` is 1/L; by default L is a Lanczos estimate of ||A||^2 (times
     1.01). ``restart`` resets the momentum when the objective would increase; ``nonnegative``
     constrains x >= 0.
 

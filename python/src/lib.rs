@@ -738,7 +738,7 @@ fn measurements<T: Real + numpy::Element>(
     Ok(y)
 }
 
-/// FISTA on ½‖Ax − y‖² + λ‖x‖₁ from x = 0 with the step 1/L (L = 1/`step`, or a power-iteration
+/// FISTA on ½‖Ax − y‖² + λ‖x‖₁ from x = 0 with the step 1/L (L = 1/`step`, or a Lanczos
 /// estimate of ‖A‖² when `step` is None), for exactly `niter` iterations unless `tol` (the
 /// relative change of x) stops it first; returns (x, report).
 #[pyfunction]

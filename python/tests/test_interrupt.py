@@ -1,5 +1,5 @@
 """Ctrl-C ends any reconstruction within about a second, wherever the solver is in its work
-(the power iteration before FISTA's first iteration, a support pursuit, a least-squares refit,
+(the norm estimate before FISTA's first iteration, a support pursuit, a least-squares refit,
 tiles solved in parallel), and raises KeyboardInterrupt; nothing is left running."""
 
 import subprocess
@@ -8,8 +8,8 @@ import textwrap
 
 import pytest
 
-# A problem on which every solver below runs for many seconds: FISTA's power iteration alone
-# is 400 applications of a 64x64x40 operator with K_p = 30000 in float64.
+# A problem on which every solver below runs for many seconds: FISTA's norm estimate alone is
+# tens of applications of a 64x64x40 operator with K_p = 30000 in float64, its iterations more.
 SCRIPT = textwrap.dedent(
     """
     import os, signal, sys, threading, time

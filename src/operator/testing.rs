@@ -13,7 +13,7 @@ use super::LinearOperator;
 
 /// ChaCha stream of the dot test's vectors (the bytes of "dot").
 pub(crate) const DOT_STREAM: u64 = 0x00646f74;
-/// ChaCha stream of the power iteration's start vector (the bytes of "norm").
+/// ChaCha stream of the norm estimate's start vector (the bytes of "norm").
 pub(crate) const NORM_STREAM: u64 = 0x6e6f726d;
 
 /// A ChaCha8 generator for `seed` on its own stream, so that the checks never reuse the random

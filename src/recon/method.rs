@@ -44,7 +44,7 @@ pub enum Method {
     /// Least squares by CGLS (at most 300 iterations or a relative normal-equation residual of
     /// 1e-8), then its returns.
     Cgls,
-    /// Nonnegative lasso by FISTA (λ = 0.05·‖Aᵀy‖∞, power-iteration step, function restart, at
+    /// Nonnegative lasso by FISTA (λ = 0.05·‖Aᵀy‖∞, norm-estimate step (Lanczos), function restart, at
     /// most 200 iterations), debiased by least squares on its support
     /// ([`ReconstructOptions::debias`]), then its returns.
     Fista,
@@ -138,9 +138,9 @@ pub struct ReconstructOptions {
     pub max_iter: Option<usize>,
     /// Shows a progress bar on stderr (when it is a terminal) during iterative solves.
     pub progress: bool,
-    /// Seed of the randomized parts (the power iteration behind FISTA's step).
+    /// Seed of the randomized parts (the norm estimate behind FISTA's step).
     pub seed: u64,
-    /// Overrides the number of power iterations that estimate ‖A‖² for [`Method::Fista`]'s step
+    /// Overrides the number of Lanczos iterations that estimate ‖A‖² for [`Method::Fista`]'s step
     /// (by default up to 200, until the estimate changes by less than 10⁻⁶; at 100×100×40 these
     /// cost more than 200 FISTA iterations' worth of applications). Fewer iterations
     /// underestimate ‖A‖² a little (about 2% after 30 iterations at 100×100×40), so the step's
@@ -388,7 +388,7 @@ pub(super) fn run<T: Real>(
 }
 
 /// FISTA's parameters for reconstruction: λ a fraction of ‖Aᵀy‖∞, nonnegative, the step from
-/// a power iteration, function restarts.
+/// a Lanczos norm estimate, function restarts.
 fn fista_params(options: &ReconstructOptions) -> FistaParams {
     FistaParams {
         lambda: Lambda::Fraction(FISTA_LAMBDA_FRACTION),

@@ -138,7 +138,7 @@ impl<I> Driver<I> {
 /// [`LinearLeastSquares`] problem, one native iteration per `next_iter`.
 ///
 /// `init` does what the native solver does before its first iteration (e.g. FISTA's λ from
-/// ‖Aᵀy‖∞ and its power iteration, the pruning of a greedy solver's warm start) and `next_iter`
+/// ‖Aᵀy‖∞ and its norm estimate, the pruning of a greedy solver's warm start) and `next_iter`
 /// one iteration with the same arithmetic, so the iterates are those of the native solver. The
 /// work an iteration starts from (a gradient or proxy) is done at the end of the previous one
 /// only when the executor allows another iteration, so the apply counts added to argmin's

@@ -1,4 +1,4 @@
-//! FISTA for the lasso, optionally nonnegative, with a power-iteration or backtracking step and
+//! FISTA for the lasso, optionally nonnegative, with a step from the norm estimate or backtracking and
 //! adaptive restart.
 
 use std::ops::ControlFlow;
@@ -33,11 +33,11 @@ pub enum Lambda {
 /// How [`fista`] chooses its step 1/L.
 #[derive(Debug, Clone, Copy)]
 pub enum StepRule {
-    /// A fixed L = margin · σ², where σ is the power-iteration estimate of ‖A‖₂ from
+    /// A fixed L = margin · σ², where σ is the Lanczos estimate of ‖A‖₂ from
     /// [`operator_norm`](crate::operator::operator_norm). The estimate is a lower bound, so a
     /// margin slightly above 1 (1.01 by default) keeps 1/L within the convergent range.
     PowerIteration {
-        /// Settings of the power iteration.
+        /// Settings of the norm estimate.
         settings: PowerIteration,
         /// Factor (≥ 1) applied to the estimate of ‖A‖².
         margin: f64,
@@ -101,7 +101,7 @@ pub struct FistaParams {
 }
 
 impl Default for FistaParams {
-    /// λ = 0.1 · ‖Aᵀy‖∞, no sign constraint, the power-iteration step with margin 1.01, function
+    /// λ = 0.1 · ‖Aᵀy‖∞, no sign constraint, the norm-estimate step with margin 1.01, function
     /// restart; at most 500 iterations, stopping when the relative residual reaches 1e-6 or the
     /// relative change of x falls to 1e-6.
     fn default() -> Self {
@@ -464,11 +464,11 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
 /// trial, and one of each for a function restart).
 ///
 /// The report's residual is ‖Ax − y‖ / ‖y‖, its objective the lasso objective above; apply counts
-/// include the power iteration and the adjoint that computes ‖Aᵀy‖∞ for [`Lambda::Fraction`].
+/// include the norm estimate and the adjoint that computes ‖Aᵀy‖∞ for [`Lambda::Fraction`].
 /// With `nonnegative` the warm start is first projected onto x ≥ 0.
 ///
 /// Special cases: if y = 0, x is set to 0 (the solution) and the run ends with
-/// [`Termination::ZeroResidual`] without applying the operator; if the power iteration finds
+/// [`Termination::ZeroResidual`] without applying the operator; if the norm estimate finds
 /// ‖A‖ = 0 (a zero operator), x is set to 0 when λ > 0 (left as it is when λ = 0, where every
 /// x solves the problem) and the run ends with [`Termination::Converged`] after 0 iterations.
 ///
@@ -480,7 +480,7 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for FistaIteration<
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for a negative or non-finite λ or fraction, an invalid step rule
-/// (margin < 1, eta ≤ 1, invalid power-iteration settings) or invalid stopping rules;
+/// (margin < 1, eta ≤ 1, invalid norm-estimate settings) or invalid stopping rules;
 /// [`Error::ShapeMismatch`] / [`Error::NonFinite`] for inputs that do not fit the operator or are
 /// not finite; [`Error::NonFinite`] if ‖Aᵀy‖∞ or the operator-norm estimate is not finite;
 /// [`Error::Breakdown`] if backtracking finds no step or the iteration produces non-finite values.

@@ -33,10 +33,10 @@ pub enum IhtStep {
     /// step and one per reduction.
     #[default]
     Normalized,
-    /// A fixed μ = 1/L with L = margin · σ², σ the power-iteration estimate of ‖A‖₂ from
+    /// A fixed μ = 1/L with L = margin · σ², σ the Lanczos estimate of ‖A‖₂ from
     /// [`operator_norm`](crate::operator::operator_norm) (a lower bound, hence the margin ≥ 1).
     PowerIteration {
-        /// Settings of the power iteration.
+        /// Settings of the norm estimate.
         settings: PowerIteration,
         /// Factor (≥ 1) applied to the estimate of ‖A‖².
         margin: f64,
@@ -309,11 +309,11 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for IhtIteration<T>
 /// The run ends with [`Termination::Converged`] when an iteration keeps the support and changes x
 /// by at most [`fixed_point_tol`](IhtParams::fixed_point_tol), or when the gradient Aᵀ(y − Ax) is
 /// exactly zero; the other reasons come from the [`Stopping`] rules, whose residual is
-/// ‖Ax − y‖ / ‖y‖. Apply counts include the power iteration of [`IhtStep::PowerIteration`].
+/// ‖Ax − y‖ / ‖y‖. Apply counts include the norm estimate of [`IhtStep::PowerIteration`].
 ///
 /// The warm start is first pruned to its s largest entries. If y = 0, x is set to 0 (the
 /// solution) and the run ends with [`Termination::ZeroResidual`] without applying the operator;
-/// if the power iteration finds ‖A‖ = 0 (a zero operator), the run ends with
+/// if the norm estimate finds ‖A‖ = 0 (a zero operator), the run ends with
 /// [`Termination::Converged`] after 0 iterations.
 ///
 /// # References

@@ -371,7 +371,7 @@ pub(crate) fn support<T: Real>(v: &[T]) -> Vec<usize> {
         .collect()
 }
 
-/// Checks the settings of a step derived from a power-iteration estimate of ‖A‖.
+/// Checks the settings of a step derived from the Lanczos estimate of ‖A‖.
 pub(crate) fn validate_power_step(settings: &PowerIteration, margin: f64) -> Result<()> {
     if settings.max_iter == 0 {
         return Err(Error::param(
@@ -394,7 +394,7 @@ pub(crate) fn validate_power_step(settings: &PowerIteration, margin: f64) -> Res
     Ok(())
 }
 
-/// L = margin · σ², with σ the power-iteration estimate of ‖A‖₂ (a lower bound, hence the
+/// L = margin · σ², with σ the Lanczos estimate of ‖A‖₂ (a lower bound, hence the
 /// margin); 0 when the operator maps the start vector to zero.
 pub(crate) fn lipschitz_estimate<T: Real, A: crate::operator::LinearOperator<T> + ?Sized>(
     op: &A,

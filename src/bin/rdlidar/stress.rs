@@ -22,7 +22,7 @@ use crate::common::{errln, outln, write_stdout, CliResult, Failure, Globals};
 /// 10^4 to 10^7 samples on a 4x4x8 grid: ‖A32 x − A64 x‖/‖A64 x‖ for the dense and sparse
 /// forward paths and the same for the adjoint (beside the gap of a naive f32 sum). dot-test:
 /// |<Ax,y> − <x,A*y>| / max(‖Ax‖‖y‖, ‖x‖‖A*y‖) of the same operators. conditioning: σ_max
-/// (power iteration), σ_min (inverse iteration with conjugate gradients) and κ of A restricted
+/// (Lanczos iteration), σ_min (inverse iteration with conjugate gradients) and κ of A restricted
 /// to the support of the 8x8x8 paper scene, K_p from below the support size to redundant,
 /// checked against a dense eigendecomposition. solvers: every method on the 8x8x8 paper scene
 /// (K_p 300) with amplitudes spanning 1e-6..1, a pulse of duty 0.05, ternary codes with

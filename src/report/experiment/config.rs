@@ -15,7 +15,7 @@ pub use super::values::*;
 /// The most seeds of one sweep.
 pub const MAX_SEEDS: usize = 10_000;
 
-/// The most power iterations of FISTA's step estimate.
+/// The most Lanczos iterations of FISTA's step estimate.
 pub const MAX_POWER_ITERATIONS: usize = 100_000;
 
 /// Working copies of the scene a run holds besides the simulation (the estimate, the solver's
@@ -61,7 +61,7 @@ pub struct ExperimentConfig {
     pub precision: Precision,
     /// Iteration budgets.
     pub max_iter: IterationBudgets,
-    /// Power iterations behind FISTA's step
+    /// Lanczos iterations behind FISTA's step
     /// ([`crate::recon::ReconstructOptions::power_iterations`]; `None`: its default of up to
     /// 200).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -361,7 +361,7 @@ pub struct ExperimentPatch {
     pub seeds: Option<usize>,
     /// Iteration budgets, per method name.
     pub max_iter: Option<IterationBudgets>,
-    /// Power iterations behind FISTA's step.
+    /// Lanczos iterations behind FISTA's step.
     pub power_iterations: Option<usize>,
 }
 

@@ -11,7 +11,7 @@ use super::config::{ExperimentConfig, IterationBudgets, Precision, SceneKind, DE
 impl ExperimentConfig {
     /// The main job (`rdlidar demo`): the paper's scene 100×100×40, K_p = 10000, 20000, 30000,
     /// noise-free, one seed, the nine methods of [`DEFAULT_SOLVERS`] in f32 with the demo's
-    /// budgets ([`ExperimentConfig::demo_budgets`]) and FISTA's step from 30 power iterations,
+    /// budgets ([`ExperimentConfig::demo_budgets`]) and FISTA's step from 30 Lanczos iterations,
     /// written to `out/`.
     pub fn demo() -> Self {
         ExperimentConfig {

@@ -1,7 +1,7 @@
 //! The conditioning group: the extreme singular values of A_S, the lidar operator restricted to
 //! the columns of a scene's true support, from compressive to redundant pulse lengths.
 //!
-//! σ_max comes from power iteration on A_SᵀA_S ([`operator_norm`]); σ_min from inverse
+//! σ_max comes from the Lanczos iteration on A_SᵀA_S ([`operator_norm`]); σ_min from inverse
 //! (subspace) iteration, each step solving A_SᵀA_S z = v by conjugate gradients, when A_S can
 //! have full column rank, and otherwise (σ_min = 0) from a null vector v = r − A_S⁺A_S r
 //! computed by CGLS. Both are checked against the eigenvalues of the Gram matrix A_SᵀA_S, formed
@@ -31,16 +31,16 @@ pub const SIGMA_TOL: f64 = 1e-7;
 
 /// The factor of ε·κ² in the tolerance of |σ − σ_ref|/σ_ref (κ = 1 for σ_max): a backward-stable
 /// computation in precision ε finds the eigenvalue σ² of A_SᵀA_S to within about ε·σ_max², a
-/// relative error of ε·κ² for σ_min²; the power iteration in `f32` stops at a change of ε/8 per
-/// step, and with clustered top singular values its error is that change divided by
-/// 1 − (σ₂/σ₁)², up to a few hundred times larger (measured up to 4.3·10⁻⁶ = 36ε).
+/// relative error of ε·κ² for σ_min²; the norm iteration in `f32` stops at a change of ε/8 per
+/// step (the power iteration before the Lanczos iteration, whose error with clustered top
+/// singular values is that change divided by 1 − (σ₂/σ₁)², measured up to 4.3·10⁻⁶ = 36ε).
 ///
 /// When the support is not determined (σ_min = 0), σ_min/σ_max of the null vector must be at most
 /// `SIGMA_TOL + SIGMA_TOL_EPS·ε·κ₊`, κ₊ the condition number of A_S on its row space (the
 /// `kappa_plus` value): the least squares that find the vector are accurate to about ε·κ₊.
 pub const SIGMA_TOL_EPS: f64 = 1000.0;
 
-/// Relative change of the power-iteration estimate at which it stops (or ε/8 of the precision,
+/// Relative change of the norm estimate at which it stops (or ε/8 of the precision,
 /// if larger: `f32` estimates fluctuate at that level).
 pub const POWER_TOL: f64 = 1e-11;
 
@@ -49,7 +49,7 @@ pub const POWER_TOL: f64 = 1e-11;
 /// 10⁻⁷·σ_max.
 pub const NUMERICAL_ZERO: f64 = 1e-6;
 
-/// Iteration limit of the power iteration.
+/// Iteration limit of the norm estimate.
 pub const POWER_MAX_ITER: usize = 5000;
 
 /// Relative change of the inverse-iteration estimate at which it stops (or ε of the precision,

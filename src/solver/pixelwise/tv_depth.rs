@@ -144,6 +144,7 @@ fn neighbour_priors(
             let mut depth = Vec::with_capacity(n * ks);
             let mut amplitude = Vec::with_capacity(n);
             let mut h = vec![0.0; ks];
+            let mut spread = vec![0.0; ks];
             for j in 0..n {
                 h.fill(0.0);
                 let (mut sum_lit, mut count) = (0.0, 0usize);
@@ -159,14 +160,8 @@ fn neighbour_priors(
                         count += 1;
                         a1 += w * near.amplitude[q].0;
                         a2 += w * near.amplitude[q].1;
-                        for (d, &w) in near.depth[q * ks..(q + 1) * ks].iter().enumerate() {
-                            h[d] += w;
-                            if d > 0 {
-                                h[d - 1] += w;
-                            }
-                            if d + 1 < ks {
-                                h[d + 1] += w;
-                            }
+                        for (hd, &w) in h.iter_mut().zip(&near.depth[q * ks..(q + 1) * ks]) {
+                            *hd += w;
                         }
                     }
                 }
@@ -183,8 +178,14 @@ fn neighbour_priors(
                 } else {
                     hood.reference
                 });
-                let total: f64 = h.iter().sum();
-                depth.extend(h.iter().map(|&v| {
+                // Each depth's neighbours summed, then spread over ±1 bin (slanted surfaces).
+                for d in 0..ks {
+                    let below = if d > 0 { h[d - 1] } else { 0.0 };
+                    let above = if d + 1 < ks { h[d + 1] } else { 0.0 };
+                    spread[d] = below + h[d] + above;
+                }
+                let total: f64 = spread.iter().sum();
+                depth.extend(spread.iter().map(|&v| {
                     let shaped = if total > 0.0 {
                         v / total
                     } else {
