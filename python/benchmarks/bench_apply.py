@@ -4,8 +4,11 @@ a PyLops operator composed of the same model, all in one run.
     python python/benchmarks/bench_apply.py [--rdlidar PATH] [--repeats N]
 
 1. At the paper's size (100x100x40, f32, K_p 10000 and 30000): ``RdOperator.matvec`` on a
-   dense scene and ``rmatvec``, median of N timed calls after a warm-up, against
-   ``rdlidar bench --json`` (the Rust kernels timed in Rust, same sizes and repeats).
+   dense scene and ``rmatvec``, and the operator restricted to the paper scene's nonzero
+   voxels (``RdOperator.restrict``: its ``matvec`` is the sparse forward of that scene, its
+   ``rmatvec`` the restricted adjoint), median of N timed calls after a warm-up, against
+   ``rdlidar bench --json`` (the Rust kernels timed in Rust on the same scene, same sizes and
+   repeats): the four figures ``rdlidar bench`` prints.
 2. At a few small sizes (f64): the same operator composed in PyLops as
    ``HStack([Diagonal(s_i) * Convolve1D(pulse, fft) * Pad(0, K_p - 1)])`` over the pixels,
    checked to agree with rdlidar's, and both timed.
@@ -64,13 +67,25 @@ def part_rust(binary, repeats):
         y = rng.standard_normal(k).astype(np.float32)
         py_fwd = median_time(lambda: op.matvec(x), repeats)
         py_adj = median_time(lambda: op.rmatvec(y), repeats)
+        # The paper scene's support, as the Rust bench's sparse and restricted timings use.
+        scene = rdlidar.simulate("paper", (m, n, ks), 1, seed=0).scene.ravel()
+        voxels = np.flatnonzero(scene)
+        restricted = op.restrict(voxels)
+        values = scene[voxels].astype(np.float32)
+        py_sparse = median_time(lambda: restricted.matvec(values), repeats)
+        py_restricted = median_time(lambda: restricted.rmatvec(y), repeats)
         out = subprocess.run(
             [binary, "bench", "--size", f"{m}x{n}x{ks}", "--pulse-len", str(kp),
              "--precision", "f32", "--repeats", str(repeats), "--json"],
             check=True, capture_output=True, text=True,
         )
         rust = json.loads(out.stdout)
-        for name, py, key in (("forward", py_fwd, "forward"), ("adjoint", py_adj, "adjoint")):
+        for name, py, key in (
+            ("forward", py_fwd, "forward"),
+            ("adjoint", py_adj, "adjoint"),
+            ("sparse forward", py_sparse, "sparse_forward"),
+            ("restricted adjoint", py_restricted, "restricted_adjoint"),
+        ):
             r = rust[key]["median_s"]
             print(f"| {m}x{n}x{ks} | {kp} | float32 | {name} | {1e3 * py:.2f} | {1e3 * r:.2f} "
                   f"| {py / r:.3f} |")

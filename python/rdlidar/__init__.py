@@ -32,6 +32,7 @@ from ._rdlidar import __version__
 
 __all__ = [
     "RdOperator",
+    "RestrictedOperator",
     "Simulation",
     "simulate",
     "reconstruct",
@@ -333,6 +334,29 @@ class RdOperator(LinearOperator):
             raise ValueError(f"y: expected shape {self.meas_shape}, got {y.shape}")
         return self._core.adjoint(y.reshape(-1)).reshape(self.scene_shape)
 
+    def restrict(self, voxels) -> "RestrictedOperator":
+        """A R^T: the operator restricted to the columns ``voxels`` (flat scene indices in
+        C order, e.g. ``np.flatnonzero(x)``; repeats allowed), as a SciPy ``LinearOperator`` of
+        shape (measurements, len(voxels)).
+
+        Its ``matvec`` maps one amplitude per listed voxel to the measurements, its ``rmatvec``
+        the measurements to those voxels' values of ``A^T y``. With one ADC both cost
+        O(len(voxels) K_p) instead of a whole application (the least squares of greedy solvers
+        on a support); other architectures apply the whole operator.
+        """
+        v = np.asarray(voxels)
+        if v.ndim != 1:
+            raise ValueError(f"voxels: expected a 1-D array of indices, got shape {v.shape}")
+        if v.size and not np.issubdtype(v.dtype, np.integer):
+            raise TypeError(f"voxels: expected integer indices, got dtype {v.dtype}")
+        n = self.shape[1]
+        bad = np.flatnonzero((v < 0) | (v >= n)) if v.size else np.empty(0, dtype=np.int64)
+        if bad.size:
+            raise ValueError(
+                f"voxels: entry {bad[0]} is {v[bad[0]]}, outside the scene's {n} voxels"
+            )
+        return RestrictedOperator(self, np.ascontiguousarray(v, dtype=np.int64))
+
     @property
     def pulse(self) -> np.ndarray:
         """The pulse the operator applies (zero-mean when debiased), float64."""
@@ -378,6 +402,27 @@ class _RdAdjoint(LinearOperator):
 
     def _adjoint(self):
         return self._op
+
+
+class RestrictedOperator(LinearOperator):
+    """A R^T: an ``RdOperator`` restricted to a list of voxels (``RdOperator.restrict``)."""
+
+    def __init__(self, op: RdOperator, voxels: np.ndarray):
+        self._op = op
+        #: the listed voxels (flat scene indices), int64
+        self.voxels = voxels
+        super().__init__(dtype=op.dtype, shape=(op.shape[0], len(voxels)))
+
+    def _matvec(self, b):
+        b = _real_array(b, self.dtype, "b").reshape(-1)
+        return self._op._core.restricted(self.voxels, b, False)
+
+    def _rmatvec(self, y):
+        y = _real_array(y, self.dtype, "y").reshape(-1)
+        return self._op._core.restricted(self.voxels, y, True)
+
+    def __repr__(self):
+        return f"<RestrictedOperator: {len(self.voxels)} voxels of {self._op!r}>"
 
 
 @dataclass

@@ -236,7 +236,7 @@ fn operator_of<T: Real>(acq: &Acquisition, debiased: bool) -> PyResult<BoxedOper
 /// inputs and results that overflow.
 fn apply<'py, T: Real + numpy::Element>(
     py: Python<'py>,
-    op: &BoxedOperator<T>,
+    op: &dyn LinearOperator<T>,
     x: &Bound<'py, PyAny>,
     adjoint: bool,
 ) -> PyResult<Bound<'py, PyArray1<T>>> {
@@ -331,6 +331,44 @@ impl PyOperator {
         Ok(match &self.op {
             Op::F32(op) => apply(py, op, y, true)?.into_any().unbind(),
             Op::F64(op) => apply(py, op, y, true)?.into_any().unbind(),
+        })
+    }
+
+    /// The operator restricted to the columns `voxels` (flat scene indices, int64, repeats
+    /// allowed), A·Rᵀ, applied to `v`: forward from one amplitude per listed voxel to the
+    /// measurements, or (`adjoint`) from the measurements to the listed voxels' correlations.
+    /// One ADC costs O(|voxels|·K_p) in both directions; other architectures apply the whole
+    /// operator.
+    fn restricted<'py>(
+        &self,
+        py: Python<'py>,
+        voxels: PyReadonlyArray1<'py, i64>,
+        v: &Bound<'py, PyAny>,
+        adjoint: bool,
+    ) -> PyResult<Py<PyAny>> {
+        let g = self.acq.geometry();
+        let n = g.m * g.n * g.ks;
+        let mut list = Vec::with_capacity(voxels.len());
+        for (i, &c) in voxels.as_array().iter().enumerate() {
+            match usize::try_from(c) {
+                Ok(c) if c < n => list.push(c),
+                _ => {
+                    return Err(PyValueError::new_err(format!(
+                        "voxels: entry {i} is {c}, outside the scene's {n} voxels"
+                    )))
+                }
+            }
+        }
+        drop(voxels);
+        Ok(match &self.op {
+            Op::F32(op) => {
+                let r = op.restrict_columns(list).map_err(value_error)?;
+                apply(py, &*r, v, adjoint)?.into_any().unbind()
+            }
+            Op::F64(op) => {
+                let r = op.restrict_columns(list).map_err(value_error)?;
+                apply(py, &*r, v, adjoint)?.into_any().unbind()
+            }
         })
     }
 
