@@ -64,7 +64,7 @@ pub struct ExperimentArgs {
     /// Iteration budgets, e.g. `fista=50,model-based=12` (other solvers keep the preset's).
     #[arg(long, value_name = "SOLVER=N,...", value_parser = parse_budgets)]
     pub max_iter: Option<IterationBudgets>,
-    /// Lanczos iterations that estimate ‖A‖² for FISTA's step (demo default 30; compare: the
+    /// Lanczos iterations that estimate ‖A‖² for FISTA's step (demo default 15; compare: the
     /// solver's default of up to 200).
     #[arg(long, value_name = "N", value_parser = parse_positive)]
     pub power_iterations: Option<usize>,

@@ -83,7 +83,7 @@ enum Command {
     /// 20000 and 30000 (noise-free, seed --seed) and reconstructed by every solver
     /// (backprojection plain and debiased, cgls, fista, cosamp, amp, model-based, tv, auto) within
     /// iteration budgets that keep the whole demo under three minutes on two cores: cgls 15,
-    /// fista 15 (its step from 30 Lanczos iterations), cosamp 1, model-based 6, tv and auto 4
+    /// fista 15 (its step from 15 Lanczos iterations), cosamp 1, model-based 6, tv and auto 4
     /// (each of their model-based fits); change them with --max-iter or a config file.
     ///
     /// Prints a table (per solver and K_p: lit pixels at the exact depth, false detections,

@@ -11,7 +11,7 @@ use super::config::{ExperimentConfig, IterationBudgets, Precision, SceneKind, DE
 impl ExperimentConfig {
     /// The main job (`rdlidar demo`): the paper's scene 100×100×40, K_p = 10000, 20000, 30000,
     /// noise-free, one seed, the nine methods of [`DEFAULT_SOLVERS`] in f32 with the demo's
-    /// budgets ([`ExperimentConfig::demo_budgets`]) and FISTA's step from 30 Lanczos iterations,
+    /// budgets ([`ExperimentConfig::demo_budgets`]) and FISTA's step from 15 Lanczos iterations,
     /// written to `out/`.
     pub fn demo() -> Self {
         ExperimentConfig {
@@ -30,7 +30,7 @@ impl ExperimentConfig {
             seed: 0,
             precision: Precision::F32,
             max_iter: ExperimentConfig::demo_budgets(),
-            power_iterations: Some(30),
+            power_iterations: Some(15),
         }
     }
 
