@@ -115,3 +115,28 @@ fn converges_where_the_top_singular_values_cluster() {
         "after {steps} steps: Lanczos {lanczos_err:e}, power iteration {power_err:e} below σ_max"
     );
 }
+
+/// Where the Krylov space is invariant the estimate is exact and the iteration stops at once:
+/// the identity after one step, a rank-one matrix within two.
+#[test]
+fn an_invariant_krylov_space_stops_the_iteration_exactly() {
+    let id = rdlidar::operator::Identity::<f64>::new(7);
+    let est = operator_norm(&id, &PowerIteration::default()).unwrap();
+    assert_eq!((est.iterations, est.stop), (1, NormStop::Converged));
+    assert!((est.value - 1.0).abs() <= 1e-15, "{}", est.value);
+
+    let (u, w) = (random_vec(9, 21), random_vec(13, 22));
+    let a = ndarray::Array2::from_shape_fn((9, 13), |(i, j)| u[i] * w[j]);
+    let want = sigma_max(&a);
+    let op = rdlidar::operator::DenseMatrix::new(a).unwrap();
+    let est = operator_norm(&op, &PowerIteration::default()).unwrap();
+    assert!(
+        est.iterations <= 2 && est.stop == NormStop::Converged,
+        "{est:?}"
+    );
+    assert!(
+        (est.value - want).abs() <= 1e-12 * want,
+        "{} vs {want}",
+        est.value
+    );
+}

@@ -342,7 +342,8 @@ class RdOperator(LinearOperator):
         Its ``matvec`` maps one amplitude per listed voxel to the measurements, its ``rmatvec``
         the measurements to those voxels' values of ``A^T y``. With one ADC both cost
         O(len(voxels) K_p) instead of a whole application (the least squares of greedy solvers
-        on a support); other architectures apply the whole operator.
+        on a support), with G ADCs G times that; tiles apply the whole operator. The operator
+        keeps its own read-only copy of ``voxels``.
         """
         v = np.asarray(voxels)
         if v.ndim != 1:
@@ -355,7 +356,9 @@ class RdOperator(LinearOperator):
             raise ValueError(
                 f"voxels: entry {bad[0]} is {v[bad[0]]}, outside the scene's {n} voxels"
             )
-        return RestrictedOperator(self, np.ascontiguousarray(v, dtype=np.int64))
+        kept = np.array(v, dtype=np.int64)
+        kept.setflags(write=False)
+        return RestrictedOperator(self, kept)
 
     @property
     def pulse(self) -> np.ndarray:

@@ -337,8 +337,8 @@ impl PyOperator {
     /// The operator restricted to the columns `voxels` (flat scene indices, int64, repeats
     /// allowed), A·Rᵀ, applied to `v`: forward from one amplitude per listed voxel to the
     /// measurements, or (`adjoint`) from the measurements to the listed voxels' correlations.
-    /// One ADC costs O(|voxels|·K_p) in both directions; other architectures apply the whole
-    /// operator.
+    /// One ADC costs O(|voxels|·K_p) in both directions, G ADCs G times that; tiles apply the
+    /// whole operator. The restriction is built and applied with the GIL released.
     fn restricted<'py>(
         &self,
         py: Python<'py>,
@@ -362,11 +362,15 @@ impl PyOperator {
         drop(voxels);
         Ok(match &self.op {
             Op::F32(op) => {
-                let r = op.restrict_columns(list).map_err(value_error)?;
+                let r = py
+                    .detach(|| op.restrict_columns(list))
+                    .map_err(value_error)?;
                 apply(py, &*r, v, adjoint)?.into_any().unbind()
             }
             Op::F64(op) => {
-                let r = op.restrict_columns(list).map_err(value_error)?;
+                let r = py
+                    .detach(|| op.restrict_columns(list))
+                    .map_err(value_error)?;
                 apply(py, &*r, v, adjoint)?.into_any().unbind()
             }
         })

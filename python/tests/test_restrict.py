@@ -1,6 +1,6 @@
 """The operator restricted to a list of voxels (``RdOperator.restrict``): equal to the whole
 operator on vectors that vanish elsewhere, its adjoint the listed entries of the whole adjoint,
-for one ADC (its own kernels) and for tiles (the whole operator); bad voxel lists are refused
+for one ADC (its own kernels), three ADCs (theirs, stacked) and tiles (the whole operator); bad voxel lists are refused
 naming the argument."""
 
 import numpy as np
@@ -19,10 +19,14 @@ def rel(a, b):
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("ternary", [False, True])
-@pytest.mark.parametrize("tiles", [None, (2, 3)])
-def test_restriction_is_the_whole_operator_on_the_listed_voxels(dtype, ternary, tiles):
+@pytest.mark.parametrize("layout", ["one ADC", "three ADCs", "tiles"])
+def test_restriction_is_the_whole_operator_on_the_listed_voxels(dtype, ternary, layout):
     m, n, ks, kp = 4, 6, 7, 300
     pulse, codes = random_problem(m, n, ks, kp, seed=3, ternary=ternary)
+    tiles = (2, 3) if layout == "tiles" else None
+    if layout == "three ADCs":
+        sets = [random_problem(m, n, ks, kp, seed=3 + g, ternary=ternary)[1] for g in range(3)]
+        codes = np.stack(sets)
     op = rdlidar.RdOperator(pulse, codes, ks, dtype=dtype, tiles=tiles)
     rng = np.random.default_rng(5)
     # Several voxels in some pixels, a repeat, and not in increasing order.
@@ -63,5 +67,13 @@ def test_bad_voxel_lists_are_refused_naming_the_argument():
     # An empty list is a restriction to nothing: zero measurements, an empty adjoint.
     e = op.restrict([])
     assert e.shape == (op.shape[0], 0)
-    assert not np.any(e.matvec(np.zeros(0, dtype=np.float32)))
+    assert e.matvec(np.zeros(0, dtype=np.float32)).shape == (op.shape[0],)
     assert e.rmatvec(np.ones(op.shape[0], dtype=np.float32)).shape == (0,)
+    # The operator keeps its own copy of the list: changing the caller's array changes nothing.
+    given = np.array([3, 1, 4], dtype=np.int64)
+    r = op.restrict(given)
+    y = np.arange(op.shape[0], dtype=np.float32)
+    before = r.rmatvec(y)
+    given[:] = 0
+    assert np.array_equal(r.rmatvec(y), before)
+    assert not r.voxels.flags.writeable

@@ -1,6 +1,6 @@
 //! Cancellation: an operator that stops working once a flag is raised, so that any solver
-//! running on it (its observed iterations and the unobserved work between them: power
-//! iterations, support pursuits, least-squares refits) ends within one application.
+//! running on it (its observed iterations and the unobserved work between them: the norm
+//! estimate, support pursuits, least-squares refits) ends within one application.
 //!
 //! Once the flag is raised every application writes zeros, which makes the rest of a solver's
 //! work take no time; what the solver returns then means nothing, and the caller that raised

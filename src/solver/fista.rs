@@ -1,5 +1,5 @@
-//! FISTA for the lasso, optionally nonnegative, with a step from the norm estimate or backtracking and
-//! adaptive restart.
+//! FISTA for the lasso, optionally nonnegative, with a step from the norm estimate or
+//! backtracking and adaptive restart.
 
 use std::ops::ControlFlow;
 

@@ -10,8 +10,8 @@
 //! * [`Group::DotTest`]: the dot-test gap |⟨Ax, y⟩ − ⟨x, A*y⟩| / max(‖Ax‖‖y‖, ‖x‖‖A*y‖) of the
 //!   same operators ([`DotTest`](crate::operator::DotTest)), in `f32` and `f64`.
 //! * [`Group::Conditioning`]: the extreme singular values of A restricted to the columns of a
-//!   scene's true support, from compressive to redundant pulse lengths, by the Lanczos iteration and
-//!   inverse iteration, checked against the eigenvalues of the dense Gram matrix.
+//!   scene's true support, from compressive to redundant pulse lengths, by the Lanczos iteration
+//!   and inverse iteration, checked against the eigenvalues of the dense Gram matrix.
 //! * [`Group::Solvers`]: every [`Method`] through [`reconstruct`](crate::recon::reconstruct) and
 //!   [`compare`](crate::recon::compare) on the paper scene under hard conditions: amplitudes
 //!   spanning 10⁻⁶…1, a pulse of duty cycle 0.05, ternary codes with P(0) = 0.9, and Gaussian
