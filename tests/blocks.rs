@@ -14,7 +14,7 @@ use rdlidar::Error;
 use crate::reconstruct::{measure, problem};
 
 /// ‖a − b‖∞ relative to ‖b‖∞.
-fn gap(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn gap(a: &[f64], b: &[f64]) -> f64 {
     let top = b
         .iter()
         .fold(0.0f64, |m, v| m.max(v.abs()))
@@ -29,7 +29,7 @@ fn gap(a: &[f64], b: &[f64]) -> f64 {
 /// The coarse operator of `op` for `block` against its definition A·U: the dot test, the dense
 /// path through A on upsampled scenes, and the restriction to a support (the blocks' summed
 /// codes) against the dense path in both directions.
-fn check_coarse(op: &dyn LidarOperator<f64>, block: (usize, usize)) {
+pub(crate) fn check_coarse(op: &dyn LidarOperator<f64>, block: (usize, usize)) {
     let g = op.geometry();
     let b = BlockOperator::new(op, block).unwrap();
     let (gm, gn) = b.grid();
@@ -99,7 +99,7 @@ fn the_coarse_operators_column_queries_match_its_applications() {
 
 /// The column queries of the coarse operator of `op` (and of `op` itself) against its
 /// applications.
-fn check_columns(op: &dyn LidarOperator<f64>, block: (usize, usize)) {
+pub(crate) fn check_columns(op: &dyn LidarOperator<f64>, block: (usize, usize)) {
     let g = op.geometry();
     let b = BlockOperator::new(op, block).unwrap();
     let ks = g.ks;

@@ -472,3 +472,38 @@ fn a_false_rate_runs_the_detection_test_and_bad_rates_are_refused() {
     );
     assert!(outputs(&dir).is_empty());
 }
+
+#[test]
+fn the_photon_noise_model_reports_its_weighting_and_bad_models_are_refused() {
+    // Noise-free: the estimate explains the data, so nothing is reweighted and the line says so.
+    let dir = TempDir::new("photon");
+    let sim = simulate(&dir, 300);
+    let truth = sim.join("scene.npy");
+    let out = reconstruct(
+        &dir,
+        &sim,
+        "auto",
+        &[
+            "--truth",
+            s(&truth),
+            "--noise",
+            "photon",
+            "--background",
+            "0.5",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("photon-noise weighting"), "{text}");
+    assert!(text.contains("not reweighted"), "{text}");
+    assert!(text.contains("exact depth 100.0%"), "{text}");
+    let _ = std::fs::remove_file(dir.path("depth.npy"));
+    let _ = std::fs::remove_file(dir.path("xh.npy"));
+    refused_values(&dir, &sim, "--noise", &["poisson", "", "1"]);
+    refused_values(&dir, &sim, "--background", &["-1", "nan", "inf", "abc"]);
+    // A background without the photon model is a mistake, not ignored.
+    let out = reconstruct(&dir, &sim, "auto", &["--background", "1"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("--background"), "{}", stderr(&out));
+    assert!(outputs(&dir).is_empty());
+}

@@ -82,6 +82,13 @@ def _optional_float(value, name: str) -> Optional[float]:
     return None if value is None else _float(value, name)
 
 
+def _noise(noise) -> str:
+    """``noise=``: "gaussian" or "photon"."""
+    if not isinstance(noise, str):
+        raise TypeError(f"noise: expected \"gaussian\" or \"photon\", got {noise!r:.40}")
+    return noise
+
+
 def _tiles(tiles) -> Optional[Tuple[int, int]]:
     """``tiles=(A, B)``: a tile of A rows and B columns of pixels, or None."""
     if tiles is None:
@@ -624,6 +631,8 @@ def reconstruct(
     stream_codes: bool = False,
     clipped=None,
     false_rate: Optional[float] = None,
+    noise: str = "gaussian",
+    background: Optional[float] = None,
 ):
     """Reconstructs a scene from the measurements of any architecture, as
     ``rdlidar reconstruct`` does.
@@ -655,6 +664,14 @@ def reconstruct(
         return with probability at most ``false_rate`` under white Gaussian noise (it holds the
         rate where the residual is noise, not with a few measurements per lit pixel). The
         report then gives ``detection`` (false_rate, bar, sigma, tested, dropped, skipped).
+    noise : the noise model that sets the data term, as ``--noise``: ``"gaussian"`` (least
+        squares) or ``"photon"`` (each sample's variance proportional to the light it receives
+        plus ``background``: the solver runs, its estimate gives every sample's light, and it
+        runs again on the samples weighted by 1/sqrt(variance) when its residual's variance
+        grows with the light). The report then gives ``photon`` (background, scale, slope_z,
+        light_share, gain, skipped).
+    background : with ``noise="photon"``, the ambient light and dark counts per sample in the
+        units of the scene's light (as ``simulate(background=)``; default 0).
 
     Returns ``(depth, scene, report)``: ``depth`` (M, N) int32 depth bins (-1 where no return,
     -2 for pixels no code reaches), ``scene`` (M, N, K_s) with every return found, and
@@ -684,6 +701,7 @@ def reconstruct(
     depth, scene, report = _rdlidar.reconstruct(
         op._core, y.reshape(-1), solver, max_iter, callback, _int(seed, "seed"),
         bool(fill_unobserved), _clipped(clipped), _optional_float(false_rate, "false_rate"),
+        _noise(noise), _optional_float(background, "background"),
     )
     return depth, scene.reshape(op.scene_shape), report
 

@@ -28,7 +28,7 @@ use rdlidar::lidar::{
     Geometry, Scene, SimulationSpec, TileSize, DEFAULT_TAU_S,
 };
 use rdlidar::operator::{BoxedOperator, DotTest, LinearOperator};
-use rdlidar::recon::{compare, Method, ReconstructOptions, TileReconstruction};
+use rdlidar::recon::{compare, Method, NoiseModel, ReconstructOptions, TileReconstruction};
 use rdlidar::solver::{
     fista as fista_solver, Control, FistaParams, IterationInfo, Lambda, Report, Restart, StepRule,
     Stopping,
@@ -864,7 +864,7 @@ fn run_fista<'py, T: Real + numpy::Element>(
 
 /// Runs a reconstruction method on any architecture; returns (depth, scene, report).
 #[pyfunction]
-#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false, clipped=None, false_rate=None))]
+#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false, clipped=None, false_rate=None, noise="gaussian", background=None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct<'py>(
     py: Python<'py>,
@@ -877,7 +877,10 @@ fn reconstruct<'py>(
     fill_unobserved: bool,
     clipped: Option<&str>,
     false_rate: Option<f64>,
+    noise: &str,
+    background: Option<f64>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let noise = noise_model(noise, background)?;
     let method: Method = solver
         .parse()
         .map_err(|e: rdlidar::Error| PyValueError::new_err(format!("solver: {e}")))?;
@@ -900,6 +903,7 @@ fn reconstruct<'py>(
         max_iter,
         seed,
         false_rate,
+        noise,
         ..ReconstructOptions::default()
     };
     // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
@@ -1056,7 +1060,35 @@ fn single_report<'py, T>(
         d.set_item("skipped", t.skipped)?;
         report.set_item("detection", d)?;
     }
+    if let Some(p) = &r.photon {
+        let d = PyDict::new(py);
+        d.set_item("background", p.background)?;
+        d.set_item("scale", p.scale)?;
+        d.set_item("slope_z", p.slope_z)?;
+        d.set_item("light_share", p.light_share)?;
+        d.set_item("gain", p.gain)?;
+        d.set_item("skipped", p.skipped)?;
+        report.set_item("photon", d)?;
+    }
     Ok(())
+}
+
+/// `noise=` and `background=`: the noise model of the data term.
+fn noise_model(noise: &str, background: Option<f64>) -> PyResult<NoiseModel> {
+    let model: NoiseModel = noise.parse().map_err(value_error)?;
+    match (model, background) {
+        (NoiseModel::Photon { .. }, b) => {
+            let model = NoiseModel::Photon {
+                background: b.unwrap_or(0.0),
+            };
+            model.validate().map_err(value_error)?;
+            Ok(model)
+        }
+        (NoiseModel::Gaussian, Some(_)) => Err(PyValueError::new_err(
+            "background: only with noise=\"photon\"",
+        )),
+        (NoiseModel::Gaussian, None) => Ok(model),
+    }
 }
 
 fn scene_of(a: &PyReadonlyArray3<'_, f64>, what: &str) -> PyResult<Scene<f64>> {

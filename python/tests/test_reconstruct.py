@@ -155,3 +155,28 @@ def test_a_false_rate_tests_each_return_and_is_reported():
                        (-0.5, ValueError), ("0.1", TypeError), (True, TypeError)]:
         with pytest.raises(error, match="false_rate"):
             rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16, false_rate=bad)
+
+
+def test_the_photon_noise_model_reweights_by_the_light_and_is_reported():
+    # 2.4 measurements per lit pixel under photon noise (20 per unit of intensity): the
+    # residual's variance grows with the light, the estimate is refined on the weighted rows.
+    sim = rdlidar.simulate("paper", size=(32, 32, 16), pulse_len=1305, seed=42, photons=20.0)
+    _, plain, _ = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16)
+    _, scene, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16, noise="photon")
+    p = report["photon"]
+    assert p["skipped"] is None and p["gain"] > 1.2 and p["slope_z"] >= 3.0
+    assert p["background"] == 0.0 and 0.0 < p["light_share"] <= 1.0
+    weighted = rdlidar.metrics(sim.scene, scene)
+    unweighted = rdlidar.metrics(sim.scene, plain)
+    assert weighted["relative_error"] < unweighted["relative_error"]
+    assert weighted["exact_fraction"] > unweighted["exact_fraction"]
+    assert "photon" not in rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16)[2]
+    for kwargs, error, name in [({"noise": "poisson"}, ValueError, "noise"),
+                                ({"noise": 1}, TypeError, "noise"),
+                                ({"noise": "photon", "background": -1.0}, ValueError,
+                                 "background"),
+                                ({"noise": "photon", "background": float("nan")}, ValueError,
+                                 "background"),
+                                ({"background": 1.0}, ValueError, "background")]:
+        with pytest.raises(error, match=name):
+            rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 16, **kwargs)

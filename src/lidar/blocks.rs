@@ -35,8 +35,12 @@ pub struct BlockOperator<'a, T: Real> {
     pulse0: Vec<f64>,
     /// The pulse's autocorrelation at lags 0..K_s.
     lags: Vec<f64>,
-    /// Each block's mean squared code, summed over the code sets.
+    /// Each block's mean squared code, summed over the code sets (weighted by the squared row
+    /// weights when A's rows are weighted).
     power: Vec<f64>,
+    /// A's row weights ([`LidarOperator::row_weights`]), in f64: the support applications and
+    /// column queries weight the rows as A's applications do.
+    weights: Option<Vec<f64>>,
 }
 
 impl<'a, T: Real> BlockOperator<'a, T> {
@@ -79,6 +83,9 @@ impl<'a, T: Real> BlockOperator<'a, T> {
                 }
             }
         });
+        let weights: Option<Vec<f64>> = op
+            .row_weights()
+            .map(|w| w.iter().map(|v| v.as_f64()).collect());
         let pulse: Vec<f64> = op.pulse().iter().map(|v| v.as_f64()).collect();
         let pulse0 = zero_mean(&pulse);
         let kp = pulse.len();
@@ -94,12 +101,18 @@ impl<'a, T: Real> BlockOperator<'a, T> {
                 (0..sets)
                     .map(|set| {
                         let c = &codes[(set * blocks + b) * k..][..k];
-                        c.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / k.max(1) as f64
+                        let u = |t: usize| weights.as_ref().map_or(1.0, |w| w[set * k + t].powi(2));
+                        c.iter()
+                            .enumerate()
+                            .map(|(t, &v)| f64::from(v).powi(2) * u(t))
+                            .sum::<f64>()
+                            / k.max(1) as f64
                     })
                     .sum()
             })
             .collect();
         Ok(BlockOperator {
+            weights,
             lags,
             power,
             sets,
@@ -174,7 +187,13 @@ impl<'a, T: Real> BlockOperator<'a, T> {
         &self.codes[(set * blocks + b) * self.k..][..self.k]
     }
 
-    /// Σ_sets Σ_t c_B[d + t]²·p[t]·q[t + lag] over the overlap, for block b, depth d.
+    /// The weight of row `row` (1 when A's rows are not weighted).
+    fn row_weight(&self, row: usize) -> f64 {
+        self.weights.as_ref().map_or(1.0, |w| w[row])
+    }
+
+    /// Σ_sets Σ_t c_B[d + t]²·w[d + t]²·p[t]·q[t + lag] over the overlap, for block b, depth d
+    /// (w the row weights of the set's rows, 1 when unweighted).
     fn weighted(&self, b: usize, d: usize, lag: isize, q: &[f64]) -> f64 {
         let kp = self.pulse.len() as isize;
         let lo = 0.max(-lag);
@@ -185,7 +204,7 @@ impl<'a, T: Real> BlockOperator<'a, T> {
                 (lo..hi)
                     .map(|t| {
                         let t = t as usize;
-                        let w = f64::from(c[t]);
+                        let w = f64::from(c[t]) * self.row_weight(set * self.k + d + t);
                         w * w * self.pulse[t] * q[(t as isize + lag) as usize]
                     })
                     .sum::<f64>()
@@ -298,8 +317,8 @@ impl<T: Real> VoxelOperator<T> for BlockOperator<'_, T> {
         for set in 0..self.sets {
             let codes = &self.block_codes(set, b)[d..];
             let out = &mut values[set * self.k..set * self.k + kp];
-            for ((o, v), &s) in out.iter_mut().zip(&self.pulse).zip(codes) {
-                *o = f64::from(s) * v;
+            for (t, ((o, v), &s)) in out.iter_mut().zip(&self.pulse).zip(codes).enumerate() {
+                *o = f64::from(s) * v * self.row_weight(set * self.k + d + t);
             }
         }
         (d, values)
@@ -367,8 +386,8 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
                     a
                 },
             );
-        for (yi, s) in y.iter_mut().zip(sums) {
-            *yi = T::of_f64(s);
+        for (i, (yi, s)) in y.iter_mut().zip(sums).enumerate() {
+            *yi = T::of_f64(s * self.op.row_weight(i));
         }
     }
 
@@ -384,7 +403,11 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
                     c.iter()
                         .zip(&self.op.pulse)
                         .zip(&y[set * k + d..set * k + d + kp])
-                        .map(|((&ct, &pt), yt)| f64::from(ct) * pt * yt.as_f64())
+                        .enumerate()
+                        .map(|(t, ((&ct, &pt), yt))| {
+                            let w = self.op.row_weight(set * k + d + t);
+                            f64::from(ct) * pt * yt.as_f64() * w
+                        })
                         .sum::<f64>()
                 })
                 .sum();

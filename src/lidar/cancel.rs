@@ -200,6 +200,10 @@ where
         self.inner.whole_code_sets()
     }
 
+    fn row_weights(&self) -> Option<&[T]> {
+        self.inner.row_weights()
+    }
+
     fn regime(&self) -> Regime {
         self.inner.regime()
     }

@@ -65,6 +65,13 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
         None
     }
 
+    /// The weights w of an operator whose rows are weighted, W·A with W = diag(w)
+    /// ([`RowWeighted`](super::RowWeighted)), one per row; `None` (the default) for unweighted
+    /// rows. Operators built from [`whole_code_sets`](Self::whole_code_sets) apply them too.
+    fn row_weights(&self) -> Option<&[T]> {
+        None
+    }
+
     /// The regime of the measurements against the unknowns (eq. 8–9, with every ADC's rows),
     /// those of every part when the unknowns are split ([`space`](LinearOperator::space)).
     fn regime(&self) -> Regime {
@@ -119,6 +126,9 @@ macro_rules! forward_lidar {
             }
             fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
                 (**self).whole_code_sets()
+            }
+            fn row_weights(&self) -> Option<&[T]> {
+                (**self).row_weights()
             }
             fn regime(&self) -> Regime {
                 (**self).regime()
@@ -180,6 +190,9 @@ impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Counted<A> {
     }
     fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
         self.inner().whole_code_sets()
+    }
+    fn row_weights(&self) -> Option<&[T]> {
+        self.inner().row_weights()
     }
     fn regime(&self) -> Regime {
         self.inner().regime()

@@ -23,6 +23,7 @@ mod seeded;
 mod simulate;
 mod streamed;
 mod support;
+mod weighted;
 
 pub use architectures::{
     aperture_pixels, coded_aperture, multi_adc, pixel_groups, tiles, Architecture, TileSize,
@@ -64,3 +65,4 @@ pub use simulate::{
 };
 pub use streamed::{StreamedOperator, STREAM_BLOCK_BYTES};
 pub use support::SupportOperator;
+pub use weighted::RowWeighted;

@@ -17,6 +17,7 @@ use crate::space::{self, Space};
 
 use super::names::{by_name, name_of, names, values};
 use super::peaks::{backproject, PeakThreshold};
+use super::photon::NoiseModel;
 use super::pursuit::{support_pursuit, PURSUIT_ROUNDS};
 use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
 
@@ -163,6 +164,11 @@ pub struct ReconstructOptions {
     /// where the residual is noise, not with a few measurements per lit pixel). `None`
     /// (default): no test.
     pub false_rate: Option<f64>,
+    /// The noise model that sets the data term (default [`NoiseModel::Gaussian`], ordinary
+    /// least squares). [`NoiseModel::Photon`] runs the method twice: the second time on the
+    /// rows weighted by the inverse standard deviations that the first estimate's light gives
+    /// ([`PhotonWeighting`](super::PhotonWeighting)).
+    pub noise: NoiseModel,
 }
 
 impl Default for ReconstructOptions {
@@ -176,6 +182,7 @@ impl Default for ReconstructOptions {
             debias: true,
             max_returns: Some(1),
             false_rate: None,
+            noise: NoiseModel::Gaussian,
         }
     }
 }

@@ -10,6 +10,7 @@ mod method;
 mod metrics;
 mod names;
 mod peaks;
+mod photon;
 mod pursuit;
 mod reconstruct;
 mod refit;
@@ -23,6 +24,7 @@ pub use metrics::{
     compare, compare_depth, compare_observed, relative_error, Metrics, ObservedComparison,
 };
 pub use peaks::{PeakThreshold, PAPER_FRACTION, PAPER_QUANTILE};
+pub use photon::{NoiseModel, PhotonWeighting};
 pub use pursuit::explained_tolerance;
 pub use reconstruct::{
     is_piecewise_smooth, reconstruct, reconstruct_observed, Reconstruction, SMOOTH_BINS,

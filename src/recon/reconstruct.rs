@@ -11,14 +11,15 @@
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
-use crate::lidar::{DepthMap, LidarOperator, Regime, Scene, NO_RETURN};
+use crate::lidar::{DepthMap, LidarOperator, Regime, RowWeighted, Scene, NO_RETURN};
 use crate::real::Real;
-use crate::solver::{Observer, Report};
+use crate::solver::{refine_surfaces, Observer, RefineParams, Report};
 
 use super::auto::{auto, Stage};
 use super::detect::{check_false_rate, false_rate_test, DetectionTest};
 use super::method::{run, Method, ReconstructOptions};
 use super::peaks::returns;
+use super::photon::{photon_weights, NoiseModel, PhotonWeighting};
 
 /// Fraction of the lit pixels of a depth map that must have a lit 4-neighbour within
 /// [`SMOOTH_BINS`] of their depth for the map to count as piecewise smooth
@@ -54,6 +55,10 @@ pub struct Reconstruction<T> {
     /// (`None` otherwise, and for the tiles of an array whose tiles were dealt to several
     /// processes: their summaries are not gathered).
     pub detection: Option<DetectionTest>,
+    /// What the photon-noise weighting found, when [`ReconstructOptions::noise`] is
+    /// [`NoiseModel::Photon`] (`None` otherwise, and for the tiles
+    /// of an array whose tiles were dealt to several processes). Boxed: it is rarely there.
+    pub photon: Option<Box<PhotonWeighting>>,
 }
 
 /// Reconstructs a scene from the measurements `y = A x` of the lidar operator `op`.
@@ -142,22 +147,63 @@ pub fn reconstruct_observed<T: Real>(
     }
     let g = op.geometry();
     let regime = op.regime();
-    let (mut x, method_used, mut report, stages) = if method == Method::Auto {
-        let a = auto(op, y, options, observer)?;
-        (a.x, a.method_used, a.report, a.stages)
-    } else {
-        let (x, report) = run(op, y, method, options, observer)?;
-        // The backprojections already keep one thresholded peak per pixel.
-        let x = if report.is_some() {
-            returns(op.space(), &x, g)
-        } else {
-            x
-        };
-        (x, method, report, Vec::new())
+    options.noise.validate()?;
+    let photon_model = match options.noise {
+        NoiseModel::Photon { background } => Some(background),
+        NoiseModel::Gaussian => None,
     };
-    let detection = match options.false_rate {
-        Some(alpha) => Some(false_rate_test(op, y, &mut x, alpha, &mut report)?),
-        None => None,
+    if photon_model.is_some() && op.whole_code_sets().is_none() {
+        return Err(Error::param(
+            "noise",
+            "the photon-noise model needs the codes in memory and the whole scene in one process",
+        ));
+    }
+    let (mut x, method_used, mut report, mut stages) = solve(op, y, method, options, observer)?;
+    let mut photon = None;
+    let mut weighted = None;
+    if let Some(background) = photon_model {
+        let (found, weights) = photon_weights(op, y, &x, background, &mut report)?;
+        photon = Some(Box::new(found));
+        if let Some(w) = weights {
+            let wop = RowWeighted::new(op, w)?;
+            let yw: Vec<T> = y.iter().zip(wop.weights()).map(|(a, b)| *a * *b).collect();
+            let later = if one_return_per_pixel(method_used, options) {
+                // The per-pixel solvers' statistics assume rows of one variance: the estimate is
+                // refined on the weighted data term instead, its depths and amplitudes.
+                let grid = (g.m, g.n);
+                Some(refine_surfaces(
+                    &wop,
+                    grid,
+                    &yw,
+                    &mut x,
+                    &RefineParams::default(),
+                )?)
+            } else {
+                let second = solve(&wop, &yw, method, options, observer)?;
+                x = second.0;
+                for stage in &mut stages {
+                    stage.kept = false;
+                }
+                stages.extend(second.3);
+                second.2
+            };
+            report = match (report, later) {
+                (Some(mut first), Some(later)) => {
+                    first.absorb(later);
+                    Some(first)
+                }
+                (first, later) => later.or(first),
+            };
+            weighted = Some((wop, yw));
+        }
+    }
+    // The detection test on the data term the estimate was fitted with.
+    let detection = match (options.false_rate, &weighted) {
+        (Some(alpha), Some((wop, yw))) => {
+            Some(false_rate_test(wop, yw, &mut x, alpha, &mut report)?)
+        }
+        (Some(alpha), None) => Some(false_rate_test(op, y, &mut x, alpha, &mut report)?),
+        (None, _) => None,
     };
     let scene = Scene::from_vec(g, x)?;
     let mut depth = scene.depth_map();
@@ -173,7 +219,45 @@ pub fn reconstruct_observed<T: Real>(
         stages,
         elapsed: start.elapsed(),
         detection,
+        photon,
     })
+}
+
+/// Whether `method`'s estimate holds at most one return per pixel from a per-pixel model (the
+/// model-based solvers with one return, TV, the coarse grid, message passing): its photon-noise
+/// pass refines it rather than running it again.
+fn one_return_per_pixel(method: Method, options: &ReconstructOptions) -> bool {
+    match method {
+        Method::ModelBased => options.max_returns == Some(1),
+        Method::Tv | Method::CoarseToFine | Method::Amp => true,
+        _ => false,
+    }
+}
+
+/// The method's estimate reduced to its returns, the method used, its report and (for
+/// [`Method::Auto`]) its stages.
+type Solved<T> = (Vec<T>, Method, Option<Report>, Vec<Stage>);
+
+/// Runs `method` (auto's escalation, or one method with its returns extracted).
+fn solve<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    method: Method,
+    options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
+) -> Result<Solved<T>> {
+    if method == Method::Auto {
+        let a = auto(op, y, options, observer)?;
+        return Ok((a.x, a.method_used, a.report, a.stages));
+    }
+    let (x, report) = run(op, y, method, options, observer)?;
+    // The backprojections already keep one thresholded peak per pixel.
+    let x = if report.is_some() {
+        returns(op.space(), &x, op.geometry())
+    } else {
+        x
+    };
+    Ok((x, method, report, Vec::new()))
 }
 
 /// Whether at least [`SMOOTH_FRACTION`] of the lit pixels of `depth` have a lit 4-neighbour

@@ -498,6 +498,7 @@ pub(crate) fn decode_tiles<T: Real>(
             report,
             stages: Vec::new(),
             elapsed: seconds(head[8]),
+            photon: None,
             detection: None,
         };
         out.push(TileReconstruction {

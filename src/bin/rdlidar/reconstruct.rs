@@ -11,8 +11,8 @@ use rdlidar::lidar::{
     depth_bin_m, Architecture, DepthMap, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED,
 };
 use rdlidar::recon::{
-    compare, compare_observed, Method, PeakThreshold, ReconstructOptions, Reconstruction,
-    TileReconstruction, MAX_RETURNS_ESTIMATE,
+    compare, compare_observed, Method, NoiseModel, PeakThreshold, ReconstructOptions,
+    Reconstruction, TileReconstruction, MAX_RETURNS_ESTIMATE,
 };
 use rdlidar::Real;
 
@@ -119,6 +119,39 @@ pub struct ReconstructArgs {
     /// (several measurements per return); with a few per lit pixel it does not.
     #[arg(long, value_name = "ALPHA", value_parser = parse_false_rate)]
     pub false_rate: Option<f64>,
+    /// The noise model that sets the data term: gaussian (one variance for every sample:
+    /// least squares) or photon (each sample's variance proportional to the light it receives
+    /// plus --background: the solver runs, its estimate gives every sample's light, and it runs
+    /// again on the samples weighted by 1/√variance when its residual's variance grows with the
+    /// light; needs the codes in memory and the whole scene in one process).
+    #[arg(long, value_name = "MODEL", value_parser = parse_noise, default_value = "gaussian")]
+    pub noise: NoiseModel,
+    /// With --noise photon: the ambient light and dark counts per sample, in the units of the
+    /// scene's light (those of `simulate --background`; default 0).
+    #[arg(long, value_name = "B", value_parser = parse_background)]
+    pub background: Option<f64>,
+}
+
+/// A `--background` value: finite and ≥ 0.
+fn parse_background(text: &str) -> Result<f64, String> {
+    let b: f64 = text
+        .parse()
+        .map_err(|_| format!("expected a number >= 0, got {text:?}"))?;
+    NoiseModel::Photon { background: b }
+        .validate()
+        .map_err(|e| match e {
+            rdlidar::Error::InvalidParameter { reason, .. } => reason,
+            e => e.to_string(),
+        })?;
+    Ok(b)
+}
+
+/// A `--noise` model name.
+fn parse_noise(text: &str) -> Result<NoiseModel, String> {
+    text.parse::<NoiseModel>().map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { reason, .. } => reason,
+        e => e.to_string(),
+    })
 }
 
 /// A `--false-rate` value: a number strictly between 0 and 1.
@@ -243,6 +276,15 @@ fn reconstruct_files<T: Real + WritableElement>(
     let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
     let (acq, y, censoring) = censor_inputs(a.clipped, ranks, acq, y)?;
     let g = acq.whole_geometry();
+    let noise = match (a.noise, a.background) {
+        (NoiseModel::Photon { .. }, b) => NoiseModel::Photon {
+            background: b.unwrap_or(0.0),
+        },
+        (NoiseModel::Gaussian, Some(_)) => {
+            return Err("--background: only with --noise photon".to_string().into())
+        }
+        (NoiseModel::Gaussian, None) => NoiseModel::Gaussian,
+    };
     let options = ReconstructOptions {
         max_iter: a.max_iter,
         progress: !globals.quiet && ranks.is_first(),
@@ -252,6 +294,7 @@ fn reconstruct_files<T: Real + WritableElement>(
         debias: !a.no_debias,
         max_returns: a.returns.0,
         false_rate: a.false_rate,
+        noise,
     };
     let kp = acq.pulse_len();
     let count = acq.rows().unwrap_or(1);
@@ -462,6 +505,7 @@ impl<T: Real> Outcome<T> {
             .iter()
             .enumerate()
             .map(|(i, stage)| format!("auto stage {}: {stage}", i + 1))
+            .chain(r.photon.as_ref().map(|p| p.describe()))
             .chain(r.detection.as_ref().map(|t| t.describe()))
             .collect();
         Outcome {
@@ -504,7 +548,20 @@ impl<T: Real> Outcome<T> {
             .iter()
             .filter_map(|t| t.reconstruction.detection.as_ref())
             .collect();
-        let details = match tests.first() {
+        let weighted: Vec<_> = r
+            .tiles
+            .iter()
+            .filter_map(|t| t.reconstruction.photon.as_ref())
+            .collect();
+        let photon = (!weighted.is_empty()).then(|| {
+            format!(
+                "photon-noise weighting in {} of {} tiles: reweighted {}",
+                weighted.len(),
+                r.tiles.len(),
+                weighted.iter().filter(|p| p.skipped.is_none()).count()
+            )
+        });
+        let mut details = match tests.first() {
             None => Vec::new(),
             Some(first) => vec![format!(
                 "false-detection test at α = {} in {} of {} tiles: dropped {} of {} returns \
@@ -517,6 +574,7 @@ impl<T: Real> Outcome<T> {
                 tests.iter().filter(|t| t.skipped.is_some()).count()
             )],
         };
+        details.extend(photon);
         Outcome {
             method,
             chosen,
