@@ -1,7 +1,7 @@
 //! The photon-noise data term: least squares weighted by each sample's light.
 
 use rdlidar::lidar::{
-    simulate, Geometry, PhotonNoise, Pulse, RdOperator, SeededCodes, SimulationSpec,
+    simulate, Geometry, PhotonNoise, Pulse, RdOperator, SceneSpec, SeededCodes, SimulationSpec,
     StreamedOperator,
 };
 use rdlidar::recon::{compare, reconstruct, Method, Metrics, NoiseModel, ReconstructOptions};
@@ -17,7 +17,20 @@ fn simulated(
     photons: Option<f64>,
     snr_db: Option<f64>,
 ) -> (RdOperator<f64>, Vec<f64>, rdlidar::lidar::Scene<f64>) {
+    simulated_scene(SceneSpec::Paper, g, kp, seed, photons, snr_db)
+}
+
+/// [`simulated`] of another scene.
+fn simulated_scene(
+    scene: SceneSpec,
+    g: Geometry,
+    kp: usize,
+    seed: u64,
+    photons: Option<f64>,
+    snr_db: Option<f64>,
+) -> (RdOperator<f64>, Vec<f64>, rdlidar::lidar::Scene<f64>) {
     let spec = SimulationSpec {
+        scene,
         photon_noise: photons.map(|photons| PhotonNoise {
             photons,
             background: 0.0,
@@ -134,4 +147,54 @@ fn bad_noise_models_are_refused() {
     let streamed = StreamedOperator::new(g, pulse, seeded, 0).unwrap();
     let e = reconstruct(&streamed, &y, Method::Auto, &photon(0.0)).unwrap_err();
     assert!(e.to_string().contains("noise"), "{e}");
+}
+
+#[test]
+fn estimates_the_weighted_pass_does_not_model_are_kept_as_they_are() {
+    // A semi-transparent scene (up to three returns per pixel) under photon noise: the
+    // model-based solver with three returns leaves pixels with several, which the refinement
+    // (one return per pixel) would cut down; the backprojection fits no data term. Both are
+    // returned as the unweighted run gives them, and the weighting says why.
+    let g = Geometry::new(12, 12, 12).unwrap();
+    let (op, y, _) = simulated_scene(SceneSpec::Transparent, g, 2400, 7, Some(200.0), None);
+    let several = ReconstructOptions {
+        max_returns: Some(3),
+        ..ReconstructOptions::default()
+    };
+    let weighted = ReconstructOptions {
+        noise: NoiseModel::Photon { background: 0.0 },
+        ..several
+    };
+    let a = reconstruct(&op, &y, Method::ModelBased, &several).unwrap();
+    let b = reconstruct(&op, &y, Method::ModelBased, &weighted).unwrap();
+    let multi = |x: &[f64]| {
+        x.chunks(12)
+            .filter(|c| c.iter().filter(|v| **v != 0.0).count() > 1)
+            .count()
+    };
+    assert!(multi(a.scene.as_slice()) > 0);
+    let p = b.photon.as_ref().unwrap();
+    assert!(
+        p.skipped.is_some_and(|why| why.contains("several returns")),
+        "{}",
+        p.describe()
+    );
+    assert_eq!(a.scene, b.scene);
+    assert_eq!(b.method_used, Method::ModelBased);
+    let c = reconstruct(&op, &y, Method::BackprojectionDebiased, &photon(0.0)).unwrap();
+    let d = reconstruct(
+        &op,
+        &y,
+        Method::BackprojectionDebiased,
+        &ReconstructOptions::default(),
+    )
+    .unwrap();
+    if let Some(p) = c.photon.as_ref().filter(|p| p.slope_z >= 3.0) {
+        assert!(
+            p.skipped.is_some_and(|why| why.contains("backprojections")),
+            "{}",
+            p.describe()
+        );
+    }
+    assert_eq!(c.scene, d.scene);
 }

@@ -14,7 +14,8 @@ map (``--depth-png FILE`` and optionally ``--reflectivity-png FILE``, scene "png
 takes its height and width from the file, and only K_s from the option).
 
 Several builds can be compared in one run (``--bin before=PATH --bin after=PATH``), each build on
-the same files, simulated by the first. Prints one markdown table per scene and build.
+the same files, simulated by the first. Prints one markdown table per scene and build. With
+``--photon-model`` the photon-noise columns are reconstructed with ``--noise photon``.
 
     python python/benchmarks/phase_diagram.py --bin rdlidar=target/release/rdlidar
 """
@@ -111,12 +112,12 @@ def judge(d, truth):
     return 100 * exact, 100 * near, 100 * false
 
 
-def reconstruct(binary, d, ks, truth):
+def reconstruct(binary, d, ks, truth, extra=()):
     t0 = time.perf_counter()
     run(
         [binary, "reconstruct", "--pulse", f"{d}/pulse.npy", "--codes", f"{d}/codes.npy",
          "--meas", f"{d}/meas.npy", "--depth-bins", str(ks), "--solver", "auto",
-         "--out-depth", f"{d}/d.npy", "--out-scene", f"{d}/x.npy", "--quiet"],
+         "--out-depth", f"{d}/d.npy", "--out-scene", f"{d}/x.npy", "--quiet", *extra],
         "reconstruct",
     )
     elapsed = time.perf_counter() - t0
@@ -134,12 +135,13 @@ def noise_flags(noise):
     return ["--snr-db", noise]
 
 
-def column(noise):
+def column(noise, photon_model=False):
     """A noise column's heading."""
     if noise is None:
         return "noise-free"
     if noise.startswith("photons="):
-        return f"photon noise, {noise.split('=', 1)[1]} per unit"
+        model = " (--noise photon)" if photon_model else ""
+        return f"photon noise, {noise.split('=', 1)[1]} per unit{model}"
     if noise.startswith("adc="):
         return f"{noise.split('=', 1)[1]}-bit ADC"
     return f"{float(noise):g} dB"
@@ -161,6 +163,9 @@ def main():
     ap.add_argument("--depth-png", help="a depth map for the scene png")
     ap.add_argument("--reflectivity-png", help="its reflectivity map (default: 1)")
     ap.add_argument("--seed", type=int, default=40)
+    ap.add_argument("--photon-model", action="store_true",
+                    help="reconstruct the photon-noise columns with --noise photon (the data "
+                         "term weighted by each sample's light)")
     args = ap.parse_args()
     bins = [b.split("=", 1) for b in (args.bin or ["rdlidar=rdlidar"])]
     m, n, ks = (int(v) for v in args.size.split("x"))
@@ -207,17 +212,20 @@ def main():
                          str(kp), "--seed", str(args.seed), *noise, "--out", d, "--quiet",
                          "--force"], "simulate")
                     truth = np.load(f"{d}/scene.npy")
+                    photon = args.photon_model and snr is not None and snr.startswith("photons=")
+                    extra = ["--noise", "photon"] if photon else []
                     for label, binary in bins:
-                        r = reconstruct(binary, d, ks, truth)
+                        r = reconstruct(binary, d, ks, truth, extra)
                         results[(scene, label, ratio, snr)] = (k, lit) + r
-                        print(f"{scene} {label} {ratio}/lit {column(snr)}: K {k}, exact {r[0]}%, "
+                        print(f"{scene} {label} {ratio}/lit {column(snr, photon)}: K {k}, "
+                              f"exact {r[0]}%, "
                               f"within one {r[1]}%, false {r[2]}% of empty, {r[3]:.1f} s",
                               file=sys.stderr, flush=True)
     for scene in args.scenes.split(","):
         for label, _ in bins:
             print(f"\n### {scene}, {sizes[scene]}, {label}\n")
             print("exact % / within one bin % / false % of empty / seconds\n")
-            head = " | ".join(column(s) for s in snrs)
+            head = " | ".join(column(s, args.photon_model) for s in snrs)
             print(f"| meas. per lit pixel (K) | {head} |")
             print("|---|" + "---|" * len(snrs))
             for ratio in ratios:

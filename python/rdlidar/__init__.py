@@ -668,8 +668,8 @@ def reconstruct(
         squares) or ``"photon"`` (each sample's variance proportional to the light it receives
         plus ``background``: the solver runs, its estimate gives every sample's light, and it
         runs again on the samples weighted by 1/sqrt(variance) when its residual's variance
-        grows with the light). The report then gives ``photon`` (background, scale, slope_z,
-        light_share, gain, skipped).
+        grows with the light). The report then gives ``photon`` (background, offset, scale,
+        slope_z, light_share, gain, skipped).
     background : with ``noise="photon"``, the ambient light and dark counts per sample in the
         units of the scene's light (as ``simulate(background=)``; default 0).
 

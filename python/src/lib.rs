@@ -1063,6 +1063,7 @@ fn single_report<'py, T>(
     if let Some(p) = &r.photon {
         let d = PyDict::new(py);
         d.set_item("background", p.background)?;
+        d.set_item("offset", p.offset)?;
         d.set_item("scale", p.scale)?;
         d.set_item("slope_z", p.slope_z)?;
         d.set_item("light_share", p.light_share)?;

@@ -9,7 +9,7 @@
 //! codes and the pulse with the squared weights inside the sums, so every lidar solver runs on it
 //! unchanged.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -40,8 +40,9 @@ pub struct RowWeighted<'a, T: Real> {
     pulse0: Vec<f64>,
     /// Every code set binary (±1, s² = 1): the column queries are the same for every pixel.
     binary: bool,
-    /// For binary codes: the self-correlations (d, j) and the Gram block (i, j), K_s × K_s each.
-    tables: OnceLock<(Vec<f64>, Vec<f64>)>,
+    /// The self-correlations (d, j) and the Gram block (i, j) with the codes taken as ±1,
+    /// K_s × K_s each: exact for binary codes, the base of the ternary Gram block.
+    tables: (Vec<f64>, Vec<f64>),
 }
 
 impl<T: Real> std::fmt::Debug for RowWeighted<'_, T> {
@@ -92,7 +93,7 @@ impl<'a, T: Real> RowWeighted<'a, T> {
         let pulse0 = zero_mean(&pulse);
         let binary = sets.iter().all(|c| c.minus_plane().is_none());
         let u = w.iter().map(|v| v.as_f64().powi(2)).collect();
-        Ok(RowWeighted {
+        let mut weighted = RowWeighted {
             op,
             w,
             u,
@@ -101,8 +102,12 @@ impl<'a, T: Real> RowWeighted<'a, T> {
             pulse,
             pulse0,
             binary,
-            tables: OnceLock::new(),
-        })
+            tables: (Vec::new(), Vec::new()),
+        };
+        // Built here, not on first use: a lazy cell filled by a parallel loop could be entered
+        // again by the same thread from the caller's parallel loop over pixels.
+        weighted.tables = weighted.build_tables();
+        Ok(weighted)
     }
 
     /// The weights.
@@ -130,21 +135,25 @@ impl<'a, T: Real> RowWeighted<'a, T> {
             .sum()
     }
 
-    /// The binary codes' tables: self-correlations with the zero-mean pulse and the Gram block.
+    /// The tables with the codes taken as ±1: self-correlations with the zero-mean pulse and the
+    /// Gram block (O(K_s²·K_p) per code set).
+    fn build_tables(&self) -> (Vec<f64>, Vec<f64>) {
+        let ks = self.op.column_len();
+        let cell = |i: usize, q: &[f64]| self.sum(None, i / ks, i % ks, q);
+        let corr = (0..ks * ks)
+            .into_par_iter()
+            .map(|i| cell(i, &self.pulse0))
+            .collect();
+        let gram = (0..ks * ks)
+            .into_par_iter()
+            .map(|i| cell(i, &self.pulse))
+            .collect();
+        (corr, gram)
+    }
+
+    /// The tables ([`build_tables`](Self::build_tables)).
     fn tables(&self) -> &(Vec<f64>, Vec<f64>) {
-        self.tables.get_or_init(|| {
-            let ks = self.op.column_len();
-            let cell = |i: usize, q: &[f64]| self.sum(None, i / ks, i % ks, q);
-            let corr = (0..ks * ks)
-                .into_par_iter()
-                .map(|i| cell(i, &self.pulse0))
-                .collect();
-            let gram = (0..ks * ks)
-                .into_par_iter()
-                .map(|i| cell(i, &self.pulse))
-                .collect();
-            (corr, gram)
-        })
+        &self.tables
     }
 
     /// `v` scaled by the weights, row by row.

@@ -356,7 +356,7 @@ fn coarse_stage<T: Real>(
 /// and more. Between 12 and 15 dB a one-reflector fit that misses a fifth of the lit pixels
 /// leaves 0.2–0.25, no more than noise alone would at 10 dB: a bar at 0.25 kept such fits (71%
 /// of the depths exact on the paper scene at 2.4 measurements per lit pixel, 12 dB and photon
-/// noise, where the coarse grid finds 96–98%).
+/// noise, where the coarse grid finds 96–99%).
 pub const COARSE_RESIDUAL: f64 = 0.12;
 
 /// [`Method::Auto`] takes a compressive scene for one with several returns per pixel, and skips the

@@ -7,10 +7,12 @@
 //! any noise that does not follow the light. Least squares weighted by 1/v has `E[v]·E[1/v]` times
 //! less variance than the unweighted fit, for columns uncorrelated with v.
 //!
-//! [`photon_weights`] estimates L from a first estimate, fits α and β to its squared residual
-//! (ordinary least squares of `r[k]²` on `L[k]`) and returns the weights w = 1/√v, unless the
-//! residual's variance does not grow with the light; the reconstruction is then run again on
-//! W·A and W·y ([`RowWeighted`](crate::lidar::RowWeighted)).
+//! [`photon_weights`] estimates L from a first estimate and returns the weights w = 1/√v with
+//! v = L + the background given (at least 5% of the mean light), unless the first estimate's
+//! squared residual does not grow with the light (the slope of its regression on L, by ordinary
+//! least squares, is the test; its intercept is not used: where the fit leaves part of the scene
+//! unexplained the residual holds more than noise, and the intercept with it). The estimate is
+//! then improved on W·A and W·y ([`RowWeighted`](crate::lidar::RowWeighted)).
 
 use crate::error::{Error, Result};
 use crate::lidar::LidarOperator;
@@ -97,6 +99,8 @@ const SLOPE_Z: f64 = 3.0;
 pub struct PhotonWeighting {
     /// The background of the model (as given).
     pub background: f64,
+    /// The offset of the weights, v = L + offset: the background, at least 5% of the mean light.
+    pub offset: f64,
     /// The variance per unit of light (plus background) the first estimate's residual shows:
     /// mean r² / mean (L + background).
     pub scale: f64,
@@ -116,10 +120,10 @@ impl PhotonWeighting {
     /// One line: the variance model and what was done with it.
     pub fn describe(&self) -> String {
         let head = format!(
-            "photon-noise weighting: variance {:.3e}·(light + {}) ({:.0}% from the scene's \
+            "photon-noise weighting: variance {:.3e}·(light + {:.3e}) ({:.0}% from the scene's \
              light; the squared residual grows with the light by {:.1} standard errors)",
             self.scale,
-            self.background,
+            self.offset,
             100.0 * self.light_share,
             self.slope_z
         );
@@ -133,11 +137,24 @@ impl PhotonWeighting {
     }
 }
 
-/// The unmodulated light of every row: for each code set, (Σ_pixels max(x, 0)) ⊛ p at its K rows.
+impl PhotonWeighting {
+    /// Marks the weights as not used, for `why`.
+    pub(super) fn skip(&mut self, why: &'static str) {
+        self.skipped = Some(why);
+        self.gain = 1.0;
+    }
+}
+
+/// The unmodulated light of every row: for each code set, (Σ_pixels max(x, 0)) ⊛ p at its K
+/// rows, over the pixels some code reaches.
 fn light<T: Real>(op: &dyn LidarOperator<T>, x: &[T]) -> Vec<f64> {
     let ks = op.geometry().ks;
+    let observed = op.observed_pixels();
     let mut per_bin = vec![0.0f64; ks];
-    for column in x.chunks(ks) {
+    for (p, column) in x.chunks(ks).enumerate() {
+        if observed.as_ref().is_some_and(|o| !o[p]) {
+            continue;
+        }
         for (s, v) in per_bin.iter_mut().zip(column) {
             *s += v.as_f64().max(0.0);
         }
@@ -173,10 +190,15 @@ pub(super) fn photon_weights<T: Real>(
     report: &mut Option<Report>,
 ) -> Result<(PhotonWeighting, Option<Vec<T>>)> {
     if y.len() != op.nrows() || x.len() != op.ncols() {
+        let (what, expected, found) = if y.len() != op.nrows() {
+            ("measurements vs operator rows", op.nrows(), y.len())
+        } else {
+            ("estimate vs operator columns", op.ncols(), x.len())
+        };
         return Err(Error::shape(
-            "photon weights: measurements vs operator rows",
-            op.nrows(),
-            y.len(),
+            format!("photon weights: {what}"),
+            expected,
+            found,
         ));
     }
     let counted = Counted::new(op);
@@ -225,9 +247,10 @@ pub(super) fn photon_weights<T: Real>(
     let offset = background.max(FLOOR_FRACTION * mean_l);
     let mut found = PhotonWeighting {
         background,
+        offset,
         scale: mean_r / (mean_l + background).max(f64::MIN_POSITIVE),
         slope_z,
-        light_share: mean_l / (mean_l + background).max(f64::MIN_POSITIVE),
+        light_share: mean_l / (mean_l + offset).max(f64::MIN_POSITIVE),
         gain: 1.0,
         skipped: None,
     };

@@ -158,44 +158,18 @@ pub fn reconstruct_observed<T: Real>(
             "the photon-noise model needs the codes in memory and the whole scene in one process",
         ));
     }
-    let (mut x, method_used, mut report, mut stages) = solve(op, y, method, options, observer)?;
+    let (mut x, method_used, mut report, stages) = solve(op, y, method, options, observer)?;
     let mut photon = None;
     let mut weighted = None;
     if let Some(background) = photon_model {
-        let (found, weights) = photon_weights(op, y, &x, background, &mut report)?;
+        let pass = PhotonPass {
+            background,
+            method: method_used,
+            options,
+        };
+        let (found, w) = pass.run(op, y, &mut x, &mut report, observer)?;
         photon = Some(Box::new(found));
-        if let Some(w) = weights {
-            let wop = RowWeighted::new(op, w)?;
-            let yw: Vec<T> = y.iter().zip(wop.weights()).map(|(a, b)| *a * *b).collect();
-            let later = if one_return_per_pixel(method_used, options) {
-                // The per-pixel solvers' statistics assume rows of one variance: the estimate is
-                // refined on the weighted data term instead, its depths and amplitudes.
-                let grid = (g.m, g.n);
-                Some(refine_surfaces(
-                    &wop,
-                    grid,
-                    &yw,
-                    &mut x,
-                    &RefineParams::default(),
-                )?)
-            } else {
-                let second = solve(&wop, &yw, method, options, observer)?;
-                x = second.0;
-                for stage in &mut stages {
-                    stage.kept = false;
-                }
-                stages.extend(second.3);
-                second.2
-            };
-            report = match (report, later) {
-                (Some(mut first), Some(later)) => {
-                    first.absorb(later);
-                    Some(first)
-                }
-                (first, later) => later.or(first),
-            };
-            weighted = Some((wop, yw));
-        }
+        weighted = w;
     }
     // The detection test on the data term the estimate was fitted with.
     let detection = match (options.false_rate, &weighted) {
@@ -223,14 +197,82 @@ pub fn reconstruct_observed<T: Real>(
     })
 }
 
-/// Whether `method`'s estimate holds at most one return per pixel from a per-pixel model (the
-/// model-based solvers with one return, TV, the coarse grid, message passing): its photon-noise
-/// pass refines it rather than running it again.
-fn one_return_per_pixel(method: Method, options: &ReconstructOptions) -> bool {
-    match method {
-        Method::ModelBased => options.max_returns == Some(1),
-        Method::Tv | Method::CoarseToFine | Method::Amp => true,
-        _ => false,
+/// The photon-noise pass after the method's estimate (`method` the method that made it).
+struct PhotonPass<'o> {
+    background: f64,
+    method: Method,
+    options: &'o ReconstructOptions,
+}
+
+/// The weighted operator and measurements of a photon-noise pass that ran.
+type Weighted<'a, T> = (RowWeighted<'a, T>, Vec<T>);
+
+impl PhotonPass<'_> {
+    /// Weights the rows by the light of the estimate `x` ([`photon_weights`]) and, unless the
+    /// residual does not call for it, replaces `x` by an estimate on the weighted data term:
+    /// the per-pixel solvers' one-return estimates are refined there ([`refine_surfaces`]: their
+    /// own statistics assume rows of one variance, and message passing on the weighted rows
+    /// fails), the generic solvers run again. The backprojections and estimates with several
+    /// returns in a pixel from the per-pixel solvers are left as they are, and so is `x` when
+    /// the weighted pass fails (other than by cancellation).
+    fn run<'a, T: Real>(
+        &self,
+        op: &'a dyn LidarOperator<T>,
+        y: &[T],
+        x: &mut Vec<T>,
+        report: &mut Option<Report>,
+        observer: &mut dyn Observer<T>,
+    ) -> Result<(PhotonWeighting, Option<Weighted<'a, T>>)> {
+        let (mut found, weights) = photon_weights(op, y, x, self.background, report)?;
+        let Some(w) = weights else {
+            return Ok((found, None));
+        };
+        let g = op.geometry();
+        let one_return = x
+            .chunks(g.ks.max(1))
+            .all(|c| c.iter().filter(|v| **v != T::zero()).count() <= 1);
+        let refine = match self.method {
+            Method::Backprojection | Method::BackprojectionDebiased => {
+                found.skip("the backprojections fit no data term");
+                return Ok((found, None));
+            }
+            Method::Tv | Method::CoarseToFine | Method::Amp | Method::ModelBased => {
+                if !one_return {
+                    found.skip("the estimate has several returns in some pixels, which the refinement does not model");
+                    return Ok((found, None));
+                }
+                true
+            }
+            _ => false,
+        };
+        let wop = RowWeighted::new(op, w)?;
+        let yw: Vec<T> = y.iter().zip(wop.weights()).map(|(a, b)| *a * *b).collect();
+        let attempt = if refine {
+            let mut refined = x.clone();
+            let params = RefineParams::default();
+            refine_surfaces(&wop, (g.m, g.n), &yw, &mut refined, &params)
+                .map(|r| (refined, Some(r)))
+        } else {
+            solve(&wop, &yw, self.method, self.options, observer).map(|s| (s.0, s.2))
+        };
+        match attempt {
+            Ok((estimate, later)) => {
+                *x = estimate;
+                *report = match (report.take(), later) {
+                    (Some(mut first), Some(later)) => {
+                        first.absorb(later);
+                        Some(first)
+                    }
+                    (first, later) => later.or(first),
+                };
+                Ok((found, Some((wop, yw))))
+            }
+            Err(e @ Error::Cancelled { .. }) => Err(e),
+            Err(_) => {
+                found.skip("the weighted pass failed, the first estimate is kept");
+                Ok((found, None))
+            }
+        }
     }
 }
 

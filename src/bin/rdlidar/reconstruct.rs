@@ -212,7 +212,21 @@ fn parse_method(text: &str) -> Result<Method, String> {
 }
 
 /// Runs `reconstruct`.
+/// The noise model of `--noise` and `--background`.
+fn noise_model(a: &ReconstructArgs) -> CliResult<NoiseModel> {
+    match (a.noise, a.background) {
+        (NoiseModel::Photon { .. }, b) => Ok(NoiseModel::Photon {
+            background: b.unwrap_or(0.0),
+        }),
+        (NoiseModel::Gaussian, Some(_)) => {
+            Err("--background: only with --noise photon".to_string().into())
+        }
+        (NoiseModel::Gaussian, None) => Ok(NoiseModel::Gaussian),
+    }
+}
+
 pub fn run(a: &ReconstructArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
+    noise_model(a)?;
     let mut inputs = a.files.inputs().to_vec();
     if let Some(t) = &a.truth {
         inputs.push((t, "--truth"));
@@ -276,15 +290,7 @@ fn reconstruct_files<T: Real + WritableElement>(
     let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
     let (acq, y, censoring) = censor_inputs(a.clipped, ranks, acq, y)?;
     let g = acq.whole_geometry();
-    let noise = match (a.noise, a.background) {
-        (NoiseModel::Photon { .. }, b) => NoiseModel::Photon {
-            background: b.unwrap_or(0.0),
-        },
-        (NoiseModel::Gaussian, Some(_)) => {
-            return Err("--background: only with --noise photon".to_string().into())
-        }
-        (NoiseModel::Gaussian, None) => NoiseModel::Gaussian,
-    };
+    let noise = noise_model(a)?;
     let options = ReconstructOptions {
         max_iter: a.max_iter,
         progress: !globals.quiet && ranks.is_first(),
