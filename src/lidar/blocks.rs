@@ -15,8 +15,8 @@ use crate::real::Real;
 use super::measurement::LidarOperator;
 use super::pulse::zero_mean;
 
-/// `A·U` for a lidar operator A over the whole scene (one ADC or several) and the upsampling U that copies each block's depth column to
-/// its pixels: the operator of the scene on the grid of blocks (⌈M/bm⌉ × ⌈N/bn⌉ pixels, K_s
+/// `A·U` for a lidar operator A over the whole scene (one ADC or several) and the upsampling U
+/// that copies each block's depth column to its pixels: the operator of the scene on the grid of blocks (⌈M/bm⌉ × ⌈N/bn⌉ pixels, K_s
 /// bins, C order). Its dense applications and correlations go through A (one application of A
 /// each, so that A's wrappers count or cancel them); its support-restricted applications and
 /// column queries use the blocks' summed codes directly.

@@ -59,8 +59,8 @@ pub enum Method {
     /// Support pursuit: greedy rounds that add each pixel's best voxel where the residual's
     /// correlation stands out of the cross-talk, solve least squares on the support and drop
     /// insignificant amplitudes, until the data are explained or a round gains less than 5%
-    /// (at most 100 rounds, a support of at most K/3 voxels). No per-pixel model: pixels may keep several returns. Exact and cheap
-    /// wherever the measurements comfortably outnumber the returns; [`Method::Auto`] runs it
+    /// (at most 100 rounds, a support of at most K/3 voxels). No per-pixel model: pixels may
+    /// keep several returns. Exact and cheap wherever the measurements comfortably outnumber the returns; [`Method::Auto`] runs it
     /// first.
     SupportLs,
     /// Message passing with the one-reflector-per-pixel prior alone

@@ -38,8 +38,9 @@ use crate::ranks::Ranks;
 /// --returns K), tv (TV on the depth map) and auto, which escalates from the cheapest:
 /// support-ls; then, when K ≥ M·N·K_s, model-based and cgls; otherwise tv, then model-based;
 /// and where several returns per pixel show (in the pursuit's support or in what the
-/// one-reflector fit leaves), model-based with k returns and fista. It keeps the first fit that explains the data (with noise, the best by an information
-/// criterion) and prints each stage it ran and why.
+/// one-reflector fit leaves), model-based with k returns and fista. It keeps the first fit
+/// that explains the data (with noise, the best by an information criterion) and prints each
+/// stage it ran and why.
 ///
 /// Every architecture of `simulate`: G code sets (G, M, N, K) with measurements (G, K) are
 /// reconstructed through the stacked operator of the G ADCs (every solver, auto too); with
