@@ -666,9 +666,9 @@ def reconstruct(
         report then gives ``detection`` (false_rate, bar, sigma, tested, dropped, skipped).
     noise : the noise model that sets the data term, as ``--noise``: ``"gaussian"`` (least
         squares) or ``"photon"`` (each sample's variance proportional to the light it receives
-        plus ``background``: the solver runs, its estimate gives every sample's light, and it
-        runs again on the samples weighted by 1/sqrt(variance) when its residual's variance
-        grows with the light). The report then gives ``photon`` (background, offset, scale,
+        plus ``background``: the solver runs, its estimate gives every sample's light, and when
+        its residual's variance grows with the light the estimate is refined (per-pixel
+        solvers) or solved again (generic ones) on the samples weighted by 1/sqrt(variance)). The report then gives ``photon`` (background, offset, scale,
         slope_z, light_share, gain, skipped).
     background : with ``noise="photon"``, the ambient light and dark counts per sample in the
         units of the scene's light (as ``simulate(background=)``; default 0).

@@ -16,10 +16,10 @@ use super::measurement::LidarOperator;
 use super::pulse::zero_mean;
 
 /// `A·U` for a lidar operator A over the whole scene (one ADC or several) and the upsampling U
-/// that copies each block's depth column to its pixels: the operator of the scene on the grid of blocks (⌈M/bm⌉ × ⌈N/bn⌉ pixels, K_s
-/// bins, C order). Its dense applications and correlations go through A (one application of A
-/// each, so that A's wrappers count or cancel them); its support-restricted applications and
-/// column queries use the blocks' summed codes directly.
+/// that copies each block's depth column to its pixels: the operator of the scene on the grid of
+/// blocks (⌈M/bm⌉ × ⌈N/bn⌉ pixels, K_s bins, C order). Its dense applications and correlations
+/// go through A (one application of A each, so that A's wrappers count or cancel them); its
+/// support-restricted applications and column queries use the blocks' summed codes directly.
 pub struct BlockOperator<'a, T: Real> {
     op: &'a dyn LidarOperator<T>,
     block: (usize, usize),
@@ -395,6 +395,17 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
         let ks = self.op.ks();
         let kp = self.op.pulse.len();
         let (sets, k) = (self.op.sets, self.op.k);
+        // The measurements weighted once, as A's rows are (none when unweighted).
+        let weighted: Option<Vec<f64>> = self
+            .op
+            .weights
+            .as_ref()
+            .map(|w| y.iter().zip(w).map(|(v, w)| v.as_f64() * w).collect());
+        let yt = |row: usize| {
+            weighted
+                .as_ref()
+                .map_or_else(|| y[row].as_f64(), |z| z[row])
+        };
         x.par_iter_mut().zip(&self.voxels).for_each(|(xi, &v)| {
             let (b, d) = (v / ks, v % ks);
             let s: f64 = (0..sets)
@@ -402,12 +413,8 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
                     let c = &self.op.block_codes(set, b)[d..d + kp];
                     c.iter()
                         .zip(&self.op.pulse)
-                        .zip(&y[set * k + d..set * k + d + kp])
                         .enumerate()
-                        .map(|(t, ((&ct, &pt), yt))| {
-                            let w = self.op.row_weight(set * k + d + t);
-                            f64::from(ct) * pt * yt.as_f64() * w
-                        })
+                        .map(|(t, (&ct, &pt))| f64::from(ct) * pt * yt(set * k + d + t))
                         .sum::<f64>()
                 })
                 .sum();

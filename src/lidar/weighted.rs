@@ -40,9 +40,11 @@ pub struct RowWeighted<'a, T: Real> {
     pulse0: Vec<f64>,
     /// Every code set binary (±1, s² = 1): the column queries are the same for every pixel.
     binary: bool,
-    /// The self-correlations (d, j) and the Gram block (i, j) with the codes taken as ±1,
-    /// K_s × K_s each: exact for binary codes, the base of the ternary Gram block.
-    tables: (Vec<f64>, Vec<f64>),
+    /// The self-correlations (d, j) with the codes taken as ±1, K_s × K_s: exact for binary codes.
+    corr: Vec<f64>,
+    /// The Gram block (i, j) with the codes taken as ±1, K_s × K_s: exact for binary codes, the
+    /// base of the ternary one.
+    gram: Vec<f64>,
 }
 
 impl<T: Real> std::fmt::Debug for RowWeighted<'_, T> {
@@ -102,11 +104,12 @@ impl<'a, T: Real> RowWeighted<'a, T> {
             pulse,
             pulse0,
             binary,
-            tables: (Vec::new(), Vec::new()),
+            corr: Vec::new(),
+            gram: Vec::new(),
         };
         // Built here, not on first use: a lazy cell filled by a parallel loop could be entered
         // again by the same thread from the caller's parallel loop over pixels.
-        weighted.tables = weighted.build_tables();
+        (weighted.corr, weighted.gram) = weighted.build_tables();
         Ok(weighted)
     }
 
@@ -151,13 +154,8 @@ impl<'a, T: Real> RowWeighted<'a, T> {
         (corr, gram)
     }
 
-    /// The tables ([`build_tables`](Self::build_tables)).
-    fn tables(&self) -> &(Vec<f64>, Vec<f64>) {
-        &self.tables
-    }
-
-    /// `v` scaled by the weights, row by row.
-    fn scaled(&self, v: &[T]) -> Vec<T> {
+    /// W·`v`: `v` scaled by the weights, row by row (the weighted measurements of `v`).
+    pub fn weigh(&self, v: &[T]) -> Vec<T> {
         let mut out = v.to_vec();
         scale_rows(&mut out, &self.w);
         out
@@ -213,7 +211,7 @@ impl<T: Real> LinearOperator<T> for RowWeighted<'_, T> {
     }
 
     fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
-        self.op.apply_adjoint(&self.scaled(y), x);
+        self.op.apply_adjoint(&self.weigh(y), x);
     }
 
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
@@ -235,16 +233,15 @@ impl<T: Real> VoxelOperator<T> for RowWeighted<'_, T> {
 
     /// The operator's correlation (the debiased one) of the weighted residual: Aᵀ₀·W·r.
     fn correlate(&self, r: &[T], u: &mut [T]) {
-        self.op.correlate(&self.scaled(r), u)
+        self.op.correlate(&self.weigh(r), u)
     }
 
     fn self_correlations(&self, voxels: &[usize]) -> Vec<f64> {
         let ks = self.column_len();
         if self.binary {
-            let corr = &self.tables().0;
             return voxels
                 .iter()
-                .flat_map(|&v| corr[(v % ks) * ks..][..ks].iter().copied())
+                .flat_map(|&v| self.corr[(v % ks) * ks..][..ks].iter().copied())
                 .collect();
         }
         voxels
@@ -262,9 +259,8 @@ impl<T: Real> VoxelOperator<T> for RowWeighted<'_, T> {
     /// block scaled by the weighted share of the pixel's nonzero codes, as the unweighted
     /// operator approximates it.
     fn pixel_gram(&self, pixel: usize) -> Vec<f64> {
-        let gram = &self.tables().1;
         if self.binary {
-            return gram.clone();
+            return self.gram.clone();
         }
         let (mut nonzero, mut all) = (0.0, 0.0);
         for (set, codes) in self.sets.iter().enumerate() {
@@ -277,7 +273,7 @@ impl<T: Real> VoxelOperator<T> for RowWeighted<'_, T> {
             }
         }
         let scale = if all > 0.0 { nonzero / all } else { 0.0 };
-        gram.iter().map(|g| scale * g).collect()
+        self.gram.iter().map(|g| scale * g).collect()
     }
 
     fn uniform_pixel_gram(&self) -> bool {
@@ -291,10 +287,9 @@ impl<T: Real> VoxelOperator<T> for RowWeighted<'_, T> {
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
         let ks = self.column_len();
         if self.binary {
-            let gram = &self.tables().1;
             return columns
                 .iter()
-                .map(|&c| gram[(c % ks) * (ks + 1)].max(0.0).sqrt())
+                .map(|&c| self.gram[(c % ks) * (ks + 1)].max(0.0).sqrt())
                 .collect();
         }
         columns

@@ -60,8 +60,8 @@ pub enum Method {
     /// correlation stands out of the cross-talk, solve least squares on the support and drop
     /// insignificant amplitudes, until the data are explained or a round gains less than 5%
     /// (at most 100 rounds, a support of at most K/3 voxels). No per-pixel model: pixels may
-    /// keep several returns. Exact and cheap wherever the measurements comfortably outnumber the returns; [`Method::Auto`] runs it
-    /// first.
+    /// keep several returns. Exact and cheap wherever the measurements comfortably outnumber the
+    /// returns; [`Method::Auto`] runs it first.
     SupportLs,
     /// Message passing with the one-reflector-per-pixel prior alone
     /// ([`ReflectorAmpParams::default`](crate::solver::ReflectorAmpParams)): the most probable
@@ -165,9 +165,9 @@ pub struct ReconstructOptions {
     /// (default): no test.
     pub false_rate: Option<f64>,
     /// The noise model that sets the data term (default [`NoiseModel::Gaussian`], ordinary
-    /// least squares). [`NoiseModel::Photon`] runs the method twice: the second time on the
-    /// rows weighted by the inverse standard deviations that the first estimate's light gives
-    /// ([`PhotonWeighting`](super::PhotonWeighting)).
+    /// least squares). With [`NoiseModel::Photon`] the method's estimate is then refined (the
+    /// per-pixel solvers) or solved again (the generic ones) on the rows weighted by the inverse
+    /// standard deviations that its light gives ([`PhotonWeighting`](super::PhotonWeighting)).
     pub noise: NoiseModel,
 }
 

@@ -32,8 +32,8 @@ pub enum NoiseModel {
     /// Photon noise: each sample's variance is proportional to the light it receives plus
     /// `background` (the ambient light and dark counts per sample, in the units of the scene's
     /// light: those of `rdlidar simulate --background`). The method runs, its estimate gives each
-    /// sample's light, and it runs again on the measurements weighted by the inverse standard
-    /// deviations ([`PhotonWeighting`]).
+    /// sample's light, and the estimate is improved on the measurements weighted by the inverse
+    /// standard deviations ([`PhotonWeighting`]).
     Photon {
         /// The background per sample, ≥ 0.
         background: f64,
@@ -101,8 +101,8 @@ pub struct PhotonWeighting {
     pub background: f64,
     /// The offset of the weights, v = L + offset: the background, at least 5% of the mean light.
     pub offset: f64,
-    /// The variance per unit of light (plus background) the first estimate's residual shows:
-    /// mean r² / mean (L + background).
+    /// The variance per unit of light (plus offset) the first estimate's residual shows:
+    /// mean r² / mean (L + offset).
     pub scale: f64,
     /// The slope of the regression of the squared residual on the light, over its standard
     /// error: how clearly the residual's variance grows with the light.
@@ -112,7 +112,7 @@ pub struct PhotonWeighting {
     /// `E[v]·E[1/v]` over the samples: how many times less variance the weighted fit has than
     /// the unweighted one, for columns uncorrelated with v (1 when not reweighted).
     pub gain: f64,
-    /// Why the reconstruction did not run again with the weights; `None` when it did.
+    /// Why the estimate was not improved with the weights; `None` when it was.
     pub skipped: Option<&'static str>,
 }
 
@@ -135,9 +135,7 @@ impl PhotonWeighting {
             ),
         }
     }
-}
 
-impl PhotonWeighting {
     /// Marks the weights as not used, for `why`.
     pub(super) fn skip(&mut self, why: &'static str) {
         self.skipped = Some(why);
@@ -248,7 +246,7 @@ pub(super) fn photon_weights<T: Real>(
     let mut found = PhotonWeighting {
         background,
         offset,
-        scale: mean_r / (mean_l + background).max(f64::MIN_POSITIVE),
+        scale: mean_r / (mean_l + offset).max(f64::MIN_POSITIVE),
         slope_z,
         light_share: mean_l / (mean_l + offset).max(f64::MIN_POSITIVE),
         gain: 1.0,

@@ -228,25 +228,24 @@ impl PhotonPass<'_> {
             return Ok((found, None));
         };
         let g = op.geometry();
-        let one_return = x
-            .chunks(g.ks.max(1))
-            .all(|c| c.iter().filter(|v| **v != T::zero()).count() <= 1);
+        let several = |x: &[T]| {
+            x.chunks(g.ks.max(1))
+                .any(|c| c.iter().filter(|v| **v != T::zero()).count() > 1)
+        };
         let refine = match self.method {
             Method::Backprojection | Method::BackprojectionDebiased => {
                 found.skip("the backprojections fit no data term");
                 return Ok((found, None));
             }
-            Method::Tv | Method::CoarseToFine | Method::Amp | Method::ModelBased => {
-                if !one_return {
-                    found.skip("the estimate has several returns in some pixels, which the refinement does not model");
-                    return Ok((found, None));
-                }
-                true
+            Method::Tv | Method::CoarseToFine | Method::Amp | Method::ModelBased if several(x) => {
+                found.skip("the estimate has several returns in a pixel: not refined");
+                return Ok((found, None));
             }
+            Method::Tv | Method::CoarseToFine | Method::Amp | Method::ModelBased => true,
             _ => false,
         };
         let wop = RowWeighted::new(op, w)?;
-        let yw: Vec<T> = y.iter().zip(wop.weights()).map(|(a, b)| *a * *b).collect();
+        let yw = wop.weigh(y);
         let attempt = if refine {
             let mut refined = x.clone();
             let params = RefineParams::default();

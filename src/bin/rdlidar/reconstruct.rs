@@ -122,9 +122,10 @@ pub struct ReconstructArgs {
     pub false_rate: Option<f64>,
     /// The noise model that sets the data term: gaussian (one variance for every sample:
     /// least squares) or photon (each sample's variance proportional to the light it receives
-    /// plus --background: the solver runs, its estimate gives every sample's light, and it runs
-    /// again on the samples weighted by 1/√variance when its residual's variance grows with the
-    /// light; needs the codes in memory and the whole scene in one process).
+    /// plus --background: the solver runs, its estimate gives every sample's light, and when its
+    /// residual's variance grows with the light the estimate is refined (per-pixel solvers) or
+    /// solved again (generic ones) on the samples weighted by 1/√variance; needs the codes in
+    /// memory and the whole scene in one process).
     #[arg(long, value_name = "MODEL", value_parser = parse_noise, default_value = "gaussian")]
     pub noise: NoiseModel,
     /// With --noise photon: the ambient light and dark counts per sample, in the units of the
@@ -212,7 +213,6 @@ fn parse_method(text: &str) -> Result<Method, String> {
     })
 }
 
-/// Runs `reconstruct`.
 /// The noise model of `--noise` and `--background`.
 fn noise_model(a: &ReconstructArgs) -> CliResult<NoiseModel> {
     match (a.noise, a.background) {
@@ -226,6 +226,7 @@ fn noise_model(a: &ReconstructArgs) -> CliResult<NoiseModel> {
     }
 }
 
+/// Runs `reconstruct`.
 pub fn run(a: &ReconstructArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     noise_model(a)?;
     let mut inputs = a.files.inputs().to_vec();
