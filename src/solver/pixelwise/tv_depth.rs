@@ -48,8 +48,8 @@ pub struct TvDepthParams {
     /// When the fit after the continued rounds leaves a relative residual above 10⁻³, the
     /// neighbourhood prior runs again with rounds restarted from scratch, of at most this many
     /// iterations each (after a first run to message passing's own limit), and the fit with the
-    /// smaller residual is kept (default 20; 0 skips it). Not when the continued rounds stopped
-    /// lowering the residual and their fit leaves at most 0.2 of ‖y‖: that is noise. Continued
+    /// smaller residual is kept (default 20; 0 skips it). The restart is skipped when the
+    /// continued rounds stalled at the noise and their fit leaves at most 0.2 of ‖y‖. Continued
     /// rounds are several times faster on large images, restarted ones reach a lower phase
     /// transition on small ones.
     pub neighbour_restart: usize,
@@ -286,11 +286,12 @@ fn changed_fraction<T: Real>(space: &dyn Space, a: &[T], b: &[T], ks: usize) -> 
 const RESTART_BELOW: f64 = 1e-3;
 
 /// A round of the neighbourhood prior improves when the squared residual of its estimate falls
-/// at least this fraction below the lowest of the rounds before.
+/// at least this fraction below the lowest so far (the first run's included).
 const ROUND_GAIN: f64 = 0.01;
 
-/// The rounds stop when this many in a row have not improved ([`ROUND_GAIN`]) while the
-/// estimate's relative residual is at most [`NOISE_FLOOR`]. Under noise the pixels at the
+/// The rounds stop when this many in a row have not improved ([`ROUND_GAIN`]) with the
+/// estimate's relative residual at most [`NOISE_FLOOR`] (a round above it starts the count
+/// again); the last round's estimate goes on to the model-based fit. Under noise the pixels at the
 /// detection bar keep changing, so the change rule
 /// ([`neighbour_change`](TvDepthParams::neighbour_change)) alone would run every round: at 20 dB
 /// on the 100×100×40 paper scene at K_p = 10 000 the residual stops falling after about 20 of
@@ -326,7 +327,8 @@ where
 /// How the rounds of the neighbourhood prior ended.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum RoundsEnd {
-    /// A run explained the data, or a round changed too few pixels.
+    /// A run explained the data, the first run found no amplitude, or a round changed too few
+    /// pixels.
     Settled,
     /// The rounds stopped lowering a residual at the noise while pixels still changed
     /// ([`ROUND_PATIENCE`]).
@@ -460,14 +462,14 @@ where
 /// its neighbours' posteriors at the end of the previous round: the probability of a return, the
 /// depth distribution (spread over ±1 bin) and the amplitude's mean and spread. A pixel whose
 /// neighbours agree on a surface thus needs the data only to confirm a few depths and an
-/// amplitude close to theirs, so confident regions grow round by round from
-/// where the data alone decide. The rounds stop when a run explains the data, when a round
-/// changes fewer than [`neighbour_change`](TvDepthParams::neighbour_change) of the pixels, or
-/// when three rounds in a row do not lower a residual of at most 0.2 of ‖y‖ by 1% (noise). On the
-/// 100×100×40 paper scene this recovers every depth from K_p = 10000 samples (K ≈ 1.8 times the
-/// number of returns), noise-free, where message passing alone finds 19%; short rounds that
-/// continue one run (2 iterations each) need a quarter of the iterations that rounds restarted
-/// from scratch (20 each) need. Neighbours with an
+/// amplitude close to theirs, so confident regions grow round by round from where the data
+/// alone decide. The rounds stop when a run explains the data, when a round changes fewer than
+/// [`neighbour_change`](TvDepthParams::neighbour_change) of the pixels, or when three rounds in a
+/// row do not lower the squared residual by 1% while the residual is at most 0.2 of ‖y‖
+/// (noise). On the 100×100×40 paper scene this recovers every depth from K_p = 10000 samples
+/// (K ≈ 1.8 times the number of returns), noise-free, where message passing alone finds 19%;
+/// short rounds that continue one run (2 iterations each) need a quarter of the iterations that
+/// rounds restarted from scratch (20 each) need. Neighbours with an
 /// expected amplitude below [`neighbour_gate`](TvDepthParams::neighbour_gate) of the typical
 /// one count as empty: otherwise "a return of vanishing amplitude", which the data cannot tell
 /// from an empty pixel, spreads through the background.
