@@ -70,7 +70,7 @@ where
 }
 
 /// y − A_S b.
-fn residual<T, A>(op: &A, voxels: &[usize], y: &[T], b: &[T]) -> Result<Vec<T>>
+pub(super) fn residual<T, A>(op: &A, voxels: &[usize], y: &[T], b: &[T]) -> Result<Vec<T>>
 where
     T: Real,
     A: VoxelOperator<T> + ?Sized,
