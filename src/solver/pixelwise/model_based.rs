@@ -243,8 +243,9 @@ const LEAVES: usize = 2;
 /// An unchanged support ends the run only once an iteration's least squares no longer lowers
 /// the squared residual below this fraction of the previous iteration's (a residual halved).
 /// Ill-conditioned supports (every pixel lit at one depth, three measurements per pixel: CGLS
-/// gains a factor of about 0.8 per iteration) need more inner iterations than one refit gives;
-/// under noise the residual levels off at the noise at once and the run ends as before.
+/// gains a factor of about 0.8–0.9 per iteration) need more inner iterations than one refit gives;
+/// under noise the residual levels off at the noise within a refit or two and the run ends as
+/// before.
 const STILL_FALLING: f64 = 0.25;
 
 impl<'w, T: Real> Iterative<T> for ModelBasedIteration<'w, T> {
