@@ -417,7 +417,7 @@ fn the_neighbourhood_prior_is_exact_with_few_measurements_per_return() {
 #[test]
 fn an_ill_conditioned_support_is_fitted_to_the_end() {
     // Every pixel lit at one depth, three measurements per pixel: least squares on that support
-    // gains a factor of about 0.8 per CGLS iteration, so one refit (10 iterations) leaves the
+    // gains a factor of about 0.8–0.9 per CGLS iteration, so one refit (10 iterations) leaves the
     // residual far above the tolerance when the support is already right. The fit must go on
     // until the data are explained (it stopped on the unchanged support, and TV's rounds and
     // `auto`'s model-based stage then ran for nothing: a 100×100 tile took 60 s instead of 9).
