@@ -344,3 +344,28 @@ fn in_the_compressive_regime_auto_skips_the_one_reflector_fits_when_the_pursuit_
     assert!(a.returns_exact as f64 >= 0.8 * a.true_returns as f64, "{a}");
     assert!(a.returns_exact > 2 * t.returns_exact, "auto {a} / TV {t}");
 }
+
+#[test]
+fn at_20_db_auto_skips_the_model_based_fit_when_tv_leaves_only_noise() {
+    // TV cannot explain noisy data, but where its residual holds no return (few returns' energy,
+    // none standing out in lit or empty pixels) the one-reflector fit cannot do markedly better
+    // and is not run. (Where unexplained returns are many, as on a semi-transparent scene, it
+    // still runs: tests/split.rs.)
+    use rdlidar::lidar::add_gaussian_snr;
+    let g = Geometry::new(24, 24, 16).unwrap();
+    let truth = paper_scene::<f64>(g).unwrap();
+    let op = problem::<f64>(g, 900, 40);
+    let mut y = measure(&op, &truth);
+    add_gaussian_snr(&mut y, 20.0, 50).unwrap();
+    let r = reconstruct(&op, &y, Method::Auto, &ReconstructOptions::default()).unwrap();
+    let ran: Vec<Method> = r.stages.iter().map(|s| s.method).collect();
+    assert_eq!(ran, [Method::SupportLs, Method::Tv], "{:?}", r.stages);
+    assert_eq!(r.method_used, Method::Tv);
+    assert!(
+        r.stages[1].verdict.contains("at the noise"),
+        "{:?}",
+        r.stages
+    );
+    let m = compare(&truth, &r.scene, 200e-12).unwrap();
+    assert!(m.exact as f64 >= 0.99 * m.lit as f64, "{m}");
+}

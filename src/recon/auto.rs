@@ -8,10 +8,12 @@ use crate::real::Real;
 use crate::solver::{Observer, Report, Termination};
 use crate::space::{self, Space};
 
+use super::detect::normal_tail;
 use super::method::{estimate_returns_in, run, Method, ReconstructOptions};
 use super::peaks::returns;
 use super::pursuit::{
-    explained_tolerance, relative_residual, support_pursuit, PursuitEnd, PURSUIT_ROUNDS,
+    explained_tolerance, relative_residual, support_pursuit, unexplained_returns, PursuitEnd,
+    HIDDEN_RATIO, PURSUIT_ROUNDS,
 };
 use super::refit::{refit_support, REFIT_MAX_ITER, REFIT_ROUNDS};
 
@@ -241,23 +243,13 @@ pub(super) fn auto<T: Real>(
         stages.push(best.stage);
         return Ok(finish(tv, stages));
     }
-    let mut mb = attempt(op, y, Method::ModelBased, options, observer)?;
-    if explained(mb.stage.relative_residual) || mb.converged() {
-        tv.stage.verdict = "TV on the depth map does not explain the data".to_string();
-        mb.stage.verdict = "one reflector per pixel explains the data".to_string();
-        stages.extend([best.stage, tv.stage]);
-        return Ok(finish(mb, stages));
-    }
-    let y_norm = crate::linalg::norm2(y);
-    let (r_mb, r_tv) = (mb.stage.relative_residual, tv.stage.relative_residual);
-    let tv_fits = r_tv * y_norm <= TV_RESIDUAL_MARGIN * r_mb * y_norm + 1e-6 * y_norm;
-    tv.stage.verdict = if tv_fits {
-        "TV fits about as well as the model-based scene (within 5%)".to_string()
-    } else {
-        "TV fits worse than the model-based scene".to_string()
+    let (mut one, other, left) = match one_reflector(op, y, options, observer, tv)? {
+        Chosen::Explained { mb, tv } => {
+            stages.extend([best.stage, tv.stage]);
+            return Ok(finish(mb, stages));
+        }
+        Chosen::Compared { one, other, left } => (one, other, left),
     };
-    mb.stage.verdict = "one reflector per pixel does not explain the data".to_string();
-    let (mut one, other) = if tv_fits { (tv, mb) } else { (mb, tv) };
     // The pursuit (no per-pixel model) is kept over the one-reflector fits when it explains the
     // data markedly better: a sign of several returns per pixel.
     if best.stage.relative_residual < 0.5 * one.stage.relative_residual {
@@ -265,13 +257,13 @@ pub(super) fn auto<T: Real>(
             "{}; it fits better than one reflector per pixel can (residual {:.2e} against {:.2e})",
             best.stage.verdict, best.stage.relative_residual, one.stage.relative_residual
         );
-        stages.push(other.stage);
+        stages.extend(other.map(|t| t.stage));
         stages.push(one.stage);
         return Ok(finish(best, stages));
     }
     // Does the residual of the one-reflector fit still hold returns in its lit pixels?
     // (A fit without a lit pixel has no returns to hide.)
-    let (hidden, lit) = hidden_returns(op, y, &one.x, one.stage.report.as_mut());
+    let ResidualReturns { hidden, lit, .. } = left;
     if lit == 0 || (hidden as f64) < HIDDEN_FRACTION * lit as f64 {
         one.stage.verdict = format!(
             "{}; its residual holds no further return in {} of {lit} lit pixels",
@@ -279,15 +271,83 @@ pub(super) fn auto<T: Real>(
             lit - hidden
         );
         stages.push(best.stage);
-        stages.push(other.stage);
+        stages.extend(other.map(|t| t.stage));
         return coarse_stage(op, y, options, observer, one, stages);
     }
     one.stage.verdict = format!(
         "{}; its residual still holds returns in {hidden} of {lit} lit pixels",
         one.stage.verdict
     );
-    stages.push(other.stage);
+    stages.extend(other.map(|t| t.stage));
     several_returns(op, y, options, observer, (best, p.end), vec![one], stages)
+}
+
+/// The one-reflector fit [`auto`] goes on with in the compressive regime, after TV did not
+/// explain the data.
+enum Chosen<T> {
+    /// The model-based fit explains the data.
+    Explained { mb: Tried<T>, tv: Tried<T> },
+    /// The kept fit, the other one if it ran, and where the kept fit's residual shows returns.
+    Compared {
+        one: Tried<T>,
+        other: Option<Tried<T>>,
+        left: ResidualReturns,
+    },
+}
+
+/// TV's fit, or the model-based one where it fits markedly better: the model-based solver runs
+/// unless TV's residual is at the noise ([`ResidualReturns::at_the_noise`]), since no
+/// one-reflector fit can then explain the data markedly better than by fitting noise.
+fn one_reflector<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
+    mut tv: Tried<T>,
+) -> Result<Chosen<T>> {
+    let tv_returns = hidden_returns(op, y, &tv.x, tv.stage.report.as_mut());
+    if tv_returns.at_the_noise(op.nrows(), op.geometry().ks) {
+        tv.stage.verdict = format!(
+            "TV does not explain the data, but its residual is at the noise (about {:.0} returns' \
+             energy, no return standing out of it in {} of {} empty pixels): the model-based fit \
+             is not run",
+            tv_returns.unexplained,
+            tv_returns.empty - tv_returns.missed,
+            tv_returns.empty
+        );
+        return Ok(Chosen::Compared {
+            one: tv,
+            other: None,
+            left: tv_returns,
+        });
+    }
+    let tol = explained_tolerance::<T>();
+    let mut mb = attempt(op, y, Method::ModelBased, options, observer)?;
+    if mb.stage.relative_residual <= tol || mb.converged() {
+        tv.stage.verdict = "TV on the depth map does not explain the data".to_string();
+        mb.stage.verdict = "one reflector per pixel explains the data".to_string();
+        return Ok(Chosen::Explained { mb, tv });
+    }
+    let y_norm = crate::linalg::norm2(y);
+    let (r_mb, r_tv) = (mb.stage.relative_residual, tv.stage.relative_residual);
+    let tv_fits = r_tv * y_norm <= TV_RESIDUAL_MARGIN * r_mb * y_norm + 1e-6 * y_norm;
+    mb.stage.verdict = "one reflector per pixel does not explain the data".to_string();
+    Ok(if tv_fits {
+        tv.stage.verdict = "TV fits about as well as the model-based scene (within 5%)".to_string();
+        Chosen::Compared {
+            one: tv,
+            other: Some(mb),
+            left: tv_returns,
+        }
+    } else {
+        tv.stage.verdict = "TV fits worse than the model-based scene".to_string();
+        let left = hidden_returns(op, y, &mb.x, mb.stage.report.as_mut());
+        Chosen::Compared {
+            one: mb,
+            other: Some(tv),
+            left,
+        }
+    })
 }
 
 /// The end of auto's one-return branch: the kept one-reflector fit `one`, or, where it leaves
@@ -423,7 +483,7 @@ fn several_returns<T: Real>(
         0
     };
     let b = &mut tried[better];
-    let (hidden, lit) = hidden_returns(op, y, &b.x, b.stage.report.as_mut());
+    let ResidualReturns { hidden, lit, .. } = hidden_returns(op, y, &b.x, b.stage.report.as_mut());
     let exhausted = matches!(end, PursuitEnd::NoCandidate | PursuitEnd::Stalled);
     if exhausted && (hidden as f64) < HIDDEN_FRACTION * lit as f64 {
         b.stage.verdict = format!(
@@ -465,16 +525,48 @@ const HIDDEN_FRACTION: f64 = 0.05;
 /// show a hidden return.
 const HIDDEN_Z: f64 = 3.5;
 
-/// The lit pixels of a one-return-per-pixel estimate whose residual correlation (one adjoint
-/// with the zero-mean pulse) stands [`HIDDEN_Z`] robust standard deviations above the median at
-/// a voxel other than their return: returns the fit has no room for. Returns (such pixels, lit
-/// pixels).
+/// Where the residual of a one-return-per-pixel estimate still shows returns: its correlation with
+/// every voxel (one adjoint with the zero-mean pulse) standing [`HIDDEN_Z`] robust standard
+/// deviations above the median.
+struct ResidualReturns {
+    /// Lit pixels with such a voxel other than their return: returns the fit has no room for.
+    hidden: usize,
+    lit: usize,
+    /// Empty pixels with such a voxel: returns the fit missed.
+    missed: usize,
+    empty: usize,
+    /// The residual's energy in returns of the estimate's mean energy.
+    unexplained: f64,
+}
+
+impl ResidualReturns {
+    /// Whether the residual is at the noise. Were it made of n returns of the estimate's mean
+    /// energy, each would stand about √(K/n) deviations out of the others' cross-talk: with at
+    /// most K/[`HIDDEN_RATIO`] of them, each would stand out by ten, and the test would see
+    /// them. So: that few, and no more pixels with a correlation standing out, lit or empty,
+    /// than white noise shows (each of K_s voxels beyond [`HIDDEN_Z`] deviations with
+    /// probability Q(3.5) ≈ 2.3·10⁻⁴; one pixel in about a hundred at K_s = 40), within three
+    /// binomial deviations. With more energy, unexplained returns hide in each other's
+    /// cross-talk, and only another fit can tell them from noise.
+    fn at_the_noise(&self, k: usize, ks: usize) -> bool {
+        let q = 1.0 - (1.0 - normal_tail(HIDDEN_Z)).powi(ks as i32);
+        let within = |count: usize, of: usize| {
+            let expected = q * of as f64;
+            count as f64 <= expected + 3.0 * expected.sqrt() + 1.0
+        };
+        self.unexplained * HIDDEN_RATIO <= k as f64
+            && within(self.hidden, self.lit)
+            && within(self.missed, self.empty)
+    }
+}
+
+/// [`ResidualReturns`] of the estimate `x`; the two applications go into `report`.
 fn hidden_returns<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
     x: &[T],
     report: Option<&mut Report>,
-) -> (usize, usize) {
+) -> ResidualReturns {
     let ks = op.geometry().ks;
     let op = Counted::new(op);
     let mut ax = vec![T::zero(); y.len()];
@@ -489,19 +581,29 @@ fn hidden_returns<T: Real>(
     let mut all: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();
     let med = space::median(space, &mut all);
     let level = med + HIDDEN_Z * space::robust_sigma(space, &mut all, med);
-    let (mut hidden, mut lit) = (0, 0);
+    let [mut hidden, mut lit, mut missed, mut empty] = [0usize; 4];
     for (col, cu) in x.chunks(ks).zip(u.chunks(ks)) {
-        if col.iter().all(|v| *v == T::zero()) {
-            continue;
-        }
-        lit += 1;
         let stands = col
             .iter()
             .zip(cu)
             .any(|(v, c)| *v == T::zero() && c.as_f64() > 0.0 && c.as_f64() >= level);
-        hidden += usize::from(stands);
+        if col.iter().all(|v| *v == T::zero()) {
+            empty += 1;
+            missed += usize::from(stands);
+        } else {
+            lit += 1;
+            hidden += usize::from(stands);
+        }
     }
-    (space::count(space, hidden), space::count(space, lit))
+    let [hidden, lit, missed, empty] =
+        space::sums(space, [hidden, lit, missed, empty].map(|c| c as f64)).map(|c| c as usize);
+    ResidualReturns {
+        hidden,
+        lit,
+        missed,
+        empty,
+        unexplained: unexplained_returns(&op, x, &r),
+    }
 }
 
 /// The stages in the order they ran, the kept one marked; the reports are summed.

@@ -121,7 +121,7 @@ pub fn normal_upper_quantile(p: f64) -> f64 {
 
 /// Q(z) = P(Z > z) for z ≥ 0: erfc by its continued fraction beyond 2, by the series of erf
 /// below.
-fn normal_tail(z: f64) -> f64 {
+pub(super) fn normal_tail(z: f64) -> f64 {
     let x = z / std::f64::consts::SQRT_2;
     0.5 * erfc(x)
 }

@@ -46,7 +46,7 @@ const MIN_PROGRESS: f64 = 0.05;
 /// of them (counted in returns of the held voxels' mean energy): then a round adds as many
 /// candidates as the support holds even when fewer stand out; otherwise only those that stand
 /// out join.
-const HIDDEN_RATIO: f64 = 100.0;
+pub(super) const HIDDEN_RATIO: f64 = 100.0;
 
 /// The relative residual ‖y − Ax‖/‖y‖ at or below which an estimate explains noise-free data:
 /// 10⁻⁶, or 30 machine epsilons where that is larger (f32).
@@ -324,7 +324,7 @@ impl<T: Real, A: LidarOperator<T>> Iteration<T, A> for PursuitIteration<T> {
 
 /// The residual's energy in returns of the held voxels' mean energy (amplitude² times column
 /// norm²): about how many returns are still unexplained. Infinite when nothing is held.
-fn unexplained_returns<T: Real>(op: &dyn LidarOperator<T>, x: &[T], r: &[T]) -> f64 {
+pub(super) fn unexplained_returns<T: Real>(op: &dyn LidarOperator<T>, x: &[T], r: &[T]) -> f64 {
     let support: Vec<usize> = (0..x.len()).filter(|&i| x[i] != T::zero()).collect();
     let norms = op.column_norms(&support);
     let held: f64 = support
