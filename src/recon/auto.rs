@@ -235,8 +235,8 @@ pub(super) fn auto<T: Real>(
         return several_returns(op, y, options, observer, (best, p.end), Vec::new(), stages);
     }
     // TV on the depth map, whose first fit is the model-based one (so that it costs little more
-    // where that fit explains the data already); the model-based fit alone only when TV does not
-    // explain the data, as a scene need not be piecewise smooth.
+    // where that fit explains the data already); the model-based fit alone only when TV neither
+    // explains the data nor leaves only noise, as a scene need not be piecewise smooth.
     let mut tv = attempt(op, y, Method::Tv, options, observer)?;
     if explained(tv.stage.relative_residual) || tv.converged() {
         tv.stage.verdict = "TV on the depth map explains the data".to_string();
@@ -263,7 +263,10 @@ pub(super) fn auto<T: Real>(
     }
     // Does the residual of the one-reflector fit still hold returns in its lit pixels?
     // (A fit without a lit pixel has no returns to hide.)
-    let ResidualReturns { hidden, lit, .. } = left;
+    let ResidualReturns { hidden, lit, .. } = match left {
+        Some(left) => left,
+        None => hidden_returns(op, y, &one.x, one.stage.report.as_mut()),
+    };
     if lit == 0 || (hidden as f64) < HIDDEN_FRACTION * lit as f64 {
         one.stage.verdict = format!(
             "{}; its residual holds no further return in {} of {lit} lit pixels",
@@ -287,11 +290,12 @@ pub(super) fn auto<T: Real>(
 enum Chosen<T> {
     /// The model-based fit explains the data.
     Explained { mb: Tried<T>, tv: Tried<T> },
-    /// The kept fit, the other one if it ran, and where the kept fit's residual shows returns.
+    /// The kept fit, the other one if it ran, and where the kept fit's residual shows returns
+    /// (if already known).
     Compared {
         one: Tried<T>,
         other: Option<Tried<T>>,
-        left: ResidualReturns,
+        left: Option<ResidualReturns>,
     },
 }
 
@@ -318,7 +322,7 @@ fn one_reflector<T: Real>(
         return Ok(Chosen::Compared {
             one: tv,
             other: None,
-            left: tv_returns,
+            left: Some(tv_returns),
         });
     }
     let tol = explained_tolerance::<T>();
@@ -337,15 +341,14 @@ fn one_reflector<T: Real>(
         Chosen::Compared {
             one: tv,
             other: Some(mb),
-            left: tv_returns,
+            left: Some(tv_returns),
         }
     } else {
         tv.stage.verdict = "TV fits worse than the model-based scene".to_string();
-        let left = hidden_returns(op, y, &mb.x, mb.stage.report.as_mut());
         Chosen::Compared {
             one: mb,
             other: Some(tv),
-            left,
+            left: None,
         }
     })
 }
@@ -541,13 +544,15 @@ struct ResidualReturns {
 
 impl ResidualReturns {
     /// Whether the residual is at the noise. Were it made of n returns of the estimate's mean
-    /// energy, each would stand about √(K/n) deviations out of the others' cross-talk: with at
-    /// most K/[`HIDDEN_RATIO`] of them, each would stand out by ten, and the test would see
-    /// them. So: that few, and no more pixels with a correlation standing out, lit or empty,
-    /// than white noise shows (each of K_s voxels beyond [`HIDDEN_Z`] deviations with
-    /// probability Q(3.5) ≈ 2.3·10⁻⁴; one pixel in about a hundred at K_s = 40), within three
-    /// binomial deviations. With more energy, unexplained returns hide in each other's
-    /// cross-talk, and only another fit can tell them from noise.
+    /// energy (amplitude² times column norm²), each would stand about √(K/n) deviations out of
+    /// the others' cross-talk: with n at most K/[`HIDDEN_RATIO`], each would stand out by ten,
+    /// and the test would see it. So: that little energy, and no more pixels with a correlation
+    /// standing out, lit or empty, than white noise makes (each of K_s voxels beyond
+    /// [`HIDDEN_Z`] deviations with probability Q(3.5) ≈ 2.3·10⁻⁴; one pixel in about a hundred
+    /// at K_s = 40), with three deviations (the square root of the expected count) and one pixel
+    /// to spare, and in fewer than [`HIDDEN_FRACTION`] of the lit pixels (the bar at which
+    /// [`auto`] looks for several returns per pixel). With more energy, unexplained returns hide
+    /// in each other's cross-talk, and only another fit can tell them from noise.
     fn at_the_noise(&self, k: usize, ks: usize) -> bool {
         let q = 1.0 - (1.0 - normal_tail(HIDDEN_Z)).powi(ks as i32);
         let within = |count: usize, of: usize| {
@@ -556,11 +561,13 @@ impl ResidualReturns {
         };
         self.unexplained * HIDDEN_RATIO <= k as f64
             && within(self.hidden, self.lit)
+            && (self.hidden as f64) < HIDDEN_FRACTION * self.lit as f64
             && within(self.missed, self.empty)
     }
 }
 
-/// [`ResidualReturns`] of the estimate `x`; the two applications go into `report`.
+/// [`ResidualReturns`] of the estimate `x`; its applications (the sparse forward, the adjoint and
+/// the column norms) go into `report`.
 fn hidden_returns<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
@@ -574,6 +581,7 @@ fn hidden_returns<T: Real>(
     let r: Vec<T> = y.iter().zip(&ax).map(|(&a, &b)| a - b).collect();
     let mut u = vec![T::zero(); x.len()];
     op.correlate(&r, &mut u);
+    let unexplained = unexplained_returns(&op, x, &r);
     if let Some(rep) = report {
         rep.add_counts(&op);
     }
@@ -602,7 +610,7 @@ fn hidden_returns<T: Real>(
         lit,
         missed,
         empty,
-        unexplained: unexplained_returns(&op, x, &r),
+        unexplained,
     }
 }
 

@@ -45,7 +45,8 @@ const MIN_PROGRESS: f64 = 0.05;
 /// The unexplained returns' cross-talk may hide true returns while there are more than K / this
 /// of them (counted in returns of the held voxels' mean energy): then a round adds as many
 /// candidates as the support holds even when fewer stand out; otherwise only those that stand
-/// out join.
+/// out join. [`Method::Auto`](super::Method::Auto) takes a residual for noise only when it holds
+/// at most K / this returns' energy.
 pub(super) const HIDDEN_RATIO: f64 = 100.0;
 
 /// The relative residual ‖y − Ax‖/‖y‖ at or below which an estimate explains noise-free data:

@@ -87,11 +87,10 @@ pub struct Reconstruction<T> {
 ///    several returns, the scene is not one reflector per pixel: straight to step 5. Otherwise
 ///    [`Method::Tv`], whose first fit is the model-based one; unless it explains the data or
 ///    its residual is at the noise (few returns' energy, returns standing out of it in no more
-///    pixels than noise shows), [`Method::ModelBased`] alone, and TV is kept if it fits
-///    about as well as the model-based scene ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)).
-///    If the support pursuit fitted
-///    the data more than twice as well as the better one-reflector scene, the scene has more
-///    than one return per pixel and the pursuit's estimate is kept;
+///    pixels than noise shows), [`Method::ModelBased`] alone, and TV is kept if it fits about
+///    as well as the model-based scene ([`TV_RESIDUAL_MARGIN`](super::TV_RESIDUAL_MARGIN)). If
+///    the support pursuit fitted the data more than twice as well as the better one-reflector
+///    scene, the scene has more than one return per pixel and the pursuit's estimate is kept;
 /// 4. if the one-reflector fit's residual still shows returns at other depths in at least 5% of
 ///    its lit pixels, step 5 (with the one-reflector fit among the candidates);
 /// 5. several returns per pixel: [`Method::ModelBased`] with k returns per pixel (k from the
