@@ -443,3 +443,80 @@ fn an_ill_conditioned_support_is_fitted_to_the_end() {
         report.residual_history.last()
     );
 }
+
+/// The paper scene's amplitudes each scaled by a factor in [1 − spread, 1 + spread]: a warm
+/// start on the true support.
+fn perturbed(truth: &Scene<f64>, spread: f64, seed: u64) -> Vec<f64> {
+    use rand::RngExt;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    truth
+        .as_slice()
+        .iter()
+        .map(|&v| v * (1.0 + rng.random_range(-spread..=spread)))
+        .collect()
+}
+
+#[test]
+fn a_warm_start_on_the_right_support_is_fitted_to_the_tolerance_without_a_correlation() {
+    // Least squares on the true support converges fast; at 2.3 measurements per lit pixel ten
+    // CGLS iterations from amplitudes half wrong leave far more than the tolerance, and the fit
+    // goes on while it falls fast, so that the run ends before its first iteration: no
+    // correlation (an adjoint application of the whole operator) is needed.
+    let g = Geometry::new(24, 24, 32).unwrap();
+    let op = lidar_problem(g, 700, false, 3);
+    let truth = paper_scene::<f64>(g).unwrap();
+    let mut y = vec![0.0; op.nrows()];
+    op.apply(truth.as_slice(), &mut y);
+    let mut x = perturbed(&truth, 0.5, 7);
+    let report = model_based(&op, &y, &mut x, &ModelBasedParams::default(), &mut ()).unwrap();
+    assert_eq!(report.termination, Termination::Residual, "{report:?}");
+    assert_eq!(report.iterations, 0, "{report:?}");
+    assert_eq!(report.adjoint_applies, 0, "{report:?}");
+    let m = compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap();
+    assert_eq!(m.exact, m.lit, "{m}");
+    assert_eq!(m.false_detections, 0, "{m}");
+    assert!(m.relative_error < 1e-5, "{m}");
+}
+
+#[test]
+fn a_warm_start_that_nearly_explains_the_data_is_not_explored() {
+    // Three CGLS iterations from amplitudes 5% off leave the residual between the tolerance
+    // and 10⁻³ of ‖y‖: the support is found, and the first iteration must not put every pixel
+    // with a positive correlation in it (the exploration); with a tolerance far below the
+    // residual the run goes on, and no pixel joins.
+    let g = Geometry::new(24, 24, 32).unwrap();
+    let op = lidar_problem(g, 6000, false, 3);
+    let truth = paper_scene::<f64>(g).unwrap();
+    let lit = truth
+        .as_slice()
+        .chunks(g.ks)
+        .filter(|c| c.iter().any(|v| *v != 0.0))
+        .count();
+    let mut y = vec![0.0; op.nrows()];
+    op.apply(truth.as_slice(), &mut y);
+    for tolerance in [1e-6, 1e-12] {
+        let mut x = perturbed(&truth, 0.05, 8);
+        let mut params = ModelBasedParams::default();
+        params.inner.stopping.max_iter = 3;
+        params.stopping.rel_residual = Some(tolerance);
+        let mut widest = 0;
+        let mut watch = |info: &rdlidar::solver::IterationInfo<'_, f64>| {
+            let held = info
+                .x
+                .chunks(g.ks)
+                .filter(|c| c.iter().any(|v| *v != 0.0))
+                .count();
+            widest = widest.max(held);
+            rdlidar::solver::Control::Continue
+        };
+        let report = model_based(&op, &y, &mut x, &params, &mut watch).unwrap();
+        assert!(report.iterations >= 1, "{report:?}");
+        assert!(
+            widest <= lit,
+            "tolerance {tolerance}: {widest} pixels held for {lit} lit ({report:?})"
+        );
+        let m = compare(&truth, &Scene::from_vec(g, x).unwrap(), 200e-12).unwrap();
+        assert_eq!(m.exact, m.lit, "{m}");
+        assert_eq!(m.false_detections, 0, "{m}");
+    }
+}

@@ -11,8 +11,8 @@ use crate::linalg::dot;
 use crate::operator::{check_pixels, LinearOperator, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{
-    cgls, check_problem, solve, CglsParams, Iteration, Iterative, Observer, Progress, Report,
-    Stopping, Termination,
+    cgls, check_problem, solve, CglsParams, Control, Iteration, IterationInfo, Iterative, Observer,
+    Progress, Report, Stopping, Termination,
 };
 use crate::space::{self, Space};
 
@@ -42,7 +42,33 @@ fn support_residual<T: Real>(restricted: &dyn LinearOperator<T>, y: &[T], b: &[T
     r
 }
 
-/// Least squares on the support `voxels`, warm-started from `b`; returns the residual y − A_S b.
+/// A least squares whose iterations ([`ModelBasedParams::inner`]) run out while its squared
+/// residual still falls by at least a factor of 4 over the last [`FAST_WINDOW`] iterations goes
+/// on, up to [`FAST_ROUNDS`] times its iterations, until it slows down or reaches the run's
+/// residual tolerance. A support that is right converges fast (CGLS on an overdetermined,
+/// well-conditioned system): on the noise-free 100×100×40 paper scene at K_p = 10 000 the fit
+/// from the neighbourhood prior's estimate falls from 0.04 to 10⁻³ of ‖y‖ in ten iterations, and
+/// the correlations of so unfinished a residual make the next iteration offer thousands of
+/// spurious pixels, tested and dropped over the iterations after it. Under noise the residual
+/// levels off at the noise, and on a wrong support at its misfit, within the first iterations:
+/// those fits end as before.
+const FAST_FALL: f64 = 0.25;
+
+/// The iterations over which [`FAST_FALL`] is judged.
+const FAST_WINDOW: usize = 5;
+
+/// How many times its iterations a fast least squares may run.
+const FAST_ROUNDS: usize = 5;
+
+/// A warm start whose least squares leaves at most this fraction of ‖y‖ has found the support
+/// (one pixel of the 144 lit pixels of a 16×16 scene carries about 8% of ‖y‖, of the 5547 of the
+/// 100×100 paper scene 1.3%): the exploration ([`ModelBasedParams::explore_iterations`]), which
+/// puts every pixel with a positive correlation in the support, is skipped.
+const FOUND: f64 = 1e-3;
+
+/// Least squares on the support `voxels`, warm-started from `b`, for at least the iterations of
+/// `inner` and on while they converge fast ([`FAST_FALL`]) and the objective ½‖y − A_S b‖² is
+/// above `explained`; returns the residual y − A_S b.
 fn fit<T, A>(
     op: &A,
     voxels: &[usize],
@@ -50,6 +76,7 @@ fn fit<T, A>(
     b: &mut [T],
     inner: &CglsParams,
     it: usize,
+    explained: f64,
 ) -> Result<Vec<T>>
 where
     T: Real,
@@ -58,7 +85,27 @@ where
     const NAME: &str = "model-based";
     let restricted = op.restrict_columns(voxels.to_vec())?;
     if space::count(op.space(), voxels.len()) > 0 {
-        cgls(&restricted, y, b, inner, &mut ()).map_err(|e| match e {
+        let limit = inner.stopping.max_iter;
+        let extended = CglsParams {
+            stopping: Stopping {
+                max_iter: limit.saturating_mul(FAST_ROUNDS),
+                ..inner.stopping
+            },
+            ..*inner
+        };
+        let mut objectives: Vec<f64> = Vec::with_capacity(limit);
+        let mut go_on = |info: &IterationInfo<'_, T>| {
+            objectives.push(info.objective);
+            let k = objectives.len();
+            let fast =
+                k > FAST_WINDOW && info.objective <= FAST_FALL * objectives[k - 1 - FAST_WINDOW];
+            if k >= limit && (!fast || info.objective <= explained) {
+                Control::Stop
+            } else {
+                Control::Continue
+            }
+        };
+        cgls(&restricted, y, b, &extended, &mut go_on).map_err(|e| match e {
             Error::Breakdown { reason, .. } => Error::Breakdown {
                 solver: NAME,
                 reason: format!("least squares at iteration {it}: {reason}"),
@@ -137,7 +184,10 @@ fn retain_support<T: Copy>(
 /// squares no longer halves the residual (an ill-conditioned support needs more than one refit's
 /// inner iterations: those iterations go on, and the correlations confirm the support), with
 /// [`Termination::ZeroResidual`] for y = 0, otherwise by the [`Stopping`] rules (residual
-/// ‖Ax − y‖ / ‖y‖). The report counts the restricted applications as support applications.
+/// ‖Ax − y‖ / ‖y‖). A warm start whose least squares (the model's largest entries of `x`,
+/// refitted) already meets the residual tolerance ends the run before its first iteration, with
+/// [`Termination::Residual`] and no correlation; the final amplitude test still runs. The report
+/// counts the restricted applications as support applications.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for invalid parameters; [`Error::ShapeMismatch`] /
@@ -469,7 +519,12 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         voxels: &[usize],
         amp: &mut [T],
     ) -> Result<()> {
-        self.r = fit(op, voxels, y, amp, &self.params.inner, self.it)?;
+        let explained = self
+            .params
+            .stopping
+            .rel_residual
+            .map_or(0.0, |t| 0.5 * (t * self.ynorm).powi(2));
+        self.r = fit(op, voxels, y, amp, &self.params.inner, self.it, explained)?;
         Ok(())
     }
 
@@ -542,7 +597,22 @@ impl<'w, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for ModelBasedIt
         run.voxels = voxels;
         run.amp = amp;
         run.rr = dot(&run.r, &run.r);
+        run.write_scene(x);
+        if run.rr <= (FOUND * ynorm).powi(2) {
+            run.explore_iterations = 0;
+        }
         Ok(ControlFlow::Continue(run))
+    }
+
+    /// A warm start whose least squares explains the data to the tolerance ends the run before
+    /// any correlation (the final test still runs).
+    fn prepare(&mut self, _op: &A) -> Option<Termination> {
+        let explained = self
+            .params
+            .stopping
+            .rel_residual
+            .is_some_and(|t| self.rr <= (t * self.ynorm).powi(2));
+        (self.it == 0 && explained).then_some(Termination::Residual)
     }
 
     fn step(&mut self, op: &A, y: &[T], x: &mut [T], it: usize) -> Result<Progress> {

@@ -20,7 +20,9 @@ pub struct ModelBasedParams {
     /// the support (within the budget). Least squares then gives each lit pixel at least about
     /// half its amplitude even at a wrong depth (a pixel's columns overlap by half for a 0/1
     /// pulse), so that the amplitude test at the end of the exploration separates lit from empty
-    /// pixels even when cross-talk hides the depths (default 3; 0 skips the exploration).
+    /// pixels even when cross-talk hides the depths (default 3; 0 skips the exploration). A
+    /// warm start whose least squares leaves at most 10⁻³ of ‖y‖ has found the support and skips
+    /// it.
     pub explore_iterations: usize,
     /// After the exploration, a pixel outside the support joins it when its best correlation is
     /// at least this many robust standard deviations (1.4826·MAD) of all correlations: a maximum
@@ -66,7 +68,10 @@ pub struct ModelBasedParams {
     /// fraction of the measurements' RMS, so that noise-free runs drop the round-off amplitudes
     /// that least squares leaves on empty pixels: it bounds the dynamic range (default 1e-4).
     pub noise_floor: f64,
-    /// The least-squares step on the support (CGLS on the restricted operator, warm-started).
+    /// The least-squares step on the support (CGLS on the restricted operator, warm-started). A
+    /// fit whose iterations run out while its squared residual still falls by a factor of 4 over
+    /// five iterations goes on, up to five times as many, until it slows down or meets
+    /// [`stopping`](Self::stopping)'s residual tolerance.
     pub inner: CglsParams,
     /// Without a warm start, the first support comes from message passing with the one-reflector
     /// prior ([`reflector_amp`](crate::solver::reflector_amp)), and the exploration is skipped;
