@@ -42,17 +42,21 @@ fn support_residual<T: Real>(restricted: &dyn LinearOperator<T>, y: &[T], b: &[T
     r
 }
 
-/// A least squares whose iterations ([`ModelBasedParams::inner`]) run out while its squared
-/// residual still falls by at least a factor of 4 over the last [`FAST_WINDOW`] iterations goes
-/// on, up to [`FAST_ROUNDS`] times its iterations, until it slows down or reaches the run's
-/// residual tolerance. A support that is right converges fast (CGLS on an overdetermined,
+/// A least squares whose iterations ([`ModelBasedParams::inner`]) run out with its residual at
+/// most [`NEAR`] of ‖y‖ and its square still falling by at least a factor of 4 over the last
+/// [`FAST_WINDOW`] iterations goes on, up to [`FAST_ROUNDS`] times its iterations, until it slows
+/// down or reaches the run's residual tolerance. A support that is right converges fast (CGLS on an overdetermined,
 /// well-conditioned system): on the noise-free 100×100×40 paper scene at K_p = 10 000 the fit
 /// from the neighbourhood prior's estimate falls from 0.04 to 10⁻³ of ‖y‖ in ten iterations, and
 /// the correlations of so unfinished a residual make the next iteration offer thousands of
 /// spurious pixels, tested and dropped over the iterations after it. Under noise the residual
-/// levels off at the noise, and on a wrong support at its misfit, within the first iterations:
-/// those fits end as before.
+/// levels off at the noise, and on a wrong support at its misfit, within the first iterations;
+/// fits far from the data (a stalled run's wrong support, whose residual may still fall fast for
+/// a while) end as before too.
 const FAST_FALL: f64 = 0.25;
+
+/// The residual, as a fraction of ‖y‖, at or below which a fast least squares goes on.
+const NEAR: f64 = 1e-2;
 
 /// The iterations over which [`FAST_FALL`] is judged.
 const FAST_WINDOW: usize = 5;
@@ -67,8 +71,8 @@ const FAST_ROUNDS: usize = 5;
 const FOUND: f64 = 1e-3;
 
 /// Least squares on the support `voxels`, warm-started from `b`, for at least the iterations of
-/// `inner` and on while they converge fast ([`FAST_FALL`]) and the objective ½‖y − A_S b‖² is
-/// above `explained`; returns the residual y − A_S b.
+/// `inner` and on while they converge fast ([`FAST_FALL`]) with the objective ½‖y − A_S b‖² at
+/// most `near` and above `explained`; returns the residual y − A_S b.
 fn fit<T, A>(
     op: &A,
     voxels: &[usize],
@@ -76,7 +80,7 @@ fn fit<T, A>(
     b: &mut [T],
     inner: &CglsParams,
     it: usize,
-    explained: f64,
+    (near, explained): (f64, f64),
 ) -> Result<Vec<T>>
 where
     T: Real,
@@ -99,7 +103,8 @@ where
             let k = objectives.len();
             let fast =
                 k > FAST_WINDOW && info.objective <= FAST_FALL * objectives[k - 1 - FAST_WINDOW];
-            if k >= limit && (!fast || info.objective <= explained) {
+            let going = fast && info.objective <= near && info.objective > explained;
+            if k >= limit && !going {
                 Control::Stop
             } else {
                 Control::Continue
@@ -519,12 +524,10 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         voxels: &[usize],
         amp: &mut [T],
     ) -> Result<()> {
-        let explained = self
-            .params
-            .stopping
-            .rel_residual
-            .map_or(0.0, |t| 0.5 * (t * self.ynorm).powi(2));
-        self.r = fit(op, voxels, y, amp, &self.params.inner, self.it, explained)?;
+        let objective = |rel: f64| 0.5 * (rel * self.ynorm).powi(2);
+        let explained = self.params.stopping.rel_residual.map_or(0.0, objective);
+        let bounds = (objective(NEAR), explained);
+        self.r = fit(op, voxels, y, amp, &self.params.inner, self.it, bounds)?;
         Ok(())
     }
 
