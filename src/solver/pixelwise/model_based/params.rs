@@ -70,8 +70,8 @@ pub struct ModelBasedParams {
     pub noise_floor: f64,
     /// The least-squares step on the support (CGLS on the restricted operator, warm-started). A
     /// fit whose iterations run out while its squared residual still falls by a factor of 4 over
-    /// five iterations goes on, up to five times as many, until it slows down or meets
-    /// [`stopping`](Self::stopping)'s residual tolerance.
+    /// five iterations goes on, up to five times as many, until it slows down or reaches a
+    /// tenth of [`stopping`](Self::stopping)'s residual tolerance.
     pub inner: CglsParams,
     /// Without a warm start, the first support comes from message passing with the one-reflector
     /// prior ([`reflector_amp`](crate::solver::reflector_amp)), and the exploration is skipped;
