@@ -69,9 +69,9 @@ pub struct ModelBasedParams {
     /// that least squares leaves on empty pixels: it bounds the dynamic range (default 1e-4).
     pub noise_floor: f64,
     /// The least-squares step on the support (CGLS on the restricted operator, warm-started). A
-    /// fit whose iterations run out while its squared residual still falls by a factor of 4 over
-    /// five iterations goes on, up to five times as many, until it slows down or reaches a
-    /// tenth of [`stopping`](Self::stopping)'s residual tolerance.
+    /// fit whose iterations run out within 1% of ‖y‖ while its squared residual still falls by a
+    /// factor of 4 over five iterations goes on, up to five times as many, until it slows down
+    /// or reaches a tenth of [`stopping`](Self::stopping)'s residual tolerance.
     pub inner: CglsParams,
     /// Without a warm start, the first support comes from message passing with the one-reflector
     /// prior ([`reflector_amp`](crate::solver::reflector_amp)), and the exploration is skipped;
