@@ -13,8 +13,8 @@ use super::model_based::{model_based_windowed, residual};
 use super::PixelConstraints;
 use crate::operator::{Counted, VoxelOperator};
 use crate::solver::{
-    residual_norm_sq, tv_denoise, ModelBasedParams, Observer, ReflectorAmpParams, Report, Stopping,
-    Termination, TvParams,
+    residual_norm_sq, tv_denoise, Control, IterationInfo, ModelBasedParams, Observer,
+    ReflectorAmpParams, Report, Stopping, Termination, TvParams,
 };
 
 mod neighbours;
@@ -246,11 +246,22 @@ where
         }
         last.copy_from_slice(x);
     }
+    // Rounds that stalled at the noise leave every return the data decide: exploring from their
+    // estimate would only add the empty pixels with a positive correlation (about half of them
+    // under noise), which the amplitude tests then drop over a dozen iterations, not all.
+    let model = ModelBasedParams {
+        explore_iterations: if end == RoundsEnd::Stalled {
+            0
+        } else {
+            params.model.explore_iterations
+        },
+        ..params.model
+    };
     rep.absorb(model_based_windowed(
         op,
         y,
         x,
-        &params.model,
+        &model,
         None,
         Some(grid),
         observer,
@@ -274,7 +285,8 @@ where
 /// alone decide. The rounds stop when a run explains the data, when a round changes fewer than
 /// [`neighbour_change`](TvDepthParams::neighbour_change) of the pixels, or when three rounds in a
 /// row do not lower the squared residual by 1% while the residual is at most 0.2 of ‖y‖
-/// (noise). On the 100×100×40 paper scene this recovers every depth from K_p = 10000 samples
+/// (noise; the fit from their estimate then skips its exploration,
+/// [`ModelBasedParams::explore_iterations`]: it would only add empty pixels). On the 100×100×40 paper scene this recovers every depth from K_p = 10000 samples
 /// (K ≈ 1.8 times the number of returns), noise-free, where message passing alone finds 19%;
 /// short rounds that continue one run (2 iterations each) need a quarter of the iterations that
 /// rounds restarted from scratch (20 each) need. Neighbours with an
@@ -305,9 +317,10 @@ where
 ///
 /// Steps 2–3 repeat [`rounds`](TvDepthParams::rounds) times; none run when the first fit already
 /// explains the data (it stopped on its residual tolerance), and a round whose fit leaves more than
-/// twice the squared residual of the one before is undone and ends them. Isolated wrong depths,
-/// which cross-talk and noise cause and which the per-pixel model cannot tell from true ones,
-/// are pulled towards their neighbours' depths, where the data then confirm or move them.
+/// twice the squared residual of the one before is undone and ends them (its fit ends as soon as
+/// its squared residual is above that bar and rising: it does not come back). Isolated wrong
+/// depths, which cross-talk and noise cause and which the per-pixel model cannot tell from true
+/// ones, are pulled towards their neighbours' depths, where the data then confirm or move them.
 ///
 /// `grid` is (M, N), with M·N pixels of `op.column_len()` voxels each. The report sums the
 /// iterations and the applications of `op` over every fit and ends with the last fit's termination.
@@ -486,6 +499,40 @@ fn regularized_depths(
         .collect())
 }
 
+/// A windowed fit that leaves more than this many times the squared residual of the fit before
+/// it has lost what that one found: its round is undone and the rounds end.
+const LOST: f64 = 2.0;
+
+/// The observer of a round's windowed fit: every iteration goes on to the caller's observer, and
+/// the fit ends as soon as it is on its way to being undone, its squared residual above
+/// [`LOST`] times that of the fit before and rising. Without exploration the windowed fit finds
+/// few new returns, so a fit that drops returns faster than it finds them does not come back:
+/// at 20 dB on the 100×100×40 paper scene at K_p = 10 000 the windowed fit started from message
+/// passing within the windows at 15 times the squared residual and rose for 31 iterations, a
+/// third of the solver's time, to be undone. Fits that are kept may start as high (up to 8
+/// times on the 16×16×16 scenes of the hard comparisons) but fall from their first iteration.
+struct Losing<'o, O: ?Sized> {
+    observer: &'o mut O,
+    /// √([`LOST`] · the fit before) / ‖y‖: the bar on the relative residual.
+    bar: f64,
+    /// The previous iteration's relative residual.
+    last: f64,
+    lost: bool,
+}
+
+impl<T, O: Observer<T> + ?Sized> Observer<T> for Losing<'_, O> {
+    fn observe(&mut self, info: &IterationInfo<'_, T>) -> Control {
+        let control = self.observer.observe(info);
+        let rising = info.residual > self.last;
+        self.last = info.residual;
+        if control == Control::Continue && rising && info.residual > self.bar {
+            self.lost = true;
+            return Control::Stop;
+        }
+        control
+    }
+}
+
 /// The rounds of TV on the depth map of `x`, each followed by the model-based fit within the
 /// windows around the regularized depths; a round whose fit more than doubles the squared
 /// residual is undone and ends them. Adds each fit to `report`.
@@ -514,6 +561,7 @@ where
     };
     let mut before = x.to_vec();
     let mut fit_before = residual_norm_sq(op, y, x);
+    let y2 = crate::linalg::dot(y, y);
     let space = op.space();
     for _ in 0..params.rounds {
         let found = column_peaks(x, ks, PeakRule::LargestPositive);
@@ -549,13 +597,40 @@ where
                 }
             }
         }
-        let r = model_based_windowed(op, y, x, &windowed, Some(&windows), Some((m, n)), observer)?;
-        report.absorb(r);
         // The windows are a heuristic: a windowed fit that lost what the previous one had found
         // (more than doubling the squared residual) is undone. Smaller increases are expected
         // in noise, where dropping false detections leaves more of the noise unexplained.
-        let fit = residual_norm_sq(op, y, x);
-        if fit > 2.0 * fit_before {
+        let mut watch = Losing {
+            observer: &mut *observer,
+            bar: (LOST * fit_before / y2).sqrt(),
+            last: f64::INFINITY,
+            lost: false,
+        };
+        let r = model_based_windowed(
+            op,
+            y,
+            x,
+            &windowed,
+            Some(&windows),
+            Some((m, n)),
+            &mut watch,
+        )?;
+        let lost = watch.lost;
+        if lost {
+            // Ended by the watch: the iterations and applications count, the ending is the
+            // previous fit's.
+            let termination = report.termination;
+            report.absorb(r);
+            report.termination = termination;
+        } else {
+            report.absorb(r);
+        }
+        let fit = if lost {
+            f64::INFINITY
+        } else {
+            residual_norm_sq(op, y, x)
+        };
+        if fit > LOST * fit_before {
             x.copy_from_slice(&before);
             break;
         }
