@@ -286,10 +286,11 @@ where
 /// [`neighbour_change`](TvDepthParams::neighbour_change) of the pixels, or when three rounds in a
 /// row do not lower the squared residual by 1% while the residual is at most 0.2 of ‖y‖
 /// (noise; the fit from their estimate then skips its exploration,
-/// [`ModelBasedParams::explore_iterations`]: it would only add empty pixels). On the 100×100×40 paper scene this recovers every depth from K_p = 10000 samples
-/// (K ≈ 1.8 times the number of returns), noise-free, where message passing alone finds 19%;
-/// short rounds that continue one run (2 iterations each) need a quarter of the iterations that
-/// rounds restarted from scratch (20 each) need. Neighbours with an
+/// [`ModelBasedParams::explore_iterations`]: it would only add empty pixels). On the 100×100×40
+/// paper scene this recovers every depth from K_p = 10000 samples (K ≈ 1.8 times the number of
+/// returns), noise-free, where message passing alone finds 19%; short rounds that continue one
+/// run (2 iterations each) need a quarter of the iterations that rounds restarted from scratch
+/// (20 each) need. Neighbours with an
 /// expected amplitude below [`neighbour_gate`](TvDepthParams::neighbour_gate) of the typical
 /// one count as empty: otherwise "a return of vanishing amplitude", which the data cannot tell
 /// from an empty pixel, spreads through the background.
@@ -506,7 +507,7 @@ const LOST: f64 = 2.0;
 /// The observer of a round's windowed fit: every iteration goes on to the caller's observer, and
 /// the fit ends as soon as it is on its way to being undone, its squared residual above
 /// [`LOST`] times that of the fit before and rising. Without exploration the windowed fit finds
-/// few new returns, so a fit that drops returns faster than it finds them does not come back:
+/// few new returns, and no fit measured that dropped returns faster than it found them came back:
 /// at 20 dB on the 100×100×40 paper scene at K_p = 10 000 the windowed fit started from message
 /// passing within the windows at 15 times the squared residual and rose for 31 iterations, a
 /// third of the solver's time, to be undone. Fits that are kept may start as high (up to 8
