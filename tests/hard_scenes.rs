@@ -378,11 +378,9 @@ fn below_one_measurement_per_lit_pixel_a_false_patch_that_explains_only_noise_is
 /// For each fit an observer sees, every iteration's relative residual and pixels held.
 type Fits = Vec<Vec<(f64, usize)>>;
 
-/// TV on the depth map with the default settings at 20 dB (seed 41): its scene, its metrics and
-/// its fits.
-fn tv_fits(g: Geometry, kp: usize) -> (Vec<f64>, Metrics, Fits) {
+/// TV on the depth map with the default settings: its scene, its metrics and its fits.
+fn tv_fits(g: Geometry, op: &RdOperator<f64>, y: &[f64]) -> (Vec<f64>, Metrics, Fits) {
     use rdlidar::solver::{Control, IterationInfo};
-    let (op, y) = measured(g, kp, Some(20.0), 41);
     let mut fits: Fits = Vec::new();
     let mut record = |info: &IterationInfo<'_, f64>| {
         if info.iteration == 1 {
@@ -394,7 +392,7 @@ fn tv_fits(g: Geometry, kp: usize) -> (Vec<f64>, Metrics, Fits) {
     };
     let mut x = vec![0.0; g.voxels()];
     let params = TvDepthParams::default();
-    tv_depth(&op, (g.m, g.n), &y, &mut x, &params, &mut record).unwrap();
+    tv_depth(op, (g.m, g.n), y, &mut x, &params, &mut record).unwrap();
     let truth = paper_scene::<f64>(g).unwrap();
     let m = compare(&truth, &Scene::from_vec(g, x.clone()).unwrap(), 200e-12).unwrap();
     (x, m, fits)
@@ -408,12 +406,12 @@ fn a_windowed_fit_that_loses_the_first_fits_returns_ends_early_and_is_undone() {
     // iteration. It ends as soon as its residual is above twice the first fit's squared one and
     // rising (it ran about 25 iterations to be undone before) and the first fit is kept.
     let g = Geometry::new(48, 48, 24).unwrap();
-    let (x, m, fits) = tv_fits(g, 3000);
+    let (op, y) = measured(g, 3000, Some(20.0), 41);
+    let (x, m, fits) = tv_fits(g, &op, &y);
     let first_only = TvDepthParams {
         rounds: 0,
         ..TvDepthParams::default()
     };
-    let (op, y) = measured(g, 3000, Some(20.0), 41);
     let mut x0 = vec![0.0; g.voxels()];
     tv_depth(&op, (g.m, g.n), &y, &mut x0, &first_only, &mut ()).unwrap();
     assert!(fits.len() >= 2, "{fits:?}");
@@ -430,7 +428,8 @@ fn after_rounds_that_stall_at_the_noise_the_fit_does_not_explore() {
     // support, about half the empty ones, and dropped them again over a dozen iterations, not
     // all (on the 100×100×40 paper scene at K_p = 10 000: 7909 pixels held for 5547 lit).
     let g = Geometry::new(48, 48, 24).unwrap();
-    let (_, m, fits) = tv_fits(g, 3111);
+    let (op, y) = measured(g, 3111, Some(20.0), 41);
+    let (_, m, fits) = tv_fits(g, &op, &y);
     let first: Vec<usize> = fits[0].iter().map(|f| f.1).collect();
     let most = first.iter().copied().max().unwrap_or(0);
     let empty = g.m * g.n - m.lit;

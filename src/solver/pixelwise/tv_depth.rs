@@ -616,17 +616,12 @@ where
             Some((m, n)),
             &mut watch,
         )?;
-        let lost = watch.lost;
-        if lost {
+        let termination = report.termination;
+        report.absorb(r);
+        let fit = if watch.lost {
             // Ended by the watch: the iterations and applications count, the ending is the
             // previous fit's.
-            let termination = report.termination;
-            report.absorb(r);
             report.termination = termination;
-        } else {
-            report.absorb(r);
-        }
-        let fit = if lost {
             f64::INFINITY
         } else {
             residual_norm_sq(op, y, x)
