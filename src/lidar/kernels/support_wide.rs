@@ -358,9 +358,11 @@ unsafe fn entries4_wide<T: Real, S: Simd<T = T>, const TERNARY: bool>(
     let n = out.len();
     let op = out.as_mut_ptr();
     let mut amps = [S::v_zero(); 4];
+    let mut negs = [S::v_zero(); 4];
     let mut cm = [e[0].plus.as_ptr(); 4];
     for i in 0..4 {
         amps[i] = S::v_splat(e[i].amp);
+        negs[i] = S::v_splat(T::zero() - e[i].amp);
         cm[i] = e[i].minus.unwrap_or(e[i].plus).as_ptr();
     }
     let mut at = 0;
@@ -368,8 +370,14 @@ unsafe fn entries4_wide<T: Real, S: Simd<T = T>, const TERNARY: bool>(
         let mut o = S::v_loadu(op.add(at));
         for i in 0..4 {
             let p = S::v_loadu(e[i].pw.as_ptr().add(at));
-            let v = coded::<S, true, TERNARY>(e[i].bit, e[i].plus.as_ptr(), cm[i], p, at);
-            o = S::v_mul_add(v, amps[i], o);
+            o = if TERNARY {
+                let v = coded::<S, true, TERNARY>(e[i].bit, e[i].plus.as_ptr(), cm[i], p, at);
+                S::v_mul_add(v, amps[i], o)
+            } else {
+                // The code picks +amp or −amp: the same product as the signed pulse value's.
+                let m = S::m_bit(e[i].plus.as_ptr().add(at), e[i].bit);
+                S::v_mul_add(p, S::v_pick(m, amps[i], negs[i]), o)
+            };
         }
         S::v_storeu(op.add(at), o);
         at += per;

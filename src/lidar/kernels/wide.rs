@@ -100,6 +100,8 @@ pub trait Simd: Copy {
     /// `a` in the lanes of `plus` only, 0 − a in those of `minus` only, zero elsewhere: a
     /// ternary code applied.
     unsafe fn v_ternary(plus: Self::M, minus: Self::M, a: Self::V) -> Self::V;
+    /// `a` in the lanes of `plus`, `b` in the others.
+    unsafe fn v_pick(plus: Self::M, a: Self::V, b: Self::V) -> Self::V;
 }
 
 /// The mask of the first `min(n, bits)` lanes.
@@ -176,6 +178,10 @@ impl Simd for W512<f32> {
         let gated = _mm512_maskz_mov_ps(plus, a);
         _mm512_mask_sub_ps(gated, minus, gated, a)
     }
+    #[inline(always)]
+    unsafe fn v_pick(plus: __mmask16, a: __m512, b: __m512) -> __m512 {
+        _mm512_mask_blend_ps(plus, b, a)
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -238,6 +244,10 @@ impl Simd for W512<f64> {
     unsafe fn v_ternary(plus: __mmask8, minus: __mmask8, a: __m512d) -> __m512d {
         let gated = _mm512_maskz_mov_pd(plus, a);
         _mm512_mask_sub_pd(gated, minus, gated, a)
+    }
+    #[inline(always)]
+    unsafe fn v_pick(plus: __mmask8, a: __m512d, b: __m512d) -> __m512d {
+        _mm512_mask_blend_pd(plus, b, a)
     }
 }
 
@@ -309,6 +319,10 @@ impl Simd for W256<f32> {
         let gated = _mm256_blendv_ps(_mm256_setzero_ps(), a, plus);
         _mm256_blendv_ps(gated, _mm256_sub_ps(gated, a), minus)
     }
+    #[inline(always)]
+    unsafe fn v_pick(plus: __m256, a: __m256, b: __m256) -> __m256 {
+        _mm256_blendv_ps(b, a, plus)
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -377,6 +391,10 @@ impl Simd for W256<f64> {
     unsafe fn v_ternary(plus: __m256d, minus: __m256d, a: __m256d) -> __m256d {
         let gated = _mm256_blendv_pd(_mm256_setzero_pd(), a, plus);
         _mm256_blendv_pd(gated, _mm256_sub_pd(gated, a), minus)
+    }
+    #[inline(always)]
+    unsafe fn v_pick(plus: __m256d, a: __m256d, b: __m256d) -> __m256d {
+        _mm256_blendv_pd(b, a, plus)
     }
 }
 

@@ -26,7 +26,7 @@ use crate::space::{self, Space};
 use super::PixelConstraints;
 
 mod denoise;
-use denoise::{denoise, dot_f64, PixelPosterior};
+use denoise::{pixel_posterior, PixelPosterior};
 
 /// Parameters of [`reflector_amp`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -443,17 +443,6 @@ impl<'c, T: Real> AmpIteration<'c, T> {
             .enumerate()
             .map(|(p, ((mp, up), wp))| {
                 let gram = grams.block(p, ks);
-                let mut g = [0.0f64; 256];
-                let mut big;
-                let g: &mut [f64] = if ks <= g.len() {
-                    &mut g[..ks]
-                } else {
-                    big = vec![0.0; ks];
-                    &mut big
-                };
-                for (d, gd) in g.iter_mut().enumerate() {
-                    *gd = up[d].as_f64() + dot_f64(&gram[d * ks..(d + 1) * ks], mp);
-                }
                 let window = windows.map_or((0, ks - 1), |w| w[p]);
                 let pixel_prior = priors.map(|pr| {
                     (
@@ -462,7 +451,7 @@ impl<'c, T: Real> AmpIteration<'c, T> {
                         pr.amplitude.as_ref().map(|a| a[p]),
                     )
                 });
-                denoise(g, gram, window, tau2, prior, pixel_prior, mp, wp)
+                pixel_posterior(up, gram, window, tau2, prior, pixel_prior, mp, wp)
             })
             .collect()
     }
