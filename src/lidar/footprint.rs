@@ -14,7 +14,7 @@ use crate::real::Real;
 use super::codes::CodeAlphabet;
 use super::geometry::Geometry;
 use super::kernels::adjoint_wide::{adjoint_row_nch, wide_adjoint_nch};
-use super::kernels::quads::{gather_rows_wide, lines_as_mut, quad_row_len, CacheLine, QUAD_ROWS};
+use super::kernels::quads::{gather_rows_wide, lines_as_mut, quad_row_read, CacheLine, QUAD_ROWS};
 use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
 use super::rdop::{
     adjoint_groups_per_block, depth_slabs, groups_per_block, RdOperator, ADJ_BLOCK_BYTES,
@@ -167,7 +167,7 @@ impl<T: Real> RdOperator<T> {
             let row = self
                 .slabs()
                 .iter()
-                .map(|s| quad_row_len::<T>(s.1))
+                .map(|s| quad_row_read::<T>(s.1, (8 * s.1).min(g.ks - s.0)))
                 .sum::<usize>();
             let lookups = 2.0 * groups * k * planes;
             KernelWork {

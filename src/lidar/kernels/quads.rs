@@ -37,6 +37,22 @@ pub(crate) fn quad_row_len<T>(nch: usize) -> usize {
     (8 * nch).div_ceil(per) * per
 }
 
+/// Values the quad forward reads per row of a slab of `nch` chunks holding `width` bins: the
+/// whole row, or all but the second half of its last vector when every bin lies before it.
+pub(crate) fn quad_row_read<T>(nch: usize, width: usize) -> usize {
+    let (rl, half) = (quad_row_len::<T>(nch), per_vector::<T>() / 2);
+    if reads_half(width, rl, half) {
+        rl - half
+    } else {
+        rl
+    }
+}
+
+/// Whether a row of `rl` values holding `width` bins has none in its last `half` values.
+fn reads_half(width: usize, rl: usize, half: usize) -> bool {
+    width + half <= rl
+}
+
 /// Values of `T` per 512-bit vector (and per cache line).
 fn per_vector<T>() -> usize {
     64 / std::mem::size_of::<T>()
@@ -190,16 +206,30 @@ unsafe fn quad_kernel<T: Real, S: Simd<T = T>, const Z: usize>(
     a: &QuadBlock<'_, T>,
     part: &mut [Lane<T>],
 ) {
+    // A last vector whose slab bins all lie in its first half is read as that half.
+    if reads_half(a.width, Z * S::PER, S::PER / 2) {
+        quad_run::<T, S, Z, true>(a, part);
+    } else {
+        quad_run::<T, S, Z, false>(a, part);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn quad_run<T: Real, S: Simd<T = T>, const Z: usize, const HALF: bool>(
+    a: &QuadBlock<'_, T>,
+    part: &mut [Lane<T>],
+) {
     let n = part.len();
     let mut k = 0;
     if 2 * Z + 4 <= S::REGS {
         while k + 2 <= n {
-            quad_samples::<T, S, Z, 2>(a, k, part);
+            quad_samples::<T, S, Z, 2, HALF>(a, k, part);
             k += 2;
         }
     }
     while k < n {
-        quad_samples::<T, S, Z, 1>(a, k, part);
+        quad_samples::<T, S, Z, 1, HALF>(a, k, part);
         k += 1;
     }
 }
@@ -212,7 +242,13 @@ unsafe fn quad_kernel<T: Real, S: Simd<T = T>, const Z: usize>(
 #[inline(always)]
 // The accumulators are indexed in step with the vectors' offsets in the rows.
 #[allow(clippy::needless_range_loop)]
-unsafe fn quad_samples<T: Real, S: Simd<T = T>, const Z: usize, const N: usize>(
+unsafe fn quad_samples<
+    T: Real,
+    S: Simd<T = T>,
+    const Z: usize,
+    const N: usize,
+    const HALF: bool,
+>(
     a: &QuadBlock<'_, T>,
     k: usize,
     part: &mut [Lane<T>],
@@ -230,12 +266,20 @@ unsafe fn quad_samples<T: Real, S: Simd<T = T>, const Z: usize, const N: usize>(
             base.add((QUAD_ROWS + (b >> 4)) * rl),
         )
     };
+    // The row's `z`-th vector, its first half only for the last one of a `HALF` row.
+    let load = |row: *const T, z: usize| {
+        if HALF && z == Z - 1 {
+            S::v_load_half(row.add(z * per))
+        } else {
+            S::v_load(row.add(z * per))
+        }
+    };
     for (g, plus) in a.plus.iter().enumerate() {
         for (s, acc) in acc.iter_mut().enumerate() {
             let (lo, hi) = rows(plus, g, s);
             for z in 0..Z {
-                acc[0][z] = S::v_add(acc[0][z], S::v_load(lo.add(z * per)));
-                acc[hi_set][z] = S::v_add(acc[hi_set][z], S::v_load(hi.add(z * per)));
+                acc[0][z] = S::v_add(acc[0][z], load(lo, z));
+                acc[hi_set][z] = S::v_add(acc[hi_set][z], load(hi, z));
             }
         }
     }
@@ -244,8 +288,8 @@ unsafe fn quad_samples<T: Real, S: Simd<T = T>, const Z: usize, const N: usize>(
             for (s, acc) in acc.iter_mut().enumerate() {
                 let (lo, hi) = rows(minus, g, s);
                 for z in 0..Z {
-                    acc[0][z] = S::v_sub(acc[0][z], S::v_load(lo.add(z * per)));
-                    acc[hi_set][z] = S::v_sub(acc[hi_set][z], S::v_load(hi.add(z * per)));
+                    acc[0][z] = S::v_sub(acc[0][z], load(lo, z));
+                    acc[hi_set][z] = S::v_sub(acc[hi_set][z], load(hi, z));
                 }
             }
         }

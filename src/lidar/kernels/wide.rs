@@ -102,6 +102,9 @@ pub trait Simd: Copy {
     unsafe fn v_ternary(plus: Self::M, minus: Self::M, a: Self::V) -> Self::V;
     /// `a` in the lanes of `plus`, `b` in the others.
     unsafe fn v_pick(plus: Self::M, a: Self::V, b: Self::V) -> Self::V;
+    /// The first half of the vector's values at `p` (aligned to half the vector's size), zeros
+    /// in the other half: nothing past them is read.
+    unsafe fn v_load_half(p: *const Self::T) -> Self::V;
 }
 
 /// The mask of the first `min(n, bits)` lanes.
@@ -182,6 +185,10 @@ impl Simd for W512<f32> {
     unsafe fn v_pick(plus: __mmask16, a: __m512, b: __m512) -> __m512 {
         _mm512_mask_blend_ps(plus, b, a)
     }
+    #[inline(always)]
+    unsafe fn v_load_half(p: *const f32) -> __m512 {
+        _mm512_zextps256_ps512(_mm256_load_ps(p))
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -248,6 +255,10 @@ impl Simd for W512<f64> {
     #[inline(always)]
     unsafe fn v_pick(plus: __mmask8, a: __m512d, b: __m512d) -> __m512d {
         _mm512_mask_blend_pd(plus, b, a)
+    }
+    #[inline(always)]
+    unsafe fn v_load_half(p: *const f64) -> __m512d {
+        _mm512_zextpd256_pd512(_mm256_load_pd(p))
     }
 }
 
@@ -323,6 +334,10 @@ impl Simd for W256<f32> {
     unsafe fn v_pick(plus: __m256, a: __m256, b: __m256) -> __m256 {
         _mm256_blendv_ps(b, a, plus)
     }
+    #[inline(always)]
+    unsafe fn v_load_half(p: *const f32) -> __m256 {
+        _mm256_zextps128_ps256(_mm_load_ps(p))
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -395,6 +410,10 @@ impl Simd for W256<f64> {
     #[inline(always)]
     unsafe fn v_pick(plus: __m256d, a: __m256d, b: __m256d) -> __m256d {
         _mm256_blendv_pd(b, a, plus)
+    }
+    #[inline(always)]
+    unsafe fn v_load_half(p: *const f64) -> __m256d {
+        _mm256_zextpd128_pd256(_mm_load_pd(p))
     }
 }
 
