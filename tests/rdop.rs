@@ -353,15 +353,13 @@ fn work_counts_the_table_rows_of_each_kernel() {
             let w = op.work();
             let (groups, k, octets, ks) = (3.0, 55.0, 7.0, 6.0);
             if op.isa() == "avx512" {
-                // Two quads of 16 rows per group, rows padded to a cache line (16 values).
+                // Two quads of 16 rows per group, rows padded to a cache line (16 values), of
+                // which the kernel reads the first half: the 6 bins all lie there.
                 assert_eq!(
                     w.forward.additions,
                     planes * 2.0 * groups * k * ks + groups * 32.0 * ks
                 );
-                assert_eq!(
-                    w.forward.table_bytes,
-                    planes * 2.0 * groups * k * 16.0 * 4.0
-                );
+                assert_eq!(w.forward.table_bytes, planes * 2.0 * groups * k * 8.0 * 4.0);
             } else {
                 assert_eq!(
                     w.forward.additions,
@@ -381,6 +379,14 @@ fn work_counts_the_table_rows_of_each_kernel() {
                 planes * 8.0 * groups * octets * row * 4.0
             );
             assert_eq!(w.forward.additions_per_s(0.5), 2.0 * w.forward.additions);
+        }
+        // K_s = 12 reaches into the second half of the row's vector: the whole row is read.
+        let g = Geometry::new(4, 5, 12).unwrap();
+        let pulse = Pulse::<f32>::bernoulli(44, 0).unwrap().into_inner();
+        let codes = Codes::random_binary(20, 55, 1).unwrap();
+        let op = RdOperator::new(g, pulse, Arc::new(codes)).unwrap();
+        if op.isa() == "avx512" {
+            assert_eq!(op.work().forward.table_bytes, 2.0 * 3.0 * 55.0 * 16.0 * 4.0);
         }
     });
 }

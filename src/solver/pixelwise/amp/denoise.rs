@@ -77,14 +77,19 @@ fn denoise(
     let mut top = log_empty;
     // The logarithm of the amplitude's posterior spread, once per distinct diagonal entry (one
     // for the Toeplitz blocks of ±1 codes).
-    let mut spread = (f64::NAN, 0.0);
+    let mut spread: Option<(u64, f64)> = None;
     for d in (lo..=hi).filter(|&d| admissible(d)) {
         let prec = gram[d * ks + d] / tau2 + 1.0 / prior.var;
-        if prec.to_bits() != spread.0.to_bits() {
-            spread = (prec, 0.5 * (prior.var * prec).ln());
-        }
+        let log_spread = match spread {
+            Some((bits, v)) if bits == prec.to_bits() => v,
+            _ => {
+                let v = 0.5 * (prior.var * prec).ln();
+                spread = Some((prec.to_bits(), v));
+                v
+            }
+        };
         let b = g[d] / tau2 + prior.mean / prior.var;
-        logw[d] = log_depth + log_q(d) - spread.1 + b * b / (2.0 * prec);
+        logw[d] = log_depth + log_q(d) - log_spread + b * b / (2.0 * prec);
         top = top.max(logw[d]);
     }
     let mut total = (log_empty - top).exp();
