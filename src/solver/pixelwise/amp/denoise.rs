@@ -114,14 +114,8 @@ fn denoise(
             best = Some((d, w, a));
         }
     }
-    let mut times = [0.0f64; 256];
-    let mut big_times;
-    let times: &mut [f64] = if ks <= times.len() {
-        &mut times[..ks]
-    } else {
-        big_times = vec![0.0; ks];
-        &mut big_times
-    };
+    // The weights are spent: their buffer takes G·mean.
+    let times = logw;
     gram_times(gram, mean, times);
     let quad = dot_f64(mean, times);
     PixelPosterior {
