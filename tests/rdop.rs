@@ -404,3 +404,71 @@ fn the_gather_limit_is_measured_and_refuses_impossible_rows() {
         assert!(e.to_string().contains(name), "{e}");
     }
 }
+
+/// The single-precision twin of an `f64` operator is the operator built in `f32` from the same
+/// pulse and codes (bit for bit, on both forward paths), within `f32`'s rounding of the `f64`
+/// products; an `f32` operator and a pulse beyond `f32`'s range have none; counting and
+/// cancellation reach the twin.
+#[test]
+fn the_single_precision_twin_is_the_f32_operator() {
+    use rdlidar::lidar::Cancellable;
+    use rdlidar::operator::Counted;
+    use std::sync::atomic::AtomicBool;
+
+    let g = Geometry::new(5, 3, 12).unwrap();
+    let kp = 70;
+    let pulse = Pulse::<f64>::bernoulli(kp, 3).unwrap().into_inner();
+    let codes = Arc::new(Codes::random_binary(g.pixels(), g.samples(kp), 4).unwrap());
+    let pulse32: Vec<f32> = pulse.iter().map(|&v| v as f32).collect();
+    let x = scene(SceneKind::Sparse, g.voxels(), 5);
+    let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+    let y = random_vec(g.samples(kp), 6);
+    let y32: Vec<f32> = y.iter().map(|&v| v as f32).collect();
+    for path in [ForwardPath::Dense, ForwardPath::Sparse] {
+        let op = RdOperator::new(g, pulse.clone(), codes.clone())
+            .unwrap()
+            .with_forward_path(path);
+        let want = RdOperator::new(g, pulse32.clone(), codes.clone())
+            .unwrap()
+            .with_forward_path(path);
+        let twin = op.single().expect("an f64 operator has a twin");
+        assert_eq!((twin.nrows(), twin.ncols()), (op.nrows(), op.ncols()));
+        let (mut a, mut b) = (vec![0f32; op.nrows()], vec![0f32; op.nrows()]);
+        twin.apply(&x32, &mut a);
+        want.apply(&x32, &mut b);
+        assert_eq!(a, b, "{path:?} forward");
+        let mut full = vec![0f64; op.nrows()];
+        op.apply(&x, &mut full);
+        assert!(rel(&a, &full.iter().map(|&v| v as f32).collect::<Vec<_>>()) < 1e-5);
+        let (mut u, mut v) = (vec![0f32; op.ncols()], vec![0f32; op.ncols()]);
+        twin.apply_adjoint(&y32, &mut u);
+        want.apply_adjoint(&y32, &mut v);
+        assert_eq!(u, v, "{path:?} adjoint");
+    }
+    let op32 = RdOperator::new(g, pulse32, codes.clone()).unwrap();
+    assert!(op32.single().is_none(), "nothing to gain in f32");
+    let mut wide = pulse.clone();
+    wide[0] = 1e300;
+    let beyond = RdOperator::new(g, wide, codes.clone()).unwrap();
+    assert!(beyond.single().is_none(), "a pulse beyond f32's range");
+
+    let op = RdOperator::new(g, pulse, codes).unwrap();
+    let counted = Counted::new(&op);
+    let twin = counted.single().unwrap();
+    let mut a = vec![0f32; op.nrows()];
+    twin.apply(&x32, &mut a);
+    twin.apply(&x32, &mut a);
+    let mut u = vec![0f32; op.ncols()];
+    twin.apply_adjoint(&y32, &mut u);
+    assert_eq!((counted.forward_count(), counted.adjoint_count()), (2, 1));
+    let flag = AtomicBool::new(false);
+    let cancellable = Cancellable::new(&op, &flag);
+    cancellable.single().unwrap().apply(&x32, &mut a);
+    assert!(a.iter().any(|v| *v != 0.0));
+    flag.store(true, std::sync::atomic::Ordering::Relaxed);
+    cancellable.single().unwrap().apply(&x32, &mut a);
+    assert!(
+        a.iter().all(|v| *v == 0.0),
+        "a raised flag reaches the twin"
+    );
+}

@@ -101,6 +101,13 @@ where
     fn space(&self) -> &dyn crate::space::Space {
         self.inner.space()
     }
+
+    fn single(&self) -> Option<Box<dyn LinearOperator<f32> + '_>> {
+        Some(Box::new(Cancellable {
+            inner: self.inner.single()?,
+            flag: self.flag,
+        }))
+    }
 }
 
 impl<'f, T, P> VoxelOperator<T> for Cancellable<'f, P>

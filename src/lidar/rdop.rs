@@ -156,6 +156,9 @@ pub struct RdOperator<T: Real> {
     lags: OnceLock<Vec<f64>>,
     /// The zero-mean twin ([`RdOperator::zero_mean`]), built on first use.
     twin: OnceLock<Box<RdOperator<T>>>,
+    /// The single-precision twin ([`LinearOperator::single`]), built on first use; `None` when
+    /// `T` is `f32` or the pulse does not fit in `f32`.
+    single: OnceLock<Option<Box<RdOperator<f32>>>>,
 }
 
 impl<T: Real> std::fmt::Debug for RdOperator<T> {
@@ -243,6 +246,7 @@ impl<T: Real> RdOperator<T> {
             pool: Pool(Mutex::new(Vec::new())),
             lags: OnceLock::new(),
             twin: OnceLock::new(),
+            single: OnceLock::new(),
         })
     }
 
@@ -289,6 +293,9 @@ impl<T: Real> RdOperator<T> {
     /// Sets how the forward product is evaluated.
     pub fn with_forward_path(mut self, path: ForwardPath) -> Self {
         self.path = path;
+        // Twins built before take the new path when next asked for.
+        self.twin = OnceLock::new();
+        self.single = OnceLock::new();
         self
     }
 
@@ -659,6 +666,23 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                     }
                 }
             });
+    }
+
+    /// The same codes and forward path with the pulse rounded to `f32` (exactly the pulse for
+    /// the 0/1 pulses of the simulations), built on the first call and kept; `None` when `T` is
+    /// `f32`, or when a pulse value overflows `f32`.
+    fn single(&self) -> Option<Box<dyn LinearOperator<f32> + '_>> {
+        let twin = self.single.get_or_init(|| {
+            if std::mem::size_of::<T>() <= std::mem::size_of::<f32>() {
+                return None;
+            }
+            let pulse = self.pulse.iter().map(|v| f32::of_f64(v.as_f64())).collect();
+            RdOperator::new(self.geom, pulse, self.codes.clone())
+                .ok()
+                .map(|op| Box::new(op.with_forward_path(self.path)))
+        });
+        twin.as_deref()
+            .map(|op| Box::new(op) as Box<dyn LinearOperator<f32> + '_>)
     }
 
     /// A [`SupportOperator`](super::SupportOperator): both directions cost O(|columns|·K_p),

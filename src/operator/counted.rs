@@ -121,6 +121,16 @@ impl<T: Real, A: LinearOperator<T>> LinearOperator<T> for Counted<A> {
     fn space(&self) -> &dyn Space {
         self.inner.space()
     }
+    /// The inner operator's single-precision twin, whose applications count as this one's.
+    fn single(&self) -> Option<Box<dyn LinearOperator<f32> + '_>> {
+        let twin = self.inner.single()?;
+        Some(Box::new(CountedPart {
+            inner: twin,
+            forward: &self.forward,
+            adjoint: &self.adjoint,
+            support: &self.support,
+        }))
+    }
     /// The inner operator's restriction, whose applications count as support applications of
     /// this one.
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {
@@ -217,6 +227,15 @@ impl<T: Real> LinearOperator<T> for CountedPart<'_, T> {
     }
     fn space(&self) -> &dyn Space {
         self.inner.space()
+    }
+    fn single(&self) -> Option<Box<dyn LinearOperator<f32> + '_>> {
+        let twin = self.inner.single()?;
+        Some(Box::new(CountedPart {
+            inner: twin,
+            forward: self.forward,
+            adjoint: self.adjoint,
+            support: self.support,
+        }))
     }
     /// A restriction of the part, whose applications count as support applications.
     fn restrict_columns(&self, columns: Vec<usize>) -> Result<Box<dyn LinearOperator<T> + '_>> {

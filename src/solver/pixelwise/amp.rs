@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
-use crate::operator::{check_pixels, VoxelOperator};
+use crate::operator::{check_pixels, LinearOperator, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{
     check_problem, solve_with, Iteration, Iterative, Observer, Progress, Report, Stopping,
@@ -50,6 +50,15 @@ pub struct ReflectorAmpParams {
     /// The estimate keeps a pixel when its posterior probability of a return exceeds this
     /// (in (0, 1), default 0.5).
     pub decision: f64,
+    /// Applies the operator in single precision where it has a twin in `f32`
+    /// ([`LinearOperator::single`](crate::LinearOperator::single)) and the computation is wider:
+    /// the iterates are decided at the noise level τ, far above `f32`'s rounding until the
+    /// residual is within about 10⁻⁶ of ‖y‖, and the applications cost about half. The
+    /// posteriors, the residual and the state stay in `f64`. Default `false`: the estimate's
+    /// amplitudes are the posterior means; the model-based start
+    /// ([`ModelBasedParams::amp`](super::ModelBasedParams::amp)), which re-fits them by least
+    /// squares in the computation's precision, sets it.
+    pub single_precision: bool,
     /// Stopping rules; the residual is ‖y − Ax̂‖ / ‖y‖ for the posterior mean x̂.
     pub stopping: Stopping,
 }
@@ -62,6 +71,7 @@ impl Default for ReflectorAmpParams {
             patience: 5,
             stable_support: None,
             decision: 0.5,
+            single_precision: false,
             stopping: Stopping {
                 max_iter: 60,
                 rel_residual: Some(1e-6),
@@ -318,10 +328,30 @@ pub(crate) struct AmpIteration<'c, T> {
     objective: f64,
     /// Whether the run ended on the best iterate (every ending but a zero residual).
     on_best: bool,
-    xt: Vec<T>,
-    u: Vec<T>,
-    ax: Vec<T>,
-    zt: Vec<T>,
+    /// The applications' vectors in `T`, and in `f32` for the operator's single-precision twin
+    /// (allocated on first use).
+    full: Applied<T>,
+    low: Applied<f32>,
+}
+
+/// The vectors of one iteration's applications, in the precision they run in: z and x̂ rounded
+/// to it, Aᵀz and Ax̂.
+struct Applied<U> {
+    z: Vec<U>,
+    u: Vec<U>,
+    x: Vec<U>,
+    ax: Vec<U>,
+}
+
+impl<U: Real> Applied<U> {
+    fn zeros(m: usize, n: usize) -> Self {
+        Applied {
+            z: vec![U::zero(); m],
+            u: vec![U::zero(); n],
+            x: vec![U::zero(); n],
+            ax: vec![U::zero(); m],
+        }
+    }
 }
 
 impl<'c, T: Real> Iterative<T> for AmpIteration<'c, T> {
@@ -433,12 +463,12 @@ impl<'c, T: Real> AmpIteration<'c, T> {
 
     /// Every pixel's posterior given the correlations `u` = Aᵀz, x̂ updated to the posterior
     /// mean.
-    fn pixel_posteriors(&mut self) -> Vec<PixelPosterior> {
+    fn pixel_posteriors<U: Real>(&mut self, u: &[U]) -> Vec<PixelPosterior> {
         let (ks, tau2, prior) = (self.ks, self.tau2, self.prior);
         let (grams, windows, priors) = (&self.grams, self.windows, self.priors);
         self.mean
             .par_chunks_mut(ks)
-            .zip(self.u.par_chunks(ks))
+            .zip(u.par_chunks(ks))
             .zip(self.posteriors.depth.par_chunks_mut(ks))
             .enumerate()
             .map(|(p, ((mp, up), wp))| {
@@ -489,6 +519,25 @@ impl<'c, T: Real> AmpIteration<'c, T> {
                 .max(f64::MIN_POSITIVE);
         }
         div
+    }
+
+    /// One iteration's applications of `op` in its precision `U`: u = Aᵀz, the posteriors and
+    /// the most probable scene into `x` (the sums over the unknowns through `space`), then Ax̂ and the Onsager-corrected residual; returns
+    /// ‖y − Ax̂‖².
+    fn apply_on<U: Real, B: LinearOperator<U> + ?Sized>(
+        &mut self,
+        op: &B,
+        space: &dyn Space,
+        v: &mut Applied<U>,
+        x: &mut [T],
+    ) -> f64 {
+        convert(&self.z, &mut v.z);
+        op.apply_adjoint(&v.z, &mut v.u);
+        let posts = self.pixel_posteriors(&v.u);
+        let div = self.decide(space, &posts, x);
+        convert(&self.mean, &mut v.x);
+        op.apply(&v.x, &mut v.ax);
+        onsager_residual(&mut self.z, &self.y64, &v.ax, div)
     }
 
     /// Keeps the current iterate when its residual `res` is the best so far.
@@ -565,10 +614,8 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
             stable: 0,
             objective: 0.5 * yy,
             on_best: false,
-            xt: vec![T::zero(); n],
-            u: vec![T::zero(); n],
-            ax: vec![T::zero(); m],
-            zt: vec![T::zero(); m],
+            full: Applied::zeros(m, n),
+            low: Applied::zeros(0, 0),
         }))
     }
 
@@ -580,25 +627,30 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
     }
 
     fn step(&mut self, op: &A, _y: &[T], x: &mut [T], it: usize) -> Result<Progress> {
-        for (t, v) in self.zt.iter_mut().zip(&self.z) {
-            *t = T::of_f64(*v);
-        }
-        op.apply_adjoint(&self.zt, &mut self.u);
-        let posts = self.pixel_posteriors();
+        let single = if self.params.single_precision {
+            op.single()
+        } else {
+            None
+        };
         let space = op.space();
-        let div = self.decide(space, &posts, x);
-
-        for (t, v) in self.xt.iter_mut().zip(&self.mean) {
-            *t = T::of_f64(*v);
-        }
-        op.apply(&self.xt, &mut self.ax);
-        let onsager = div / self.z.len() as f64;
-        let mut rr = 0.0;
-        for ((zi, &yi), ai) in self.z.iter_mut().zip(&self.y64).zip(&self.ax) {
-            let r = yi - ai.as_f64();
-            rr += r * r;
-            *zi = r + onsager * *zi;
-        }
+        let rr = match &single {
+            Some(low) => {
+                let (m, n) = (self.z.len(), self.mean.len());
+                if self.low.z.len() != m {
+                    self.low = Applied::zeros(m, n);
+                }
+                let mut v = std::mem::replace(&mut self.low, Applied::zeros(0, 0));
+                let rr = self.apply_on(&**low, space, &mut v, x);
+                self.low = v;
+                rr
+            }
+            None => {
+                let mut v = std::mem::replace(&mut self.full, Applied::zeros(0, 0));
+                let rr = self.apply_on(op, space, &mut v, x);
+                self.full = v;
+                rr
+            }
+        };
         let res = (rr / self.yy).sqrt();
         if !res.is_finite() || !space::all(space, x.iter().all(|v| v.is_finite())) {
             return Err(Error::Breakdown {
@@ -646,4 +698,23 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
         }
         Ok(())
     }
+}
+
+/// `to` = `from` rounded to `U`.
+fn convert<U: Real>(from: &[f64], to: &mut [U]) {
+    for (t, v) in to.iter_mut().zip(from) {
+        *t = U::of_f64(*v);
+    }
+}
+
+/// The Onsager-corrected residual z ← y − Ax̂ + (z/K)·`div`, in place; returns ‖y − Ax̂‖².
+fn onsager_residual<U: Real>(z: &mut [f64], y: &[f64], ax: &[U], div: f64) -> f64 {
+    let onsager = div / z.len() as f64;
+    let mut rr = 0.0;
+    for ((zi, &yi), ai) in z.iter_mut().zip(y).zip(ax) {
+        let r = yi - ai.as_f64();
+        rr += r * r;
+        *zi = r + onsager * *zi;
+    }
+    rr
 }

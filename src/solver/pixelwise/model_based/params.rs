@@ -76,7 +76,9 @@ pub struct ModelBasedParams {
     /// Without a warm start, the first support comes from message passing with the one-reflector
     /// prior ([`reflector_amp`](crate::solver::reflector_amp)), and the exploration is skipped;
     /// `None` starts from the exploration instead (default: AMP with its defaults, but stopping
-    /// once its support has been stable for 3 iterations).
+    /// once its support has been stable for 3 iterations, and applying the operator in single
+    /// precision where it can, [`ReflectorAmpParams::single_precision`]: the fit that follows
+    /// is in the computation's precision).
     pub amp: Option<ReflectorAmpParams>,
     /// Stopping rules; the residual is ‖Ax − y‖ / ‖y‖.
     pub stopping: Stopping,
@@ -99,6 +101,7 @@ impl Default for ModelBasedParams {
             max_support_fraction: 0.8,
             amp: Some(ReflectorAmpParams {
                 stable_support: Some(3),
+                single_precision: true,
                 ..ReflectorAmpParams::default()
             }),
             inner: CglsParams {
