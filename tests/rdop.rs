@@ -3,7 +3,9 @@
 use std::sync::Arc;
 
 use proptest::prelude::*;
-use rdlidar::lidar::{composed_operator, Codes, ForwardPath, Geometry, Pulse, RdOperator};
+use rdlidar::lidar::{
+    composed_operator, Codes, ForwardPath, Geometry, MultiAdcOperator, Pulse, RdOperator,
+};
 use rdlidar::operator::{DotTest, LinearOperator};
 use rdlidar::Real;
 
@@ -405,8 +407,8 @@ fn the_gather_limit_is_measured_and_refuses_impossible_rows() {
     }
 }
 
-/// The single-precision twin of an `f64` operator is the operator built in `f32` from the same
-/// pulse and codes (bit for bit, on both forward paths), within `f32`'s rounding of the `f64`
+/// The single-precision twin of an `f64` operator (one ADC or several) is the operator built in
+/// `f32` from the same pulse and codes (bit for bit, on both forward paths), within `f32`'s rounding of the `f64`
 /// products; an `f32` operator and a pulse beyond `f32`'s range have none; counting and
 /// cancellation reach the twin.
 #[test]
@@ -445,6 +447,29 @@ fn the_single_precision_twin_is_the_f32_operator() {
         want.apply_adjoint(&y32, &mut v);
         assert_eq!(u, v, "{path:?} adjoint");
     }
+    // G ADCs: the twin is the f32 operator of the same code sets.
+    let sets: Vec<_> = (0..3u64)
+        .map(|s| Arc::new(Codes::random_binary(g.pixels(), g.samples(kp), 20 + s).unwrap()))
+        .collect();
+    let multi = MultiAdcOperator::new(g, &pulse, sets.clone()).unwrap();
+    let want = MultiAdcOperator::new(g, &pulse32, sets.clone()).unwrap();
+    let twin = multi
+        .single()
+        .expect("an f64 multi-ADC operator has a twin");
+    let (mut a, mut b) = (vec![0f32; multi.nrows()], vec![0f32; multi.nrows()]);
+    twin.apply(&x32, &mut a);
+    want.apply(&x32, &mut b);
+    assert_eq!(a, b, "multi-ADC forward");
+    let y3: Vec<f32> = random_vec(multi.nrows(), 7)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let (mut u, mut v) = (vec![0f32; g.voxels()], vec![0f32; g.voxels()]);
+    twin.apply_adjoint(&y3, &mut u);
+    want.apply_adjoint(&y3, &mut v);
+    assert_eq!(u, v, "multi-ADC adjoint");
+    assert!(want.single().is_none());
+
     let op32 = RdOperator::new(g, pulse32, codes.clone()).unwrap();
     assert!(op32.single().is_none(), "nothing to gain in f32");
     let mut wide = pulse.clone();

@@ -5,7 +5,7 @@
 //! [`RdOperator`] (one ADC) implements it, and so does [`MultiAdcOperator`]: G ADCs, each
 //! pixel modulated by G code sets, y = [A₁x; …; A_Gx] with G·K measurements.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use crate::error::{Error, Result};
 use crate::operator::{Counted, LinearOperator, Part, VStack, VoxelOperator};
@@ -209,6 +209,8 @@ pub struct MultiAdcOperator<T: Real> {
     parts: Vec<RdOperator<T>>,
     geom: Geometry,
     k: usize,
+    /// The single-precision twin ([`LinearOperator::single`]), built on first use.
+    single: OnceLock<Option<Box<MultiAdcOperator<f32>>>>,
 }
 
 impl<T: Real> MultiAdcOperator<T> {
@@ -226,7 +228,12 @@ impl<T: Real> MultiAdcOperator<T> {
             .map(|c| RdOperator::new(geom, pulse.to_vec(), c))
             .collect::<Result<Vec<_>>>()?;
         let k = parts[0].nrows();
-        Ok(MultiAdcOperator { parts, geom, k })
+        Ok(MultiAdcOperator {
+            parts,
+            geom,
+            k,
+            single: OnceLock::new(),
+        })
     }
 
     /// The G one-ADC operators, in the order of their measurement rows.
@@ -273,6 +280,27 @@ impl<T: Real> LinearOperator<T> for MultiAdcOperator<T> {
 
     fn adjoint_kernel(&self, y: &[T], x: &mut [T], _: &mut [T]) {
         self.sum_over(y, x, |op, rows, out| op.apply_adjoint(rows, out));
+    }
+
+    /// The same code sets with the pulse rounded to `f32`, built on the first call and kept;
+    /// `None` when `T` is `f32` or a pulse value overflows `f32` (as [`RdOperator`]'s).
+    fn single(&self) -> Option<Box<dyn LinearOperator<f32> + '_>> {
+        let twin = self.single.get_or_init(|| {
+            if std::mem::size_of::<T>() <= std::mem::size_of::<f32>() {
+                return None;
+            }
+            let pulse: Vec<f32> = self.parts[0]
+                .pulse()
+                .iter()
+                .map(|v| f32::of_f64(v.as_f64()))
+                .collect();
+            let codes = self.parts.iter().map(|op| op.codes().clone()).collect();
+            MultiAdcOperator::new(self.geom, &pulse, codes)
+                .ok()
+                .map(Box::new)
+        });
+        twin.as_deref()
+            .map(|op| Box::new(op) as Box<dyn LinearOperator<f32> + '_>)
     }
 
     /// The G support operators stacked: both directions cost O(G·|columns|·K_p).
