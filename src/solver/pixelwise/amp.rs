@@ -522,8 +522,8 @@ impl<'c, T: Real> AmpIteration<'c, T> {
     }
 
     /// One iteration's applications of `op` in its precision `U`: u = Aᵀz, the posteriors and
-    /// the most probable scene into `x` (the sums over the unknowns through `space`), then Ax̂ and the Onsager-corrected residual; returns
-    /// ‖y − Ax̂‖².
+    /// the most probable scene into `x` (the sums over the unknowns through `space`), then Ax̂
+    /// and the Onsager-corrected residual; returns ‖y − Ax̂‖².
     fn apply_on<U: Real, B: LinearOperator<U> + ?Sized>(
         &mut self,
         op: &B,
