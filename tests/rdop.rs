@@ -408,9 +408,9 @@ fn the_gather_limit_is_measured_and_refuses_impossible_rows() {
 }
 
 /// The single-precision twin of an `f64` operator (one ADC or several) is the operator built in
-/// `f32` from the same pulse and codes (bit for bit, on both forward paths), within `f32`'s rounding of the `f64`
-/// products; an `f32` operator and a pulse beyond `f32`'s range have none; counting and
-/// cancellation reach the twin.
+/// `f32` from the same pulse and codes (bit for bit, on both forward paths), within `f32`'s
+/// rounding of the `f64` products; an `f32` operator and a pulse beyond `f32`'s range have
+/// none; counting and cancellation reach the twin.
 #[test]
 fn the_single_precision_twin_is_the_f32_operator() {
     use rdlidar::lidar::Cancellable;
