@@ -13,6 +13,7 @@ use crate::real::Real;
 
 use super::codes::Codes;
 use super::geometry::{Geometry, Regime};
+use super::pulse::single_pulse;
 use super::rdop::RdOperator;
 
 /// A lidar measurement operator over an M×N×K_s grid of voxels (pixel-major, depth fastest):
@@ -286,14 +287,7 @@ impl<T: Real> LinearOperator<T> for MultiAdcOperator<T> {
     /// `None` when `T` is `f32` or a pulse value overflows `f32` (as [`RdOperator`]'s).
     fn single(&self) -> Option<Box<dyn LinearOperator<f32> + '_>> {
         let twin = self.single.get_or_init(|| {
-            if std::mem::size_of::<T>() <= std::mem::size_of::<f32>() {
-                return None;
-            }
-            let pulse: Vec<f32> = self.parts[0]
-                .pulse()
-                .iter()
-                .map(|v| f32::of_f64(v.as_f64()))
-                .collect();
+            let pulse = single_pulse(self.parts[0].pulse())?;
             let codes = self.parts.iter().map(|op| op.codes().clone()).collect();
             MultiAdcOperator::new(self.geom, &pulse, codes)
                 .ok()

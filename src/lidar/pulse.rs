@@ -157,6 +157,14 @@ pub fn zero_mean<T: Real>(p: &[T]) -> Vec<T> {
     p.iter().map(|v| T::of_f64(v.as_f64() - m)).collect()
 }
 
+/// The pulse of a single-precision twin: `p` rounded to `f32`, or `None` when `T` is no wider
+/// than `f32` (nothing to gain). A value that overflows `f32` becomes infinite, which the
+/// twin's constructor refuses.
+pub(super) fn single_pulse<T: Real>(p: &[T]) -> Option<Vec<f32>> {
+    (std::mem::size_of::<T>() > std::mem::size_of::<f32>())
+        .then(|| p.iter().map(|v| f32::of_f64(v.as_f64())).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -21,6 +21,7 @@ use super::kernels::{
     adjoint_chunk, forward_block, octet_stride, sparse_entries_isa, sparse_entry_isa, AdjChunk,
     Entry, FwdBlock, Isa, Lane, ADJ_OCTETS,
 };
+use super::pulse::single_pulse;
 
 /// Largest slab of depth bins a kernel handles at once (8 lanes × 8 chunks).
 const SLAB: usize = 64;
@@ -156,8 +157,7 @@ pub struct RdOperator<T: Real> {
     lags: OnceLock<Vec<f64>>,
     /// The zero-mean twin ([`RdOperator::zero_mean`]), built on first use.
     twin: OnceLock<Box<RdOperator<T>>>,
-    /// The single-precision twin ([`LinearOperator::single`]), built on first use; `None` when
-    /// `T` is `f32` or the pulse does not fit in `f32`.
+    /// The single-precision twin ([`LinearOperator::single`]), built on first use.
     single: OnceLock<Option<Box<RdOperator<f32>>>>,
 }
 
@@ -673,13 +673,8 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
     /// `f32`, or when a pulse value overflows `f32`.
     fn single(&self) -> Option<Box<dyn LinearOperator<f32> + '_>> {
         let twin = self.single.get_or_init(|| {
-            if std::mem::size_of::<T>() <= std::mem::size_of::<f32>() {
-                return None;
-            }
-            let pulse = self.pulse.iter().map(|v| f32::of_f64(v.as_f64())).collect();
-            RdOperator::new(self.geom, pulse, self.codes.clone())
-                .ok()
-                .map(|op| Box::new(op.with_forward_path(self.path)))
+            let op = RdOperator::new(self.geom, single_pulse(&self.pulse)?, self.codes.clone());
+            op.ok().map(|op| Box::new(op.with_forward_path(self.path)))
         });
         twin.as_deref()
             .map(|op| Box::new(op) as Box<dyn LinearOperator<f32> + '_>)

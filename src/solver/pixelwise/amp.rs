@@ -25,7 +25,9 @@ use crate::space::{self, Space};
 
 use super::PixelConstraints;
 
+mod applied;
 mod denoise;
+use applied::{convert, onsager_residual, Applied};
 use denoise::{pixel_posterior, PixelPosterior};
 
 /// Parameters of [`reflector_amp`].
@@ -332,26 +334,6 @@ pub(crate) struct AmpIteration<'c, T> {
     /// (allocated on first use).
     full: Applied<T>,
     low: Applied<f32>,
-}
-
-/// The vectors of one iteration's applications, in the precision they run in: z and x̂ rounded
-/// to it, Aᵀz and Ax̂.
-struct Applied<U> {
-    z: Vec<U>,
-    u: Vec<U>,
-    x: Vec<U>,
-    ax: Vec<U>,
-}
-
-impl<U: Real> Applied<U> {
-    fn zeros(m: usize, n: usize) -> Self {
-        Applied {
-            z: vec![U::zero(); m],
-            u: vec![U::zero(); n],
-            x: vec![U::zero(); n],
-            ax: vec![U::zero(); m],
-        }
-    }
 }
 
 impl<'c, T: Real> Iterative<T> for AmpIteration<'c, T> {
@@ -698,23 +680,4 @@ impl<'c, T: Real, A: VoxelOperator<T> + ?Sized> Iteration<T, A> for AmpIteration
         }
         Ok(())
     }
-}
-
-/// `to` = `from` rounded to `U`.
-fn convert<U: Real>(from: &[f64], to: &mut [U]) {
-    for (t, v) in to.iter_mut().zip(from) {
-        *t = U::of_f64(*v);
-    }
-}
-
-/// The Onsager-corrected residual z ← y − Ax̂ + (z/K)·`div`, in place; returns ‖y − Ax̂‖².
-fn onsager_residual<U: Real>(z: &mut [f64], y: &[f64], ax: &[U], div: f64) -> f64 {
-    let onsager = div / z.len() as f64;
-    let mut rr = 0.0;
-    for ((zi, &yi), ai) in z.iter_mut().zip(y).zip(ax) {
-        let r = yi - ai.as_f64();
-        rr += r * r;
-        *zi = r + onsager * *zi;
-    }
-    rr
 }
