@@ -207,26 +207,42 @@ pub(crate) struct FwdBlock<'a, T> {
 #[inline(always)]
 fn fwd_block<T: Real, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) {
     let zero = [T::zero(); 8];
+    // Every row and code byte read below is within bounds: the tables hold 256 rows per group
+    // and every group has a code byte per sample of `part`.
+    assert!(a.tables.len() >= a.plus.len() * 256 * NCH, "tables");
+    let long = |planes: &[&[u8]]| planes.iter().all(|c| c.len() >= part.len());
+    assert!(
+        long(a.plus) && a.minus.is_none_or(|m| m.len() == a.plus.len() && long(m)),
+        "codes"
+    );
+    let (tables, plus) = (a.tables.as_ptr(), a.plus);
     for (k, pk) in part.iter_mut().enumerate() {
         let mut acc = [zero; NCH];
         match a.minus {
             None => {
-                for (g, codes) in a.plus.iter().enumerate() {
-                    let r = (g * 256 + codes[k] as usize) * NCH;
-                    let row: &[Lane<T>; NCH] = a.tables[r..r + NCH].try_into().expect("NCH lanes");
+                for (g, codes) in plus.iter().enumerate() {
+                    // SAFETY: k < part.len() ≤ codes.len(), and the row, of the 256 of group
+                    // g, is within the tables (both asserted above).
+                    let row = unsafe {
+                        let r = (g * 256 + *codes.get_unchecked(k) as usize) * NCH;
+                        &*tables.add(r).cast::<[Lane<T>; NCH]>()
+                    };
                     for c in 0..NCH {
                         acc[c] = add8(acc[c], row[c]);
                     }
                 }
             }
             Some(minus) => {
-                for (g, (cp, cm)) in a.plus.iter().zip(minus).enumerate() {
-                    let rp = (g * 256 + cp[k] as usize) * NCH;
-                    let rm = (g * 256 + cm[k] as usize) * NCH;
-                    let pos: &[Lane<T>; NCH] =
-                        a.tables[rp..rp + NCH].try_into().expect("NCH lanes");
-                    let neg: &[Lane<T>; NCH] =
-                        a.tables[rm..rm + NCH].try_into().expect("NCH lanes");
+                for (g, (cp, cm)) in plus.iter().zip(minus).enumerate() {
+                    // SAFETY: as above, for both code planes.
+                    let (pos, neg) = unsafe {
+                        let rp = (g * 256 + *cp.get_unchecked(k) as usize) * NCH;
+                        let rm = (g * 256 + *cm.get_unchecked(k) as usize) * NCH;
+                        (
+                            &*tables.add(rp).cast::<[Lane<T>; NCH]>(),
+                            &*tables.add(rm).cast::<[Lane<T>; NCH]>(),
+                        )
+                    };
                     for c in 0..NCH {
                         acc[c] = add8(acc[c], sub8(pos[c], neg[c]));
                     }
@@ -367,6 +383,7 @@ fn adj_chunk<T: Real, const NCH: usize>(
     a: &AdjChunk<'_, T>,
     tables: &mut [Lane<T>],
     out: &mut [Lane<T>],
+    mut flush: Option<&mut [[f64; 8]]>,
 ) {
     adj_tables::<T, NCH>(a, tables);
     let zero = [T::zero(); 8];
@@ -399,6 +416,21 @@ fn adj_chunk<T: Real, const NCH: usize>(
                 *d = add8(*d, *s);
             }
         }
+        if let Some(f) = flush.as_deref_mut() {
+            flush_sums(og, &mut f[g * 8 * NCH..(g + 1) * 8 * NCH]);
+        }
+    }
+}
+
+/// Adds a group's partial sums in `T` to its `f64` sums and clears them: done group by group
+/// while they are in the L1 cache, on the chunks that end a run of partial sums.
+#[inline(always)]
+pub(crate) fn flush_sums<T: Real>(part: &mut [Lane<T>], sums: &mut [[f64; 8]]) {
+    for (d, s) in sums.iter_mut().zip(part.iter_mut()) {
+        for (dv, sv) in d.iter_mut().zip(s.iter()) {
+            *dv += sv.as_f64();
+        }
+        *s = [T::zero(); 8];
     }
 }
 
@@ -594,7 +626,7 @@ macro_rules! multiversion {
 
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
 multiversion!(fn gather_rows_isa<T, const NCH: usize>(table: &[Lane<T>], index: &[u16], out: &mut [Lane<T>]) => gather_rows_n);
-multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>]) => adj_chunk);
+multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>], flush: Option<&mut [[f64; 8]]>) => adj_chunk);
 multiversion!(fn sparse_entry_narrow<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
 multiversion!(fn signed_copy_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
 multiversion!(fn signed_dot_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], p: &[T], out: &mut f64) => signed_dot);
@@ -620,23 +652,27 @@ pub(crate) fn forward_block<T: Real>(
     }
 }
 
-/// Runs the adjoint's chunk kernel ([`adj_chunk`]) for a slab of `8·nch` bins.
+/// Runs the adjoint's chunk kernel ([`adj_chunk`]) for a slab of `8·nch` bins. With `flush`
+/// (one `f64` sum per partial sum of `out`), each group's partial sums are then added to their
+/// sums there and cleared ([`flush_sums`]).
 pub(crate) fn adjoint_chunk<T: Real>(
     isa: Isa,
     nch: usize,
     a: &AdjChunk<'_, T>,
     tables: &mut [Lane<T>],
     out: &mut [Lane<T>],
+    flush: Option<&mut [[f64; 8]]>,
 ) {
+    assert!(flush.as_ref().is_none_or(|f| f.len() == out.len()), "sums");
     match nch {
-        1 => adj_chunk_isa::<T, 1>(isa, a, tables, out),
-        2 => adj_chunk_isa::<T, 2>(isa, a, tables, out),
-        3 => adj_chunk_isa::<T, 3>(isa, a, tables, out),
-        4 => adj_chunk_isa::<T, 4>(isa, a, tables, out),
-        5 => adj_chunk_isa::<T, 5>(isa, a, tables, out),
-        6 => adj_chunk_isa::<T, 6>(isa, a, tables, out),
-        7 => adj_chunk_isa::<T, 7>(isa, a, tables, out),
-        8 => adj_chunk_isa::<T, 8>(isa, a, tables, out),
+        1 => adj_chunk_isa::<T, 1>(isa, a, tables, out, flush),
+        2 => adj_chunk_isa::<T, 2>(isa, a, tables, out, flush),
+        3 => adj_chunk_isa::<T, 3>(isa, a, tables, out, flush),
+        4 => adj_chunk_isa::<T, 4>(isa, a, tables, out, flush),
+        5 => adj_chunk_isa::<T, 5>(isa, a, tables, out, flush),
+        6 => adj_chunk_isa::<T, 6>(isa, a, tables, out, flush),
+        7 => adj_chunk_isa::<T, 7>(isa, a, tables, out, flush),
+        8 => adj_chunk_isa::<T, 8>(isa, a, tables, out, flush),
         _ => unreachable!("slabs have 1 to 8 chunks"),
     }
 }

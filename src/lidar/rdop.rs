@@ -133,7 +133,8 @@ fn resize<U: Copy>(v: &mut Vec<U>, len: usize, zero: U) {
 /// time; a +1 row minus a −1 row for ternary codes). The kernel only reads the shared tables and
 /// keeps the pixel's sum in registers; the tables start on a cache line (a row of `f64` values then
 /// never straddles one more line than it needs); the partial sums of a block of pixels (1 MB) stay
-/// in the L2 cache and are added to `f64` sums every 1024 samples.
+/// in the L2 cache and are added to `f64` sums every 1024 samples, group by group by the kernel
+/// itself while a group's sums are in L1.
 ///
 /// Blocks are processed in parallel with rayon; the kernels are compiled for AVX-512, AVX2+FMA and
 /// generic x86-64 and chosen at run time.
@@ -643,19 +644,14 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                             base0: self.pad + self.pulse.len() - 1 + j0,
                             first_octet: o0,
                         };
+                        // The partial sums go to `out` after the last chunk of each run.
+                        let last = c % ADJ_FLUSH_CHUNKS == ADJ_FLUSH_CHUNKS - 1
+                            || o0 + ADJ_OCTETS >= octets;
+                        let flush = last.then_some(out.as_mut_slice());
                         if self.isa.has_wide() {
-                            adjoint_chunk_wide(self.isa, nch, &chunk, tables, &mut part);
+                            adjoint_chunk_wide(self.isa, nch, &chunk, tables, &mut part, flush);
                         } else {
-                            adjoint_chunk(self.isa, nch, &chunk, tables, &mut part);
-                        }
-                        if c % ADJ_FLUSH_CHUNKS == ADJ_FLUSH_CHUNKS - 1 || o0 + ADJ_OCTETS >= octets
-                        {
-                            for (d, s) in out.iter_mut().zip(part.iter_mut()) {
-                                for (dv, sv) in d.iter_mut().zip(s.iter()) {
-                                    *dv += sv.as_f64();
-                                }
-                                *s = [T::zero(); 8];
-                            }
+                            adjoint_chunk(self.isa, nch, &chunk, tables, &mut part, flush);
                         }
                     }
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);

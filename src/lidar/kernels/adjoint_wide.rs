@@ -37,7 +37,8 @@ pub(crate) fn adjoint_row_nch<T: Real>(isa: Isa, nch: usize) -> usize {
 
 /// [`adjoint_chunk`](super::adjoint_chunk) in vectors for rows of `nch` chunks, `nch` from
 /// [`adjoint_row_nch`]: the chunk's tables into `tables` (64-byte aligned), each pixel's sum
-/// added to `out[(g·8 + i)·nch ..]`.
+/// added to `out[(g·8 + i)·nch ..]`, and with `flush` each group's partial sums then added to
+/// their `f64` sums there and cleared ([`flush_sums`](super::flush_sums)).
 ///
 /// # Panics
 /// If `isa` has no wide kernels ([`Isa::has_wide`]), `nch` is not whole vectors, or the buffers
@@ -48,6 +49,7 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
     a: &AdjChunk<'_, T>,
     tables: &mut [Lane<T>],
     out: &mut [Lane<T>],
+    flush: Option<&mut [[f64; 8]]>,
 ) {
     assert!(
         (1..=8).contains(&nch) && adjoint_row_nch::<T>(isa, nch) == nch,
@@ -59,6 +61,7 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
     );
     assert_eq!(tables.as_ptr() as usize % 64, 0, "tables' alignment");
     assert_eq!(out.len(), a.plus.len() * 8 * nch, "partial sums");
+    assert!(flush.as_ref().is_none_or(|f| f.len() == out.len()), "sums");
     assert!(
         a.minus.is_none_or(|m| m.len() == a.plus.len()),
         "code planes"
@@ -70,35 +73,35 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
     // as asserted above.
     unsafe {
         match (isa, nch, <T as Wide>::PER) {
-            (Isa::Avx512, 2, 16) => adj_512::<T, 2, 1>(a, tables, out),
-            (Isa::Avx512, 4, 16) => adj_512::<T, 4, 2>(a, tables, out),
-            (Isa::Avx512, 6, 16) => adj_512::<T, 6, 3>(a, tables, out),
-            (Isa::Avx512, 8, 16) => adj_512::<T, 8, 4>(a, tables, out),
-            (Isa::Avx512, 1, 8) => adj_512::<T, 1, 1>(a, tables, out),
-            (Isa::Avx512, 2, 8) => adj_512::<T, 2, 2>(a, tables, out),
-            (Isa::Avx512, 3, 8) => adj_512::<T, 3, 3>(a, tables, out),
-            (Isa::Avx512, 4, 8) => adj_512::<T, 4, 4>(a, tables, out),
-            (Isa::Avx512, 5, 8) => adj_512::<T, 5, 5>(a, tables, out),
-            (Isa::Avx512, 6, 8) => adj_512::<T, 6, 6>(a, tables, out),
-            (Isa::Avx512, 7, 8) => adj_512::<T, 7, 7>(a, tables, out),
-            (Isa::Avx512, 8, 8) => adj_512::<T, 8, 8>(a, tables, out),
+            (Isa::Avx512, 2, 16) => adj_512::<T, 2, 1>(a, tables, out, flush),
+            (Isa::Avx512, 4, 16) => adj_512::<T, 4, 2>(a, tables, out, flush),
+            (Isa::Avx512, 6, 16) => adj_512::<T, 6, 3>(a, tables, out, flush),
+            (Isa::Avx512, 8, 16) => adj_512::<T, 8, 4>(a, tables, out, flush),
+            (Isa::Avx512, 1, 8) => adj_512::<T, 1, 1>(a, tables, out, flush),
+            (Isa::Avx512, 2, 8) => adj_512::<T, 2, 2>(a, tables, out, flush),
+            (Isa::Avx512, 3, 8) => adj_512::<T, 3, 3>(a, tables, out, flush),
+            (Isa::Avx512, 4, 8) => adj_512::<T, 4, 4>(a, tables, out, flush),
+            (Isa::Avx512, 5, 8) => adj_512::<T, 5, 5>(a, tables, out, flush),
+            (Isa::Avx512, 6, 8) => adj_512::<T, 6, 6>(a, tables, out, flush),
+            (Isa::Avx512, 7, 8) => adj_512::<T, 7, 7>(a, tables, out, flush),
+            (Isa::Avx512, 8, 8) => adj_512::<T, 8, 8>(a, tables, out, flush),
             // On AVX2 a chunk is one vector of `f32`, two of `f64`.
-            (Isa::Avx2, 1, 16) => adj_256::<T, 1, 1>(a, tables, out),
-            (Isa::Avx2, 2, 16) => adj_256::<T, 2, 2>(a, tables, out),
-            (Isa::Avx2, 3, 16) => adj_256::<T, 3, 3>(a, tables, out),
-            (Isa::Avx2, 4, 16) => adj_256::<T, 4, 4>(a, tables, out),
-            (Isa::Avx2, 5, 16) => adj_256::<T, 5, 5>(a, tables, out),
-            (Isa::Avx2, 6, 16) => adj_256::<T, 6, 6>(a, tables, out),
-            (Isa::Avx2, 7, 16) => adj_256::<T, 7, 7>(a, tables, out),
-            (Isa::Avx2, 8, 16) => adj_256::<T, 8, 8>(a, tables, out),
-            (Isa::Avx2, 1, 8) => adj_256::<T, 1, 2>(a, tables, out),
-            (Isa::Avx2, 2, 8) => adj_256::<T, 2, 4>(a, tables, out),
-            (Isa::Avx2, 3, 8) => adj_256::<T, 3, 6>(a, tables, out),
-            (Isa::Avx2, 4, 8) => adj_256::<T, 4, 8>(a, tables, out),
-            (Isa::Avx2, 5, 8) => adj_256::<T, 5, 10>(a, tables, out),
-            (Isa::Avx2, 6, 8) => adj_256::<T, 6, 12>(a, tables, out),
-            (Isa::Avx2, 7, 8) => adj_256::<T, 7, 14>(a, tables, out),
-            (Isa::Avx2, 8, 8) => adj_256::<T, 8, 16>(a, tables, out),
+            (Isa::Avx2, 1, 16) => adj_256::<T, 1, 1>(a, tables, out, flush),
+            (Isa::Avx2, 2, 16) => adj_256::<T, 2, 2>(a, tables, out, flush),
+            (Isa::Avx2, 3, 16) => adj_256::<T, 3, 3>(a, tables, out, flush),
+            (Isa::Avx2, 4, 16) => adj_256::<T, 4, 4>(a, tables, out, flush),
+            (Isa::Avx2, 5, 16) => adj_256::<T, 5, 5>(a, tables, out, flush),
+            (Isa::Avx2, 6, 16) => adj_256::<T, 6, 6>(a, tables, out, flush),
+            (Isa::Avx2, 7, 16) => adj_256::<T, 7, 7>(a, tables, out, flush),
+            (Isa::Avx2, 8, 16) => adj_256::<T, 8, 8>(a, tables, out, flush),
+            (Isa::Avx2, 1, 8) => adj_256::<T, 1, 2>(a, tables, out, flush),
+            (Isa::Avx2, 2, 8) => adj_256::<T, 2, 4>(a, tables, out, flush),
+            (Isa::Avx2, 3, 8) => adj_256::<T, 3, 6>(a, tables, out, flush),
+            (Isa::Avx2, 4, 8) => adj_256::<T, 4, 8>(a, tables, out, flush),
+            (Isa::Avx2, 5, 8) => adj_256::<T, 5, 10>(a, tables, out, flush),
+            (Isa::Avx2, 6, 8) => adj_256::<T, 6, 12>(a, tables, out, flush),
+            (Isa::Avx2, 7, 8) => adj_256::<T, 7, 14>(a, tables, out, flush),
+            (Isa::Avx2, 8, 8) => adj_256::<T, 8, 16>(a, tables, out, flush),
             _ => panic!("the wide adjoint has no kernel for {}", isa.name()),
         }
     }
@@ -108,7 +111,8 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
 
 #[cfg(target_arch = "x86_64")]
 wide_pair!(adj_512, adj_256, adj_wide<const NCH: usize, const Z: usize>(
-    a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>]
+    a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>],
+    flush: Option<&mut [[f64; 8]]>
 ));
 
 /// The chunk's tables, then every pixel's rows, `Z` vectors a row.
@@ -120,6 +124,7 @@ unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize>(
     a: &AdjChunk<'_, T>,
     tables: &mut [Lane<T>],
     out: &mut [Lane<T>],
+    mut flush: Option<&mut [[f64; 8]]>,
 ) {
     adj_tables::<T, NCH>(a, tables);
     let per = S::PER;
@@ -153,6 +158,9 @@ unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize>(
                 let d = dst.add(z * per);
                 S::v_storeu(d, S::v_add(S::v_loadu(d), acc[z]));
             }
+        }
+        if let Some(f) = flush.as_deref_mut() {
+            super::flush_sums(og, &mut f[g * 8 * NCH..(g + 1) * 8 * NCH]);
         }
     }
 }
@@ -211,9 +219,9 @@ mod tests {
                     base0: pad + kp - 1,
                     first_octet: o0,
                 };
-                adjoint_chunk_wide(isa, nch, &a, tables, &mut out);
+                adjoint_chunk_wide(isa, nch, &a, tables, &mut out, None);
                 let generic = &mut generic_tables;
-                super::super::adjoint_chunk(Isa::Generic, nch, &a, generic, &mut generic_out);
+                super::super::adjoint_chunk(Isa::Generic, nch, &a, generic, &mut generic_out, None);
             }
             // The same additions in the same order as the generic kernel.
             assert!(
@@ -222,6 +230,46 @@ mod tests {
                 T::NAME,
                 isa.name()
             );
+            // Flushed on the last chunk: the same sums in `f64`, the partial sums cleared, on
+            // both kernels.
+            let chunks: Vec<usize> = (0..k.div_ceil(8)).step_by(ADJ_OCTETS).collect();
+            for wide in [true, false] {
+                let mut part = vec![[T::zero(); 8]; out.len()];
+                let mut sums = vec![[0.0f64; 8]; out.len()];
+                for &o0 in &chunks {
+                    let a = AdjChunk {
+                        plus: &plus_refs,
+                        minus: ternary.then_some(minus_refs.as_slice()),
+                        y: &y,
+                        prev: &prev,
+                        base0: pad + kp - 1,
+                        first_octet: o0,
+                    };
+                    let flush = (o0 == *chunks.last().unwrap()).then_some(sums.as_mut_slice());
+                    if wide {
+                        adjoint_chunk_wide(isa, nch, &a, tables, &mut part, flush);
+                    } else {
+                        let generic = &mut generic_tables;
+                        super::super::adjoint_chunk(
+                            Isa::Generic,
+                            nch,
+                            &a,
+                            generic,
+                            &mut part,
+                            flush,
+                        );
+                    }
+                }
+                assert!(part.iter().flatten().all(|&v| v == T::zero()), "cleared");
+                let want: Vec<f64> = out.iter().flatten().map(|v| v.as_f64()).collect();
+                assert_eq!(
+                    sums.concat(),
+                    want,
+                    "{} {} wide {wide}",
+                    T::NAME,
+                    isa.name()
+                );
+            }
             for (g, (p, m)) in plus.iter().zip(&minus).enumerate() {
                 for i in 0..8 {
                     for j in 0..8 * SLAB {

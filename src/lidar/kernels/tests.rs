@@ -83,7 +83,7 @@ fn adjoint_chunk_matches_the_direct_sum() {
                     base0,
                     first_octet: o0,
                 };
-                adjoint_chunk(isa, NCH, &a, &mut tables, &mut out);
+                adjoint_chunk(isa, NCH, &a, &mut tables, &mut out, None);
             }
             for g in 0..groups {
                 for i in 0..8 {
