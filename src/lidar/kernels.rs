@@ -512,29 +512,6 @@ fn lane_dot<T: Real>(a: &[T], b: &[T], out: &mut f64) {
     *out = acc;
 }
 
-/// out += Σ of the rows of `table` (NCH lanes each) that `index` lists, in four interleaved
-/// partial sums: the table kernels' memory access and additions without their bookkeeping.
-#[inline(always)]
-fn gather_rows_n<T: Real, const NCH: usize>(table: &[Lane<T>], index: &[u16], out: &mut [Lane<T>]) {
-    let zero = [T::zero(); 8];
-    let mut acc = [[zero; NCH]; 4];
-    for quad in index.chunks(4) {
-        for (a, &r) in acc.iter_mut().zip(quad) {
-            let r = r as usize * NCH;
-            let row: &[Lane<T>; NCH] = table[r..r + NCH].try_into().expect("NCH lanes");
-            for c in 0..NCH {
-                a[c] = add8(a[c], row[c]);
-            }
-        }
-    }
-    for (c, o) in out.iter_mut().enumerate().take(NCH) {
-        *o = add8(
-            *o,
-            add8(add8(acc[0][c], acc[1][c]), add8(acc[2][c], acc[3][c])),
-        );
-    }
-}
-
 /// *out = Σ_k s(k)·y[k]·p[k] for the pixel at bit `bit` of the code bytes (`y`, `p` and the
 /// codes aligned on the same window): the restricted adjoint of one voxel in one pass over the
 /// codes, the measurements and the pulse. The products are summed in eight lanes of `T` over
@@ -625,7 +602,6 @@ macro_rules! multiversion {
 }
 
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
-multiversion!(fn gather_rows_isa<T, const NCH: usize>(table: &[Lane<T>], index: &[u16], out: &mut [Lane<T>]) => gather_rows_n);
 multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>], flush: Option<&mut [[f64; 8]]>) => adj_chunk);
 multiversion!(fn sparse_entry_narrow<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
 multiversion!(fn signed_copy_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
@@ -677,28 +653,8 @@ pub(crate) fn adjoint_chunk<T: Real>(
     }
 }
 
-/// Runs the row-gathering probe ([`gather_rows_n`]) for rows of `nch` chunks.
-pub(crate) fn gather_rows<T: Real>(
-    isa: Isa,
-    nch: usize,
-    table: &[Lane<T>],
-    index: &[u16],
-    out: &mut [Lane<T>],
-) {
-    match nch {
-        1 => gather_rows_isa::<T, 1>(isa, table, index, out),
-        2 => gather_rows_isa::<T, 2>(isa, table, index, out),
-        3 => gather_rows_isa::<T, 3>(isa, table, index, out),
-        4 => gather_rows_isa::<T, 4>(isa, table, index, out),
-        5 => gather_rows_isa::<T, 5>(isa, table, index, out),
-        6 => gather_rows_isa::<T, 6>(isa, table, index, out),
-        7 => gather_rows_isa::<T, 7>(isa, table, index, out),
-        8 => gather_rows_isa::<T, 8>(isa, table, index, out),
-        _ => unreachable!("rows have 1 to 8 chunks"),
-    }
-}
-
 pub(crate) mod adjoint_wide;
+mod probe;
 pub(crate) mod quads;
 pub(crate) mod support_wide;
 pub(crate) mod tables;
@@ -706,6 +662,7 @@ pub(crate) mod tables;
 mod tests;
 pub(crate) mod wide;
 
+pub(crate) use probe::gather_rows;
 pub(crate) use support_wide::{
     lane_dot_isa, signed_copy_isa, signed_dot_isa, sparse_entries_isa, sparse_entry_isa, Entry,
 };
