@@ -246,3 +246,75 @@ fn entries_four_at_a_time_equal_one_at_a_time_f32() {
 fn entries_four_at_a_time_equal_one_at_a_time_f64() {
     entries_four_at_a_time_equal_one_at_a_time::<f64>(1e-12);
 }
+
+/// The 256-row forward block against the direct sum y[k] = Σ_p s_p(k)·Σ_j x[p, j]·p[k − j] on
+/// every instruction set, binary and ternary codes, a last group with three pixels missing and
+/// a slab wider than the depth bins.
+fn forward_block_matches_the_direct_sum<T: Real>(tol: f64) {
+    const NCH: usize = 2;
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let (groups, npix, ks, kp) = (3usize, 21usize, 13usize, 25usize);
+    let k = kp + ks - 1;
+    let x: Vec<T> = (0..npix * ks)
+        .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
+        .collect();
+    let pulse: Vec<f64> = (0..kp)
+        .map(|_| f64::from(rng.random_range(0..2u8)))
+        .collect();
+    let pad = 8 * NCH;
+    let mut prev = vec![T::zero(); pad + kp + 8 * NCH];
+    for (t, &v) in pulse.iter().rev().enumerate() {
+        prev[pad + t] = T::of_f64(v);
+    }
+    let (plus, minus) = random_planes(&mut rng, groups, k);
+    let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
+    let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+    for ternary in [false, true] {
+        let mut tables = vec![[T::zero(); 8]; groups * 256 * NCH];
+        tables::build_group_tables(&x, (npix, ks), !ternary, 0..groups, 0, NCH, &mut tables);
+        for isa in every_isa() {
+            let blk = FwdBlock {
+                tables: &tables,
+                plus: &plus_refs,
+                minus: ternary.then_some(minus_refs.as_slice()),
+                prev: &prev,
+                base0: pad + kp - 1,
+            };
+            let mut part = vec![[T::zero(); 8]; k];
+            forward_block(isa, NCH, &blk, &mut part);
+            for (kk, lanes) in part.iter().enumerate() {
+                let got: f64 = lanes.iter().map(|v| v.as_f64()).sum();
+                let want: f64 = (0..npix)
+                    .map(|p| {
+                        let s = code_of(
+                            &plus[p / 8],
+                            ternary.then_some(minus[p / 8].as_slice()),
+                            (p % 8) as u32,
+                            kk,
+                        );
+                        let conv: f64 = (0..ks)
+                            .filter(|&j| kk >= j && kk - j < kp)
+                            .map(|j| x[p * ks + j].as_f64() * pulse[kk - j])
+                            .sum();
+                        s * conv
+                    })
+                    .sum();
+                assert!(
+                    (got - want).abs() <= tol * (1.0 + want.abs()),
+                    "{} {isa:?} ternary {ternary}: sample {kk}: {got} vs {want}",
+                    T::NAME
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn forward_block_matches_the_direct_sum_f32() {
+    forward_block_matches_the_direct_sum::<f32>(1e-4);
+}
+
+#[test]
+fn forward_block_matches_the_direct_sum_f64() {
+    forward_block_matches_the_direct_sum::<f64>(1e-12);
+}
