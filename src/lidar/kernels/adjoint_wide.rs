@@ -204,6 +204,14 @@ mod tests {
         let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
         let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
         for ternary in [false, true] {
+            let chunk = |o0| AdjChunk {
+                plus: &plus_refs,
+                minus: ternary.then_some(minus_refs.as_slice()),
+                y: &y,
+                prev: &prev,
+                base0: pad + kp - 1,
+                first_octet: o0,
+            };
             let bytes = ADJ_OCTETS * octet_stride::<T>(nch) * std::mem::size_of::<Lane<T>>();
             let mut lines = vec![CacheLine::default(); bytes.div_ceil(64)];
             let tables = lines_as_mut::<T>(&mut lines).as_chunks_mut::<8>().0;
@@ -211,14 +219,7 @@ mod tests {
             let mut generic_tables = vec![[T::zero(); 8]; ADJ_OCTETS * octet_stride::<T>(nch)];
             let mut generic_out = out.clone();
             for o0 in (0..k.div_ceil(8)).step_by(ADJ_OCTETS) {
-                let a = AdjChunk {
-                    plus: &plus_refs,
-                    minus: ternary.then_some(minus_refs.as_slice()),
-                    y: &y,
-                    prev: &prev,
-                    base0: pad + kp - 1,
-                    first_octet: o0,
-                };
+                let a = chunk(o0);
                 adjoint_chunk_wide(isa, nch, &a, tables, &mut out, None);
                 let generic = &mut generic_tables;
                 super::super::adjoint_chunk(Isa::Generic, nch, &a, generic, &mut generic_out, None);
@@ -237,14 +238,7 @@ mod tests {
                 let mut part = vec![[T::zero(); 8]; out.len()];
                 let mut sums = vec![[0.0f64; 8]; out.len()];
                 for &o0 in &chunks {
-                    let a = AdjChunk {
-                        plus: &plus_refs,
-                        minus: ternary.then_some(minus_refs.as_slice()),
-                        y: &y,
-                        prev: &prev,
-                        base0: pad + kp - 1,
-                        first_octet: o0,
-                    };
+                    let a = chunk(o0);
                     let flush = (o0 == *chunks.last().unwrap()).then_some(sums.as_mut_slice());
                     if wide {
                         adjoint_chunk_wide(isa, nch, &a, tables, &mut part, flush);

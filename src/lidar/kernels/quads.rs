@@ -472,22 +472,15 @@ mod tests {
                 quad_forward(isa, &block, &mut part);
                 for (kk, lanes) in part.iter().enumerate() {
                     let got: f64 = lanes.iter().map(|v| v.as_f64()).sum();
-                    let want: f64 = (0..npix)
-                        .map(|p| {
-                            let (g, i) = (p / 8, p % 8);
-                            let s = f64::from((plus[g][kk] >> i) & 1)
-                                - if ternary {
-                                    f64::from((minus[g][kk] >> i) & 1)
-                                } else {
-                                    f64::from(!(plus[g][kk] >> i) & 1)
-                                };
-                            let column: f64 = (j0..j0 + width)
-                                .filter(|&j| kk >= j && kk - j < kp)
-                                .map(|j| x[p * ks + j].as_f64() * pulse[kk - j])
-                                .sum();
-                            s * column
-                        })
-                        .sum();
+                    let codes = (plus.as_slice(), ternary.then_some(minus.as_slice()));
+                    let want = crate::lidar::kernels::tests::direct_forward(
+                        &x,
+                        (npix, ks),
+                        j0..j0 + width,
+                        &pulse,
+                        codes,
+                        kk,
+                    );
                     assert!(
                         (got - want).abs() <= tol * (1.0 + want.abs()),
                         "{} {} ks {ks} slab {j0}+{nch} ternary {ternary}: sample {kk}: {got} vs {want}",

@@ -126,6 +126,35 @@ fn code_of(plus: &[u8], minus: Option<&[u8]>, bit: u32, k: usize) -> f64 {
     }
 }
 
+/// The direct forward at sample `kk`: Σ_p s_p(kk)·Σ_{j ∈ bins} x[p, j]·pulse[kk − j] over the
+/// `npix` pixels of `ks` bins of `x`, with the codes of [`random_planes`] (binary, or ternary
+/// with `minus`).
+pub(crate) fn direct_forward<T: Real>(
+    x: &[T],
+    (npix, ks): (usize, usize),
+    bins: std::ops::Range<usize>,
+    pulse: &[f64],
+    (plus, minus): (&[Vec<u8>], Option<&[Vec<u8>]>),
+    kk: usize,
+) -> f64 {
+    (0..npix)
+        .map(|p| {
+            let s = code_of(
+                &plus[p / 8],
+                minus.map(|m| m[p / 8].as_slice()),
+                (p % 8) as u32,
+                kk,
+            );
+            let column: f64 = bins
+                .clone()
+                .filter(|&j| kk >= j && kk - j < pulse.len())
+                .map(|j| x[p * ks + j].as_f64() * pulse[kk - j])
+                .sum();
+            s * column
+        })
+        .sum()
+}
+
 /// The one-pass restricted adjoint equals the signed copy followed by the windowed dot
 /// product and the direct sum, the signed copy equals s·y exactly, for both alphabets and
 /// precisions, on every instruction set, with lengths that leave tails.
@@ -284,21 +313,8 @@ fn forward_block_matches_the_direct_sum<T: Real>(tol: f64) {
             forward_block(isa, NCH, &blk, &mut part);
             for (kk, lanes) in part.iter().enumerate() {
                 let got: f64 = lanes.iter().map(|v| v.as_f64()).sum();
-                let want: f64 = (0..npix)
-                    .map(|p| {
-                        let s = code_of(
-                            &plus[p / 8],
-                            ternary.then_some(minus[p / 8].as_slice()),
-                            (p % 8) as u32,
-                            kk,
-                        );
-                        let conv: f64 = (0..ks)
-                            .filter(|&j| kk >= j && kk - j < kp)
-                            .map(|j| x[p * ks + j].as_f64() * pulse[kk - j])
-                            .sum();
-                        s * conv
-                    })
-                    .sum();
+                let codes = (plus.as_slice(), ternary.then_some(minus.as_slice()));
+                let want = direct_forward(&x, (npix, ks), 0..ks, &pulse, codes, kk);
                 assert!(
                     (got - want).abs() <= tol * (1.0 + want.abs()),
                     "{} {isa:?} ternary {ternary}: sample {kk}: {got} vs {want}",
