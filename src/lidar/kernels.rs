@@ -15,6 +15,7 @@
 //! vector operations of [`wide`].
 
 use crate::error::{Error, Result};
+use crate::lidar::codes::GroupBytes;
 use crate::real::Real;
 
 /// A chunk of eight lanes.
@@ -192,10 +193,10 @@ pub(crate) struct FwdBlock<'a, T> {
     /// `groups × 256 × NCH` lanes: the signed subset sums of each group (binary codes), or the
     /// plain subset sums (ternary codes).
     pub tables: &'a [Lane<T>],
-    /// The +1 code bytes of each group of the block, K each.
-    pub plus: &'a [&'a [u8]],
+    /// The +1 code bytes of the block's groups, at least one per sample of the block.
+    pub plus: GroupBytes<'a>,
     /// The −1 code bytes (ternary codes only).
-    pub minus: Option<&'a [&'a [u8]]>,
+    pub minus: Option<GroupBytes<'a>>,
     /// Reversed, zero-padded pulse: p[k − j] = `prev[base0 − k + (j − j0)]` for the slab's bins.
     pub prev: &'a [T],
     /// See `prev`.
@@ -207,42 +208,37 @@ pub(crate) struct FwdBlock<'a, T> {
 #[inline(always)]
 fn fwd_block<T: Real, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) {
     let zero = [T::zero(); 8];
+    let (n, stride) = (a.plus.groups(), a.plus.stride());
     // Every row and code byte read below is within bounds: the tables hold 256 rows per group
     // and every group has a code byte per sample of `part`.
-    assert!(a.tables.len() >= a.plus.len() * 256 * NCH, "tables");
-    let long = |planes: &[&[u8]]| planes.iter().all(|c| c.len() >= part.len());
+    assert!(a.tables.len() >= n * 256 * NCH, "tables");
     assert!(
-        long(a.plus) && a.minus.is_none_or(|m| m.len() == a.plus.len() && long(m)),
+        stride >= part.len()
+            && a.minus
+                .is_none_or(|m| m.groups() == n && m.stride() == stride),
         "codes"
     );
-    let (tables, plus) = (a.tables.as_ptr(), a.plus);
+    let tables = a.tables.as_ptr();
     for (k, pk) in part.iter_mut().enumerate() {
+        // SAFETY: g < n and k < part.len() ≤ stride, so the byte is one of the n groups' bytes,
+        // and the row, of the 256 of group g, is within the tables (both asserted above).
+        let row = |plane: *const u8, g: usize| unsafe {
+            let r = (g * 256 + *plane.add(g * stride + k) as usize) * NCH;
+            &*tables.add(r).cast::<[Lane<T>; NCH]>()
+        };
         let mut acc = [zero; NCH];
         match a.minus {
             None => {
-                for (g, codes) in plus.iter().enumerate() {
-                    // SAFETY: k < part.len() ≤ codes.len(), and the row, of the 256 of group
-                    // g, is within the tables (both asserted above).
-                    let row = unsafe {
-                        let r = (g * 256 + *codes.get_unchecked(k) as usize) * NCH;
-                        &*tables.add(r).cast::<[Lane<T>; NCH]>()
-                    };
+                for g in 0..n {
+                    let row = row(a.plus.as_ptr(), g);
                     for c in 0..NCH {
                         acc[c] = add8(acc[c], row[c]);
                     }
                 }
             }
             Some(minus) => {
-                for (g, (cp, cm)) in plus.iter().zip(minus).enumerate() {
-                    // SAFETY: as above, for both code planes.
-                    let (pos, neg) = unsafe {
-                        let rp = (g * 256 + *cp.get_unchecked(k) as usize) * NCH;
-                        let rm = (g * 256 + *cm.get_unchecked(k) as usize) * NCH;
-                        (
-                            &*tables.add(rp).cast::<[Lane<T>; NCH]>(),
-                            &*tables.add(rm).cast::<[Lane<T>; NCH]>(),
-                        )
-                    };
+                for g in 0..n {
+                    let (pos, neg) = (row(a.plus.as_ptr(), g), row(minus.as_ptr(), g));
                     for c in 0..NCH {
                         acc[c] = add8(acc[c], sub8(pos[c], neg[c]));
                     }
@@ -261,10 +257,10 @@ fn fwd_block<T: Real, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>
 /// Everything the adjoint needs for one chunk of octets (eight consecutive samples each) on one
 /// depth slab, for the groups of one task.
 pub(crate) struct AdjChunk<'a, T> {
-    /// The +1 code bytes of each group, K each.
-    pub plus: &'a [&'a [u8]],
+    /// The +1 code bytes of the groups, K each.
+    pub plus: GroupBytes<'a>,
     /// The −1 code bytes (ternary codes only).
-    pub minus: Option<&'a [&'a [u8]]>,
+    pub minus: Option<GroupBytes<'a>>,
     /// Measurements.
     pub y: &'a [T],
     /// As in [`FwdBlock`].
@@ -307,7 +303,10 @@ fn octet_bits(codes: &[u8], o: usize) -> u64 {
 }
 
 /// Group `g`'s code bits for the chunk's octets, transposed ([`octet_bits`]): the +1 bits into
-/// `plus`, and the −1 bits into `minus` for ternary codes.
+/// `plus`, and the −1 bits into `minus` for ternary codes. The bytes of group g + 2 are asked
+/// for too: consecutive groups' bytes lie K apart, and a group's pixels take longer than the
+/// processor looks ahead, so that without the hint each group could wait for its bytes (one
+/// build measured twice as slow from it).
 #[inline(always)]
 fn chunk_bits<T>(
     a: &AdjChunk<'_, T>,
@@ -315,77 +314,43 @@ fn chunk_bits<T>(
     plus: &mut [u64; ADJ_OCTETS],
     minus: &mut [u64; ADJ_OCTETS],
 ) {
+    let from = 8 * a.first_octet;
+    a.plus.prefetch(g + 2, from);
+    if let Some(m) = a.minus {
+        m.prefetch(g + 2, from);
+    }
     for (oi, b) in plus.iter_mut().enumerate() {
-        *b = octet_bits(a.plus[g], a.first_octet + oi);
+        *b = octet_bits(a.plus.group(g), a.first_octet + oi);
     }
     if let Some(m) = a.minus {
         for (oi, b) in minus.iter_mut().enumerate() {
-            *b = octet_bits(m[g], a.first_octet + oi);
+            *b = octet_bits(m.group(g), a.first_octet + oi);
         }
     }
 }
+
+/// Octets per chunk of the adjoint.
+pub(crate) const ADJ_OCTETS: usize = 8;
 
 /// Lanes between the tables of successive octets of a chunk: 256 rows and one cache line, so
 /// that the same row of successive tables does not fall in the same cache set (a table of
 /// 256·NCH lanes is a multiple of 4 KiB).
-/// Octets per chunk of the adjoint.
-pub(crate) const ADJ_OCTETS: usize = 8;
-
 pub(crate) fn octet_stride<T>(nch: usize) -> usize {
     256 * nch + (64 / std::mem::size_of::<Lane<T>>()).max(1)
 }
 
-/// The tables of a chunk: for octet o and byte b, Σ_t ±w_t (binary codes: + where bit t of b is
-/// set, − elsewhere) or Σ_{t ∈ b} w_t (ternary codes), where w_t = y[k]·p[k − j], k = 8·o + t,
-/// is the row every pixel's backprojection adds with its code's sign at sample k. Each table is
-/// built by doubling: 255 row additions from its first row.
-#[inline(always)]
-fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>]) {
-    let zero = [T::zero(); 8];
-    let binary = a.minus.is_none();
-    let k = a.y.len();
-    for (oi, o) in (a.first_octet..a.first_octet + ADJ_OCTETS).enumerate() {
-        let mut w = [[zero; NCH]; 8];
-        let mut first = [zero; NCH];
-        for (t, wt) in w.iter_mut().enumerate() {
-            let kk = 8 * o + t;
-            if kk >= k || a.y[kk] == T::zero() {
-                continue;
-            }
-            let w0 = a.base0 - kk;
-            for c in 0..NCH {
-                wt[c] = scale8(a.y[kk], lane_at(a.prev, w0 + 8 * c));
-                if binary {
-                    first[c] = sub8(first[c], wt[c]);
-                    wt[c] = add8(wt[c], wt[c]);
-                }
-            }
-        }
-        let t = &mut tables[oi * octet_stride::<T>(NCH)..][..256 * NCH];
-        t[..NCH].copy_from_slice(&first);
-        for b in 1..256usize {
-            let from = (b & (b - 1)) * NCH;
-            let wt = &w[b.trailing_zeros() as usize];
-            for c in 0..NCH {
-                t[b * NCH + c] = add8(t[from + c], wt[c]);
-            }
-        }
-    }
-}
-
 /// The adjoint of a chunk of octets for a block of groups, added to `out[(g·8 + i)·NCH + c]`
-/// (pixel i of group g, chunk c, in `T`; the caller adds these to `f64` sums): the chunk's tables are built once
-/// ([`adj_tables`]), then each pixel sums one table row per octet, the one its code byte along
-/// the samples selects (two for ternary codes: its +1 row minus its −1 row). Only reads: the
+/// (pixel i of group g, chunk c, in `T`; the caller adds these to `f64` sums), from the chunk's
+/// tables ([`adjoint_tables`], built once before): each pixel sums one table row per octet, the one
+/// its code byte along the samples selects (two for ternary codes: its +1 row minus its −1 row). Only reads: the
 /// tables are shared by every pixel, and the sum stays in registers.
 #[inline(always)]
 fn adj_chunk<T: Real, const NCH: usize>(
     a: &AdjChunk<'_, T>,
-    tables: &mut [Lane<T>],
+    tables: &[Lane<T>],
     out: &mut [Lane<T>],
     mut flush: Option<&mut [[f64; 8]]>,
 ) {
-    adj_tables::<T, NCH>(a, tables);
     let zero = [T::zero(); 8];
     let row = |o: usize, b: u64| -> &[Lane<T>; NCH] {
         let r = o * octet_stride::<T>(NCH) + (b & 0xFF) as usize * NCH;
@@ -602,7 +567,7 @@ macro_rules! multiversion {
 }
 
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
-multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>], flush: Option<&mut [[f64; 8]]>) => adj_chunk);
+multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &[Lane<T>], out: &mut [Lane<T>], flush: Option<&mut [[f64; 8]]>) => adj_chunk);
 multiversion!(fn sparse_entry_narrow<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
 multiversion!(fn signed_copy_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
 multiversion!(fn signed_dot_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], p: &[T], out: &mut f64) => signed_dot);
@@ -640,6 +605,7 @@ pub(crate) fn adjoint_chunk<T: Real>(
     flush: Option<&mut [[f64; 8]]>,
 ) {
     assert!(flush.as_ref().is_none_or(|f| f.len() == out.len()), "sums");
+    adjoint_tables(isa, nch, a, tables);
     match nch {
         1 => adj_chunk_isa::<T, 1>(isa, a, tables, out, flush),
         2 => adj_chunk_isa::<T, 2>(isa, a, tables, out, flush),
@@ -658,6 +624,7 @@ mod probe;
 pub(crate) mod quads;
 pub(crate) mod support_wide;
 pub(crate) mod tables;
+pub(crate) use tables::adjoint_tables;
 #[cfg(test)]
 mod tests;
 pub(crate) mod wide;

@@ -401,16 +401,6 @@ impl<T: Real> RdOperator<T> {
         self.codes.groups().div_ceil(self.block_groups)
     }
 
-    fn group_codes(&self, groups: std::ops::Range<usize>) -> (Vec<&[u8]>, Option<Vec<&[u8]>>) {
-        let plus: Vec<&[u8]> = groups.clone().map(|g| self.codes.plus_group(g)).collect();
-        let minus = self.codes.minus_plane().map(|_| {
-            groups
-                .map(|g| self.codes.minus_group(g).expect("ternary"))
-                .collect()
-        });
-        (plus, minus)
-    }
-
     /// The dense forward: every pixel through the tables.
     fn forward_dense(&self, x: &[T], y: &mut [T]) {
         let k = self.codes.len();
@@ -455,7 +445,7 @@ impl<T: Real> RdOperator<T> {
     /// Adds block `b`'s groups, every slab, to the lane partial sums `w.part`.
     fn forward_block(&self, x: &[T], b: usize, w: &mut Work<T>) {
         let groups = self.block_range(b);
-        let (plus, minus) = self.group_codes(groups.clone());
+        let (plus, minus) = self.codes.group_bytes(groups.clone());
         let (shape, binary) = ((self.geom.pixels(), self.geom.ks), minus.is_none());
         for &(j0, nch) in &self.slabs {
             let base0 = self.pad + self.pulse.len() - 1 + j0;
@@ -466,8 +456,8 @@ impl<T: Real> RdOperator<T> {
                     tables,
                     nch,
                     width: (8 * nch).min(shape.1 - j0),
-                    plus: &plus,
-                    minus: minus.as_deref(),
+                    plus,
+                    minus,
                     prev: &self.prev,
                     base0,
                 };
@@ -476,8 +466,8 @@ impl<T: Real> RdOperator<T> {
                 build_group_tables(x, shape, binary, groups.clone(), j0, nch, &mut w.lanes);
                 let blk = FwdBlock {
                     tables: &w.lanes,
-                    plus: &plus,
-                    minus: minus.as_deref(),
+                    plus,
+                    minus,
                     prev: &self.prev,
                     base0,
                 };
@@ -621,7 +611,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
             .enumerate()
             .for_each(|(b, xb)| {
                 let groups = b * per..((b + 1) * per).min(groups);
-                let (plus, minus) = self.group_codes(groups.clone());
+                let (plus, minus) = self.codes.group_bytes(groups.clone());
                 // Allocated per application rather than pooled, so that an operator that is
                 // kept does not hold them (megabytes per thread at large K_s).
                 let (mut lines, mut part, mut out) = (Vec::new(), Vec::new(), Vec::new());
@@ -637,8 +627,8 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                     resize(&mut out, groups.len() * 8 * nch, [0.0; 8]);
                     for (c, o0) in (0..octets).step_by(ADJ_OCTETS).enumerate() {
                         let chunk = AdjChunk {
-                            plus: &plus,
-                            minus: minus.as_deref(),
+                            plus,
+                            minus,
                             y,
                             prev: &self.prev,
                             base0: self.pad + self.pulse.len() - 1 + j0,

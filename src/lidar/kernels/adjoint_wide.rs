@@ -1,18 +1,18 @@
 //! The adjoint's per-pixel sums in vectors: 512-bit on AVX-512, 256-bit on AVX2.
 //!
-//! The chunk's tables are those of the generic kernel ([`adj_tables`]); on AVX-512 their rows are
+//! The chunk's tables are those of the generic kernel ([`adjoint_tables`]); on AVX-512 their rows are
 //! widened to whole vectors (an even number of chunks of eight `f32` values) and start on cache
 //! lines (on AVX2 on 32-byte boundaries, all that its vectors need). Each pixel then adds its
 //! eight rows (one per octet) in vectors of sixteen `f32` or eight `f64` values (eight or four on
 //! AVX2) instead of chunks of eight, in the same order, lane by lane, as the generic kernel: the
 //! sums are the same to the last bit.
 
+#[cfg(target_arch = "x86_64")]
+use super::chunk_bits;
 use super::wide::Wide;
 #[cfg(target_arch = "x86_64")]
 use super::wide::{wide_pair, Simd};
-#[cfg(target_arch = "x86_64")]
-use super::{adj_tables, chunk_bits};
-use super::{octet_stride, AdjChunk, Isa, Lane, ADJ_OCTETS};
+use super::{adjoint_tables, octet_stride, AdjChunk, Isa, Lane, ADJ_OCTETS};
 use crate::real::Real;
 
 /// Chunks of eight values per row of the wide adjoint's tables on AVX-512 for a slab of `nch`
@@ -60,12 +60,13 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
         "tables"
     );
     assert_eq!(tables.as_ptr() as usize % 64, 0, "tables' alignment");
-    assert_eq!(out.len(), a.plus.len() * 8 * nch, "partial sums");
+    assert_eq!(out.len(), a.plus.groups() * 8 * nch, "partial sums");
     assert!(flush.as_ref().is_none_or(|f| f.len() == out.len()), "sums");
     assert!(
-        a.minus.is_none_or(|m| m.len() == a.plus.len()),
+        a.minus.is_none_or(|m| m.groups() == a.plus.groups()),
         "code planes"
     );
+    adjoint_tables(isa, nch, a, tables);
     #[cfg(target_arch = "x86_64")]
     // SAFETY: `Isa::Avx512` is chosen only on a CPU with AVX-512F, BW, VL and FMA, and
     // `Isa::Avx2` on one with AVX2 and FMA; the rows read are within the chunk's tables (a code
@@ -111,22 +112,21 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
 
 #[cfg(target_arch = "x86_64")]
 wide_pair!(adj_512, adj_256, adj_wide<const NCH: usize, const Z: usize>(
-    a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], out: &mut [Lane<T>],
+    a: &AdjChunk<'_, T>, tables: &[Lane<T>], out: &mut [Lane<T>],
     flush: Option<&mut [[f64; 8]]>
 ));
 
-/// The chunk's tables, then every pixel's rows, `Z` vectors a row.
+/// Every pixel's rows of the chunk's tables, `Z` vectors a row.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 // The accumulators are indexed in step with the vectors' offsets in the rows.
 #[allow(clippy::needless_range_loop)]
 unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize>(
     a: &AdjChunk<'_, T>,
-    tables: &mut [Lane<T>],
+    tables: &[Lane<T>],
     out: &mut [Lane<T>],
     mut flush: Option<&mut [[f64; 8]]>,
 ) {
-    adj_tables::<T, NCH>(a, tables);
     let per = S::PER;
     let stride = octet_stride::<T>(NCH) * 8;
     let base = tables.as_ptr().cast::<T>();
@@ -168,6 +168,7 @@ unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lidar::codes::GroupBytes;
     use crate::lidar::kernels::quads::{lines_as_mut, CacheLine};
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -201,12 +202,11 @@ mod tests {
             prev[pad + t] = T::of_f64(v);
         }
         let (plus, minus) = crate::lidar::kernels::tests::random_planes(&mut rng, groups, k);
-        let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
-        let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+        let (plus_plane, minus_plane) = (plus.concat(), minus.concat());
         for ternary in [false, true] {
             let chunk = |o0| AdjChunk {
-                plus: &plus_refs,
-                minus: ternary.then_some(minus_refs.as_slice()),
+                plus: GroupBytes::new(&plus_plane, k, 0..groups),
+                minus: ternary.then(|| GroupBytes::new(&minus_plane, k, 0..groups)),
                 y: &y,
                 prev: &prev,
                 base0: pad + kp - 1,

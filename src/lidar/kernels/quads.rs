@@ -14,6 +14,7 @@ use std::ops::Range;
 #[cfg(target_arch = "x86_64")]
 use super::wide::{by_vectors, wide_pair, Simd};
 use super::{Isa, Lane};
+use crate::lidar::codes::GroupBytes;
 use crate::real::Real;
 
 /// Rows of a quad's table: one per value of four code bits.
@@ -134,10 +135,10 @@ pub(crate) struct QuadBlock<'a, T> {
     pub nch: usize,
     /// Bins of the slab (at most 8·nch).
     pub width: usize,
-    /// The +1 code bytes of each group of the block, at least `part.len()` each.
-    pub plus: &'a [&'a [u8]],
+    /// The +1 code bytes of the block's groups, at least `part.len()` each.
+    pub plus: GroupBytes<'a>,
     /// The −1 code bytes (ternary codes only).
-    pub minus: Option<&'a [&'a [u8]]>,
+    pub minus: Option<GroupBytes<'a>>,
     /// Reversed, zero-padded pulse, as in [`FwdBlock`](super::FwdBlock).
     pub prev: &'a [T],
     /// See `prev`.
@@ -156,16 +157,14 @@ pub(crate) struct QuadBlock<'a, T> {
 pub(crate) fn quad_forward<T: Real>(isa: Isa, a: &QuadBlock<'_, T>, part: &mut [Lane<T>]) {
     let rl = quad_row_len::<T>(a.nch);
     let n = part.len();
-    let streams = a.plus.iter().chain(a.minus.into_iter().flatten());
-    assert!(streams.into_iter().all(|c| c.len() >= n), "code bytes");
+    let (groups, stride) = (a.plus.groups(), a.plus.stride());
     assert!(
-        a.minus.is_none_or(|m| m.len() == a.plus.len()),
-        "code planes"
+        stride >= n
+            && a.minus
+                .is_none_or(|m| m.groups() == groups && m.stride() == stride),
+        "code bytes"
     );
-    assert!(
-        a.tables.len() >= a.plus.len() * 2 * QUAD_ROWS * rl,
-        "tables"
-    );
+    assert!(a.tables.len() >= groups * 2 * QUAD_ROWS * rl, "tables");
     assert_eq!(a.tables.as_ptr() as usize % 64, 0, "tables' alignment");
     // Every vector of a row holds some of the slab's bins (so that no pointer into the pulse
     // window goes past its end).
@@ -258,8 +257,9 @@ unsafe fn quad_samples<
     let hi_set = usize::from(8 * Z <= S::REGS);
     let tables = a.tables.as_ptr();
     let mut acc = [[[S::v_zero(); Z]; 2]; N];
-    let rows = |codes: &[u8], g: usize, s: usize| {
-        let b = *codes.get_unchecked(k + s) as usize;
+    let stride = a.plus.stride();
+    let rows = |plane: *const u8, g: usize, s: usize| {
+        let b = *plane.add(g * stride + k + s) as usize;
         let base = tables.add(g * 2 * QUAD_ROWS * rl);
         (
             base.add((b & 15) * rl),
@@ -274,9 +274,9 @@ unsafe fn quad_samples<
             S::v_load(row.add(z * per))
         }
     };
-    for (g, plus) in a.plus.iter().enumerate() {
+    for g in 0..a.plus.groups() {
         for (s, acc) in acc.iter_mut().enumerate() {
-            let (lo, hi) = rows(plus, g, s);
+            let (lo, hi) = rows(a.plus.as_ptr(), g, s);
             for z in 0..Z {
                 acc[0][z] = S::v_add(acc[0][z], load(lo, z));
                 acc[hi_set][z] = S::v_add(acc[hi_set][z], load(hi, z));
@@ -284,9 +284,9 @@ unsafe fn quad_samples<
         }
     }
     if let Some(minus) = a.minus {
-        for (g, minus) in minus.iter().enumerate() {
+        for g in 0..minus.groups() {
             for (s, acc) in acc.iter_mut().enumerate() {
-                let (lo, hi) = rows(minus, g, s);
+                let (lo, hi) = rows(minus.as_ptr(), g, s);
                 for z in 0..Z {
                     acc[0][z] = S::v_sub(acc[0][z], load(lo, z));
                     acc[hi_set][z] = S::v_sub(acc[hi_set][z], load(hi, z));
@@ -452,8 +452,7 @@ mod tests {
                 prev[pad + t] = T::of_f64(v);
             }
             let (plus, minus) = crate::lidar::kernels::tests::random_planes(&mut rng, groups, k);
-            let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
-            let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+            let (plus_plane, minus_plane) = (plus.concat(), minus.concat());
             let width = (8 * nch).min(ks - j0);
             for ternary in [false, true] {
                 let mut lines = vec![CacheLine::default(); quad_lines::<T>(groups, nch)];
@@ -463,8 +462,8 @@ mod tests {
                     tables,
                     nch,
                     width,
-                    plus: &plus_refs,
-                    minus: ternary.then_some(minus_refs.as_slice()),
+                    plus: GroupBytes::new(&plus_plane, k, 0..groups),
+                    minus: ternary.then(|| GroupBytes::new(&minus_plane, k, 0..groups)),
                     prev: &prev,
                     base0: pad + kp - 1 + j0,
                 };
@@ -563,7 +562,7 @@ mod tests {
             tables: lines_as_mut::<f64>(&mut lines),
             nch: 1,
             width: 8,
-            plus: &[&codes[..]],
+            plus: GroupBytes::new(&codes, 4, 0..1),
             minus: None,
             prev: &prev,
             base0: 7,

@@ -1,9 +1,10 @@
-//! The forward's 256-row tables (generic and AVX2 paths): the signed subset sums of a group's
-//! eight depth columns, one row per code byte.
+//! The 256-row tables: the forward's (generic and AVX2 paths), the signed subset sums of a
+//! group's eight depth columns, one row per code byte; and the adjoint's, the signed subset sums
+//! of an octet's eight samples, one row per code byte.
 
 use std::ops::Range;
 
-use super::Lane;
+use super::{add8, lane_at, octet_stride, scale8, sub8, AdjChunk, Isa, Lane, ADJ_OCTETS};
 use crate::real::Real;
 
 /// Tabulates the groups `groups` for the slab of bins `j0 ..` (`nch` chunks of eight) of the
@@ -60,5 +61,82 @@ pub(crate) fn build_group_tables<T: Real>(
                 t[b * nch + c] = row;
             }
         }
+    }
+}
+
+/// The tables of a chunk: for octet o and byte b, Σ_t ±w_t (binary codes: + where bit t of b is
+/// set, − elsewhere) or Σ_{t ∈ b} w_t (ternary codes), where w_t = y[k]·p[k − j], k = 8·o + t,
+/// is the row every pixel's backprojection adds with its code's sign at sample k. Each table is
+/// built by doubling: 255 row additions from its first row.
+#[inline(always)]
+fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>]) {
+    let zero = [T::zero(); 8];
+    let binary = a.minus.is_none();
+    let k = a.y.len();
+    for (oi, o) in (a.first_octet..a.first_octet + ADJ_OCTETS).enumerate() {
+        let mut w = [[zero; NCH]; 8];
+        let mut first = [zero; NCH];
+        for (t, wt) in w.iter_mut().enumerate() {
+            let kk = 8 * o + t;
+            if kk >= k || a.y[kk] == T::zero() {
+                continue;
+            }
+            let w0 = a.base0 - kk;
+            for c in 0..NCH {
+                wt[c] = scale8(a.y[kk], lane_at(a.prev, w0 + 8 * c));
+                if binary {
+                    first[c] = sub8(first[c], wt[c]);
+                    wt[c] = add8(wt[c], wt[c]);
+                }
+            }
+        }
+        let t = &mut tables[oi * octet_stride::<T>(NCH)..][..256 * NCH];
+        t[..NCH].copy_from_slice(&first);
+        // Row b is row b − 2^z plus w_z, z the lowest set bit of b: the same additions of the
+        // same rows in any order that has each row's earlier one ready. By blocks of 64 rows
+        // (in L1), and in each block by z from the highest, so that w_z is read once for all
+        // the rows that add it.
+        for block in (0..256usize).step_by(64) {
+            if block > 0 {
+                let z = block.trailing_zeros() as usize;
+                let wz = w[z];
+                for c in 0..NCH {
+                    t[block * NCH + c] = add8(t[(block - (1 << z)) * NCH + c], wz[c]);
+                }
+            }
+            for z in (0..6).rev() {
+                let wz = w[z];
+                for b in ((block + (1 << z))..block + 64).step_by(2 << z) {
+                    let from = (b - (1 << z)) * NCH;
+                    for c in 0..NCH {
+                        t[b * NCH + c] = add8(t[from + c], wz[c]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+multiversion!(fn adj_tables_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>]) => adj_tables);
+
+/// Builds a chunk's tables ([`adj_tables`]) for rows of `nch` chunks, in a function of its own
+/// for each instruction set: inlined into the loops that read the tables, a change to either
+/// moved the adjoint by up to a fifth (the same loops, laid out and allocated otherwise).
+pub(crate) fn adjoint_tables<T: Real>(
+    isa: Isa,
+    nch: usize,
+    a: &AdjChunk<'_, T>,
+    tables: &mut [Lane<T>],
+) {
+    match nch {
+        1 => adj_tables_isa::<T, 1>(isa, a, tables),
+        2 => adj_tables_isa::<T, 2>(isa, a, tables),
+        3 => adj_tables_isa::<T, 3>(isa, a, tables),
+        4 => adj_tables_isa::<T, 4>(isa, a, tables),
+        5 => adj_tables_isa::<T, 5>(isa, a, tables),
+        6 => adj_tables_isa::<T, 6>(isa, a, tables),
+        7 => adj_tables_isa::<T, 7>(isa, a, tables),
+        8 => adj_tables_isa::<T, 8>(isa, a, tables),
+        _ => unreachable!("rows have 1 to 8 chunks"),
     }
 }

@@ -57,8 +57,7 @@ fn adjoint_chunk_matches_the_direct_sum() {
     }
     let base0 = pad + kp - 1;
     let (plus, minus) = random_planes(&mut rng, groups, k);
-    let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
-    let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+    let (plus_plane, minus_plane) = (plus.concat(), minus.concat());
     let mut isas = vec![Isa::Generic, Isa::best()];
     isas.dedup();
     for ternary in [false, true] {
@@ -76,8 +75,8 @@ fn adjoint_chunk_matches_the_direct_sum() {
             let octets = k.div_ceil(8);
             for o0 in (0..octets).step_by(ADJ_OCTETS) {
                 let a = AdjChunk {
-                    plus: &plus_refs,
-                    minus: ternary.then_some(minus_refs.as_slice()),
+                    plus: GroupBytes::new(&plus_plane, k, 0..groups),
+                    minus: ternary.then(|| GroupBytes::new(&minus_plane, k, 0..groups)),
                     y: &y,
                     prev: &prev,
                     base0,
@@ -296,16 +295,15 @@ fn forward_block_matches_the_direct_sum<T: Real>(tol: f64) {
         prev[pad + t] = T::of_f64(v);
     }
     let (plus, minus) = random_planes(&mut rng, groups, k);
-    let plus_refs: Vec<&[u8]> = plus.iter().map(|v| v.as_slice()).collect();
-    let minus_refs: Vec<&[u8]> = minus.iter().map(|v| v.as_slice()).collect();
+    let (plus_plane, minus_plane) = (plus.concat(), minus.concat());
     for ternary in [false, true] {
         let mut tables = vec![[T::zero(); 8]; groups * 256 * NCH];
         tables::build_group_tables(&x, (npix, ks), !ternary, 0..groups, 0, NCH, &mut tables);
         for isa in every_isa() {
             let blk = FwdBlock {
                 tables: &tables,
-                plus: &plus_refs,
-                minus: ternary.then_some(minus_refs.as_slice()),
+                plus: GroupBytes::new(&plus_plane, k, 0..groups),
+                minus: ternary.then(|| GroupBytes::new(&minus_plane, k, 0..groups)),
                 prev: &prev,
                 base0: pad + kp - 1,
             };
