@@ -341,9 +341,9 @@ pub(crate) fn octet_stride<T>(nch: usize) -> usize {
 
 /// The adjoint of a chunk of octets for a block of groups, added to `out[(g·8 + i)·NCH + c]`
 /// (pixel i of group g, chunk c, in `T`; the caller adds these to `f64` sums), from the chunk's
-/// tables ([`adjoint_tables`], built once before): each pixel sums one table row per octet, the one
-/// its code byte along the samples selects (two for ternary codes: its +1 row minus its −1 row). Only reads: the
-/// tables are shared by every pixel, and the sum stays in registers.
+/// tables ([`adjoint_tables`], built once before): each pixel sums one table row per octet, the
+/// one its code byte along the samples selects (two for ternary codes: its +1 row minus its −1
+/// row). Only reads: the tables are shared by every pixel, and the sum stays in registers.
 #[inline(always)]
 fn adj_chunk<T: Real, const NCH: usize>(
     a: &AdjChunk<'_, T>,

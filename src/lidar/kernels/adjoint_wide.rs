@@ -1,11 +1,11 @@
 //! The adjoint's per-pixel sums in vectors: 512-bit on AVX-512, 256-bit on AVX2.
 //!
-//! The chunk's tables are those of the generic kernel ([`adjoint_tables`]); on AVX-512 their rows are
-//! widened to whole vectors (an even number of chunks of eight `f32` values) and start on cache
-//! lines (on AVX2 on 32-byte boundaries, all that its vectors need). Each pixel then adds its
-//! eight rows (one per octet) in vectors of sixteen `f32` or eight `f64` values (eight or four on
-//! AVX2) instead of chunks of eight, in the same order, lane by lane, as the generic kernel: the
-//! sums are the same to the last bit.
+//! The chunk's tables are those of the generic kernel ([`adjoint_tables`]); on AVX-512 their
+//! rows are widened to whole vectors (an even number of chunks of eight `f32` values) and start on
+//! cache lines (on AVX2 on 32-byte boundaries, all that its vectors need). Each pixel then adds
+//! its eight rows (one per octet) in vectors of sixteen `f32` or eight `f64` values (eight or four
+//! on AVX2) instead of chunks of eight, in the same order, lane by lane, as the generic kernel:
+//! the sums are the same to the last bit.
 
 #[cfg(target_arch = "x86_64")]
 use super::chunk_bits;

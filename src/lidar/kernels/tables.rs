@@ -120,8 +120,8 @@ fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane
 multiversion!(fn adj_tables_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>]) => adj_tables);
 
 /// Builds a chunk's tables ([`adj_tables`]) for rows of `nch` chunks, in a function of its own
-/// for each instruction set: inlined into the loops that read the tables, a change to either
-/// moved the adjoint by up to a fifth (the same loops, laid out and allocated otherwise).
+/// for each instruction set: compiled apart from the loops that read the tables, so that a change
+/// to either leaves the other's machine code as it was.
 pub(crate) fn adjoint_tables<T: Real>(
     isa: Isa,
     nch: usize,
