@@ -124,9 +124,9 @@ impl<T: Real> RdOperator<T> {
         // The forward's block of 256-row tables (larger than a block of quad tables); the
         // adjoint's rows as wide as on AVX-512 (whole vectors): an upper bound for every path.
         let tables = block_groups * 256 * max_nch * 8 * size;
-        let max_nch = wide_adjoint_nch::<T>(max_nch);
-        // The adjoint's block: a chunk's tables, and the block's partial sums in `T` and `f64`.
-        let adjoint = ADJ_OCTETS * octet_stride::<T>(max_nch) * 8 * size
+        // The adjoint's block: a chunk's tables (rows of whole vectors), and the block's partial
+        // sums in `T` and `f64` (the slab's bins).
+        let adjoint = ADJ_OCTETS * octet_stride::<T>(wide_adjoint_nch::<T>(max_nch)) * 8 * size
             + adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch)
                 * 8
                 * max_nch

@@ -229,9 +229,8 @@ impl<T: Real> RdOperator<T> {
         } else {
             groups_per_block::<T>(BLOCK_BYTES, max_nch)
         };
-        // The adjoint's rows are whole vectors on AVX-512 (`adjoint_nch`).
-        let adj_nch = adjoint_row_nch::<T>(isa, max_nch);
-        let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, adj_nch);
+        // The adjoint's partial sums hold the slab's bins (its rows may be wider).
+        let adj_block_groups = adjoint_groups_per_block::<T>(ADJ_BLOCK_BYTES, max_nch);
         Ok(RdOperator {
             geom,
             codes,
@@ -623,8 +622,9 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                         ADJ_OCTETS * octet_stride::<T>(nch) * std::mem::size_of::<Lane<T>>();
                     resize(&mut lines, bytes.div_ceil(64), CacheLine::default());
                     let tables = lines_as_mut::<T>(&mut lines).as_chunks_mut::<8>().0;
-                    resize(&mut part, groups.len() * 8 * nch, [T::zero(); 8]);
-                    resize(&mut out, groups.len() * 8 * nch, [0.0; 8]);
+                    // The sums hold the slab's bins only.
+                    resize(&mut part, groups.len() * 8 * slab_nch, [T::zero(); 8]);
+                    resize(&mut out, groups.len() * 8 * slab_nch, [0.0; 8]);
                     for (c, o0) in (0..octets).step_by(ADJ_OCTETS).enumerate() {
                         let chunk = AdjChunk {
                             plus,
@@ -639,13 +639,15 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                             || o0 + ADJ_OCTETS >= octets;
                         let flush = last.then_some(out.as_mut_slice());
                         if self.isa.has_wide() {
-                            adjoint_chunk_wide(self.isa, nch, &chunk, tables, &mut part, flush);
+                            let (isa, part) = (self.isa, &mut part);
+                            adjoint_chunk_wide(isa, nch, slab_nch, &chunk, tables, part, flush);
                         } else {
+                            // Rows are the slab's own width off AVX-512 (`nch == slab_nch`).
                             adjoint_chunk(self.isa, nch, &chunk, tables, &mut part, flush);
                         }
                     }
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
-                    for (i, o) in out.chunks_exact(nch).take(pixels).enumerate() {
+                    for (i, o) in out.chunks_exact(slab_nch).take(pixels).enumerate() {
                         for jj in 0..(8 * slab_nch).min(ks - j0) {
                             xb[i * ks + j0 + jj] = T::of_f64(o[jj / 8][jj % 8]);
                         }

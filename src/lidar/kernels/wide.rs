@@ -105,6 +105,9 @@ pub trait Simd: Copy {
     /// The first half of the vector's values at `p` (aligned to half the vector's size), zeros
     /// in the other half: nothing past them is read.
     unsafe fn v_load_half(p: *const Self::T) -> Self::V;
+    /// Adds the first half of `v` to the values at `p` (unaligned): nothing past them is read
+    /// or written.
+    unsafe fn v_add_half(p: *mut Self::T, v: Self::V);
 }
 
 /// The mask of the first `min(n, bits)` lanes.
@@ -189,6 +192,13 @@ impl Simd for W512<f32> {
     unsafe fn v_load_half(p: *const f32) -> __m512 {
         _mm512_zextps256_ps512(_mm256_load_ps(p))
     }
+    #[inline(always)]
+    unsafe fn v_add_half(p: *mut f32, v: __m512) {
+        _mm256_storeu_ps(
+            p,
+            _mm256_add_ps(_mm256_loadu_ps(p), _mm512_castps512_ps256(v)),
+        )
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -259,6 +269,13 @@ impl Simd for W512<f64> {
     #[inline(always)]
     unsafe fn v_load_half(p: *const f64) -> __m512d {
         _mm512_zextpd256_pd512(_mm256_load_pd(p))
+    }
+    #[inline(always)]
+    unsafe fn v_add_half(p: *mut f64, v: __m512d) {
+        _mm256_storeu_pd(
+            p,
+            _mm256_add_pd(_mm256_loadu_pd(p), _mm512_castpd512_pd256(v)),
+        )
     }
 }
 
@@ -338,6 +355,10 @@ impl Simd for W256<f32> {
     unsafe fn v_load_half(p: *const f32) -> __m256 {
         _mm256_zextps128_ps256(_mm_load_ps(p))
     }
+    #[inline(always)]
+    unsafe fn v_add_half(p: *mut f32, v: __m256) {
+        _mm_storeu_ps(p, _mm_add_ps(_mm_loadu_ps(p), _mm256_castps256_ps128(v)))
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -414,6 +435,10 @@ impl Simd for W256<f64> {
     #[inline(always)]
     unsafe fn v_load_half(p: *const f64) -> __m256d {
         _mm256_zextpd128_pd256(_mm_load_pd(p))
+    }
+    #[inline(always)]
+    unsafe fn v_add_half(p: *mut f64, v: __m256d) {
+        _mm_storeu_pd(p, _mm_add_pd(_mm_loadu_pd(p), _mm256_castpd256_pd128(v)))
     }
 }
 
