@@ -151,9 +151,10 @@ unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize, co
     let base = tables.as_ptr().cast::<T>();
     let row = |o: usize, b: u64| base.add(o * stride + (b & 0xFF) as usize * NCH * 8);
     let sums_nch = if HALF { NCH - 1 } else { NCH };
+    let gfni = per * std::mem::size_of::<T>() == 64 && has_gfni();
     let (mut bp, mut bm) = ([0u64; ADJ_OCTETS], [0u64; ADJ_OCTETS]);
     for (g, og) in out.chunks_exact_mut(8 * sums_nch).enumerate() {
-        chunk_bits(a, g, &mut bp, &mut bm);
+        wide_chunk_bits(a, g, &mut bp, &mut bm, gfni);
         for (i, oi) in og.chunks_exact_mut(sums_nch).enumerate() {
             let shift = 8 * i;
             let mut acc = [S::v_zero(); Z];
@@ -187,6 +188,72 @@ unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize, co
             super::flush_sums(og, &mut f[g * 8 * sums_nch..(g + 1) * 8 * sums_nch]);
         }
     }
+}
+
+/// Whether the processor transposes bit matrices by GFNI's affine transformation (with the
+/// AVX-512 registers [`transpose_octets`] loads).
+#[cfg(target_arch = "x86_64")]
+fn has_gfni() -> bool {
+    std::arch::is_x86_feature_detected!("gfni")
+        && std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512bw")
+}
+
+/// [`chunk_bits`] for the AVX-512 kernel: with `gfni` ([`has_gfni`]) and all the chunk's bytes
+/// of the group there (not the last chunk of a K that is not a multiple of 64), the eight octets
+/// are transposed at once ([`transpose_octets`]), the same bits as one octet at a time.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn wide_chunk_bits<T>(
+    a: &AdjChunk<'_, T>,
+    g: usize,
+    plus: &mut [u64; ADJ_OCTETS],
+    minus: &mut [u64; ADJ_OCTETS],
+    gfni: bool,
+) {
+    let from = 8 * a.first_octet;
+    let (p, m) = (a.plus.group(g), a.minus.map(|m| m.group(g)));
+    let whole = |bytes: &[u8]| from + 8 * ADJ_OCTETS <= bytes.len();
+    if !gfni || !whole(p) || m.is_some_and(|m| !whole(m)) {
+        return chunk_bits(a, g, plus, minus);
+    }
+    a.plus.prefetch(g + 2, from);
+    // SAFETY: `gfni` holds only where `has_gfni` found the features `transpose_octets` uses,
+    // and the 64 bytes it reads from `from` lie within the group's bytes (both planes' for
+    // ternary codes), as checked above.
+    unsafe { transpose_octets(p[from..].as_ptr(), plus) };
+    if let (Some(m), Some(planes)) = (m, a.minus) {
+        planes.prefetch(g + 2, from);
+        // SAFETY: as above.
+        unsafe { transpose_octets(m[from..].as_ptr(), minus) };
+    }
+}
+
+/// The eight octets of 64 code bytes at `bytes` transposed as [`transpose8`](super::transpose8)
+/// does one. `vgf2p8affineqb` multiplies each byte of its first operand by the 8×8 bit matrix
+/// of the second operand's word, taking bit i of the product from the word's byte 7 − i: with
+/// the unit bytes 1 << j as the first operand and each octet's bytes reversed as the matrix,
+/// byte j of the product is bit j of every byte of the octet, the matrix transposed.
+///
+/// # Safety
+/// The processor has AVX-512F, AVX-512BW and GFNI, and 64 bytes are readable at `bytes`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,gfni")]
+unsafe fn transpose_octets(bytes: *const u8, out: &mut [u64; ADJ_OCTETS]) {
+    use std::arch::x86_64::*;
+    const _: () = assert!(ADJ_OCTETS == 8, "one 512-bit vector a chunk");
+    #[rustfmt::skip]
+    let reverse = _mm512_set_epi8(
+        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
+        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
+        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
+        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
+    );
+    // Byte j of each word is 1 << j: bit i of the product's byte j is bit j of row 7 − i.
+    let unit = _mm512_set1_epi64(0x8040_2010_0804_0201_u64 as i64);
+    let rows = _mm512_shuffle_epi8(_mm512_loadu_si512(bytes.cast()), reverse);
+    let bits = _mm512_gf2p8affine_epi64_epi8::<0>(unit, rows);
+    _mm512_storeu_si512(out.as_mut_ptr().cast(), bits);
 }
 
 #[cfg(test)]
@@ -331,6 +398,27 @@ mod tests {
     #[test]
     fn wide_adjoint_matches_the_direct_sum_f64() {
         wide_adjoint_matches_the_direct_sum::<f64>(1e-12);
+    }
+
+    /// The eight octets transposed at once by GFNI against one at a time, on random bytes
+    /// (where the processor has GFNI; the wide kernel's test covers both in one run).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn octets_transposed_at_once_match_one_at_a_time() {
+        if !has_gfni() {
+            return;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(67);
+        for _ in 0..64 {
+            let bytes: Vec<u8> = (0..64).map(|_| rng.random()).collect();
+            let mut at_once = [0u64; ADJ_OCTETS];
+            // SAFETY: `has_gfni` holds and `bytes` has 64 bytes.
+            unsafe { transpose_octets(bytes.as_ptr(), &mut at_once) };
+            for (o, &got) in at_once.iter().enumerate() {
+                let word = u64::from_le_bytes(bytes[8 * o..8 * o + 8].try_into().unwrap());
+                assert_eq!(got, super::super::transpose8(word), "octet {o}");
+            }
+        }
     }
 
     #[test]
