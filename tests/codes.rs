@@ -98,4 +98,8 @@ fn dense_codes_are_packed_entry_for_entry_and_the_first_bad_entry_is_named() {
     s[[3, 31]] = 2;
     let e = Codes::from_dense(s.view()).unwrap_err().to_string();
     assert!(e.contains("entry -128 at pixel 3, sample 30"), "{e}");
+    // The same from a view that is not in row-major order.
+    let t = s.t().to_owned();
+    let e = Codes::from_dense(t.t()).unwrap_err().to_string();
+    assert!(e.contains("entry -128 at pixel 3, sample 30"), "{e}");
 }

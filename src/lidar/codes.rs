@@ -322,11 +322,24 @@ impl Codes {
             .map(|g| {
                 let mut zero = false;
                 for (p, row) in rows(g) {
-                    for (k, &v) in row.iter().enumerate() {
-                        if !(-1..=1).contains(&v) {
-                            return (Some((p, k, v)), zero);
-                        }
+                    // The row's range and zeros without a branch per entry (a contiguous row is
+                    // scanned in vectors), then the first bad entry only if there is one.
+                    let (mut lo, mut hi) = (0i8, 0i8);
+                    let mut scan = |v: i8| {
+                        (lo, hi) = (lo.min(v), hi.max(v));
                         zero |= v == 0;
+                    };
+                    match row.as_slice() {
+                        Some(values) => values.iter().for_each(|&v| scan(v)),
+                        None => row.iter().for_each(|&v| scan(v)),
+                    }
+                    if lo < -1 || hi > 1 {
+                        let (k, &v) = row
+                            .iter()
+                            .enumerate()
+                            .find(|(_, v)| !(-1..=1).contains(*v))
+                            .expect("an entry outside {-1, 0, 1}");
+                        return (Some((p, k, v)), zero);
                     }
                 }
                 (None, zero)
@@ -342,15 +355,25 @@ impl Codes {
         // A group's bytes: bit i of byte k is pixel 8g + i's code at sample k (+1 in `plus`,
         // −1 in `minus`).
         let pack = |g: usize, plus: &mut [u8], mut minus: Option<&mut [u8]>| {
+            fn set(dst: &mut [u8], row: &[i8], value: i8, bit: u8) {
+                for (d, &v) in dst.iter_mut().zip(row) {
+                    *d |= u8::from(v == value) * bit;
+                }
+            }
             for (p, row) in rows(g) {
                 let bit = 1u8 << (p % 8);
-                for (d, &v) in plus.iter_mut().zip(row.iter()) {
-                    *d |= if v == 1 { bit } else { 0 };
-                }
-                if let Some(m) = minus.as_deref_mut() {
-                    for (d, &v) in m.iter_mut().zip(row.iter()) {
-                        *d |= if v == -1 { bit } else { 0 };
+                // A contiguous row in vectors; a strided view through a copy of the row.
+                let owned;
+                let values = match row.as_slice() {
+                    Some(values) => values,
+                    None => {
+                        owned = row.to_vec();
+                        &owned[..]
                     }
+                };
+                set(plus, values, 1, bit);
+                if let Some(m) = minus.as_deref_mut() {
+                    set(m, values, -1, bit);
                 }
             }
         };
