@@ -151,10 +151,10 @@ unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize, co
     let base = tables.as_ptr().cast::<T>();
     let row = |o: usize, b: u64| base.add(o * stride + (b & 0xFF) as usize * NCH * 8);
     let sums_nch = if HALF { NCH - 1 } else { NCH };
-    let gfni = per * std::mem::size_of::<T>() == 64 && has_gfni();
+    let transpose = gfni_transpose(per * std::mem::size_of::<T>());
     let (mut bp, mut bm) = ([0u64; ADJ_OCTETS], [0u64; ADJ_OCTETS]);
     for (g, og) in out.chunks_exact_mut(8 * sums_nch).enumerate() {
-        wide_chunk_bits(a, g, &mut bp, &mut bm, gfni);
+        wide_chunk_bits(a, g, &mut bp, &mut bm, transpose);
         for (i, oi) in og.chunks_exact_mut(sums_nch).enumerate() {
             let shift = 8 * i;
             let mut acc = [S::v_zero(); Z];
@@ -190,18 +190,30 @@ unsafe fn adj_wide<T: Real, S: Simd<T = T>, const NCH: usize, const Z: usize, co
     }
 }
 
-/// Whether the processor transposes bit matrices by GFNI's affine transformation (with the
-/// AVX-512 registers [`transpose_octets`] loads).
+/// A transpose of a chunk's eight octets of code bytes at once: reads 64 bytes at its first
+/// argument, writes what [`transpose8`](super::transpose8) makes of each octet.
 #[cfg(target_arch = "x86_64")]
-fn has_gfni() -> bool {
-    std::arch::is_x86_feature_detected!("gfni")
-        && std::arch::is_x86_feature_detected!("avx512f")
-        && std::arch::is_x86_feature_detected!("avx512bw")
+type OctetsTranspose = unsafe fn(*const u8, &mut [u64; ADJ_OCTETS]);
+
+/// The GFNI transpose for a kernel of `vector_bytes`-byte vectors ([`transpose_octets_512`] on
+/// AVX-512, [`transpose_octets_256`] on AVX2), where the processor has GFNI beside the kernel's
+/// instruction set; `None` elsewhere.
+#[cfg(target_arch = "x86_64")]
+fn gfni_transpose(vector_bytes: usize) -> Option<OctetsTranspose> {
+    use std::arch::is_x86_feature_detected as has;
+    if !has!("gfni") {
+        return None;
+    }
+    match vector_bytes {
+        64 if has!("avx512f") && has!("avx512bw") => Some(transpose_octets_512),
+        32 if has!("avx2") => Some(transpose_octets_256),
+        _ => None,
+    }
 }
 
-/// [`chunk_bits`] for the AVX-512 kernel: with `gfni` ([`has_gfni`]) and all the chunk's bytes
-/// of the group there (not the last chunk of a K that is not a multiple of 64), the eight octets
-/// are transposed at once ([`transpose_octets`]), the same bits as one octet at a time.
+/// [`chunk_bits`] for the wide kernels: with a `transpose` ([`gfni_transpose`]) and all the
+/// chunk's bytes of the group there (not the last chunk of a K that is not a multiple of 64),
+/// the eight octets are transposed at once, the same bits as one octet at a time.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn wide_chunk_bits<T>(
@@ -209,25 +221,34 @@ fn wide_chunk_bits<T>(
     g: usize,
     plus: &mut [u64; ADJ_OCTETS],
     minus: &mut [u64; ADJ_OCTETS],
-    gfni: bool,
+    transpose: Option<OctetsTranspose>,
 ) {
     let from = 8 * a.first_octet;
     let (p, m) = (a.plus.group(g), a.minus.map(|m| m.group(g)));
     let whole = |bytes: &[u8]| from + 8 * ADJ_OCTETS <= bytes.len();
-    if !gfni || !whole(p) || m.is_some_and(|m| !whole(m)) {
+    let Some(transpose) = transpose.filter(|_| whole(p) && m.is_none_or(whole)) else {
         return chunk_bits(a, g, plus, minus);
-    }
+    };
     a.plus.prefetch(g + 2, from);
-    // SAFETY: `gfni` holds only where `has_gfni` found the features `transpose_octets` uses,
-    // and the 64 bytes it reads from `from` lie within the group's bytes (both planes' for
-    // ternary codes), as checked above.
-    unsafe { transpose_octets(p[from..].as_ptr(), plus) };
+    // SAFETY: `gfni_transpose` gives a transpose only where the processor has the features it
+    // uses, and the 64 bytes it reads from `from` lie within the group's bytes (both planes'
+    // for ternary codes), as checked above.
+    unsafe { transpose(p[from..].as_ptr(), plus) };
     if let (Some(m), Some(planes)) = (m, a.minus) {
         planes.prefetch(g + 2, from);
         // SAFETY: as above.
-        unsafe { transpose_octets(m[from..].as_ptr(), minus) };
+        unsafe { transpose(m[from..].as_ptr(), minus) };
     }
 }
+
+/// Each octet's bytes reversed, for `vgf2p8affineqb`'s rows (a 128-bit lane's two words).
+#[cfg(target_arch = "x86_64")]
+#[rustfmt::skip]
+const REVERSE_OCTETS: [i8; 16] = [7, 6, 5, 4, 3, 2, 1, 0, 15, 14, 13, 12, 11, 10, 9, 8];
+
+/// Byte j of each word is 1 << j: the first operand of `vgf2p8affineqb` that transposes.
+#[cfg(target_arch = "x86_64")]
+const UNIT_BYTES: i64 = 0x8040_2010_0804_0201_u64 as i64;
 
 /// The eight octets of 64 code bytes at `bytes` transposed as [`transpose8`](super::transpose8)
 /// does one. `vgf2p8affineqb` multiplies each byte of its first operand by the 8×8 bit matrix
@@ -239,21 +260,32 @@ fn wide_chunk_bits<T>(
 /// The processor has AVX-512F, AVX-512BW and GFNI, and 64 bytes are readable at `bytes`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,gfni")]
-unsafe fn transpose_octets(bytes: *const u8, out: &mut [u64; ADJ_OCTETS]) {
+unsafe fn transpose_octets_512(bytes: *const u8, out: &mut [u64; ADJ_OCTETS]) {
     use std::arch::x86_64::*;
     const _: () = assert!(ADJ_OCTETS == 8, "one 512-bit vector a chunk");
-    #[rustfmt::skip]
-    let reverse = _mm512_set_epi8(
-        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
-        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
-        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
-        8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7,
-    );
-    // Byte j of each word is 1 << j: bit i of the product's byte j is bit j of row 7 − i.
-    let unit = _mm512_set1_epi64(0x8040_2010_0804_0201_u64 as i64);
+    let lane = _mm_loadu_si128(REVERSE_OCTETS.as_ptr().cast());
+    let reverse = _mm512_broadcast_i32x4(lane);
     let rows = _mm512_shuffle_epi8(_mm512_loadu_si512(bytes.cast()), reverse);
-    let bits = _mm512_gf2p8affine_epi64_epi8::<0>(unit, rows);
+    let bits = _mm512_gf2p8affine_epi64_epi8::<0>(_mm512_set1_epi64(UNIT_BYTES), rows);
     _mm512_storeu_si512(out.as_mut_ptr().cast(), bits);
+}
+
+/// [`transpose_octets_512`] in two 256-bit halves.
+///
+/// # Safety
+/// The processor has AVX2 and GFNI, and 64 bytes are readable at `bytes`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,gfni")]
+unsafe fn transpose_octets_256(bytes: *const u8, out: &mut [u64; ADJ_OCTETS]) {
+    use std::arch::x86_64::*;
+    let lane = _mm_loadu_si128(REVERSE_OCTETS.as_ptr().cast());
+    let reverse = _mm256_broadcastsi128_si256(lane);
+    let unit = _mm256_set1_epi64x(UNIT_BYTES);
+    for (half, words) in out.chunks_exact_mut(4).enumerate() {
+        let rows = _mm256_loadu_si256(bytes.add(32 * half).cast());
+        let bits = _mm256_gf2p8affine_epi64_epi8::<0>(unit, _mm256_shuffle_epi8(rows, reverse));
+        _mm256_storeu_si256(words.as_mut_ptr().cast(), bits);
+    }
 }
 
 #[cfg(test)]
@@ -400,23 +432,29 @@ mod tests {
         wide_adjoint_matches_the_direct_sum::<f64>(1e-12);
     }
 
-    /// The eight octets transposed at once by GFNI against one at a time, on random bytes
-    /// (where the processor has GFNI; the wide kernel's test covers both in one run).
+    /// The eight octets transposed at once by GFNI (both vector widths) against one at a time,
+    /// on random bytes, where the processor has GFNI.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn octets_transposed_at_once_match_one_at_a_time() {
-        if !has_gfni() {
-            return;
-        }
         let mut rng = ChaCha8Rng::seed_from_u64(67);
-        for _ in 0..64 {
-            let bytes: Vec<u8> = (0..64).map(|_| rng.random()).collect();
-            let mut at_once = [0u64; ADJ_OCTETS];
-            // SAFETY: `has_gfni` holds and `bytes` has 64 bytes.
-            unsafe { transpose_octets(bytes.as_ptr(), &mut at_once) };
-            for (o, &got) in at_once.iter().enumerate() {
-                let word = u64::from_le_bytes(bytes[8 * o..8 * o + 8].try_into().unwrap());
-                assert_eq!(got, super::super::transpose8(word), "octet {o}");
+        for width in [64, 32] {
+            let Some(transpose) = gfni_transpose(width) else {
+                continue;
+            };
+            for _ in 0..64 {
+                let bytes: Vec<u8> = (0..64).map(|_| rng.random()).collect();
+                let mut at_once = [0u64; ADJ_OCTETS];
+                // SAFETY: `gfni_transpose` found the features, and `bytes` has 64 bytes.
+                unsafe { transpose(bytes.as_ptr(), &mut at_once) };
+                for (o, &got) in at_once.iter().enumerate() {
+                    let word = u64::from_le_bytes(bytes[8 * o..8 * o + 8].try_into().unwrap());
+                    assert_eq!(
+                        got,
+                        super::super::transpose8(word),
+                        "{width} bytes, octet {o}"
+                    );
+                }
             }
         }
     }
