@@ -5,7 +5,9 @@
 //! cache lines (on AVX2 on 32-byte boundaries, all that its vectors need). Each pixel then adds
 //! its eight rows (one per octet) in vectors of sixteen `f32` or eight `f64` values (eight or four
 //! on AVX2) instead of chunks of eight, in the same order, lane by lane, as the generic kernel:
-//! the sums are the same to the last bit.
+//! the sums are the same to the last bit. The partial sums hold the slab's bins only, and where
+//! the processor has GFNI a group's code bytes of a chunk are transposed in vectors (the same
+//! bits as the generic kernel's scalar transposes).
 
 #[cfg(target_arch = "x86_64")]
 use super::chunk_bits;
@@ -243,7 +245,6 @@ fn wide_chunk_bits<T>(
 
 /// Each octet's bytes reversed, for `vgf2p8affineqb`'s rows (a 128-bit lane's two words).
 #[cfg(target_arch = "x86_64")]
-#[rustfmt::skip]
 const REVERSE_OCTETS: [i8; 16] = [7, 6, 5, 4, 3, 2, 1, 0, 15, 14, 13, 12, 11, 10, 9, 8];
 
 /// Byte j of each word is 1 << j: the first operand of `vgf2p8affineqb` that transposes.
