@@ -642,7 +642,7 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                             let (isa, part) = (self.isa, &mut part);
                             adjoint_chunk_wide(isa, nch, slab_nch, &chunk, tables, part, flush);
                         } else {
-                            // Rows are the slab's own width off AVX-512 (`nch == slab_nch`).
+                            // The generic kernel's rows are the slab's width (`nch == slab_nch`).
                             adjoint_chunk(self.isa, nch, &chunk, tables, &mut part, flush);
                         }
                     }
