@@ -360,15 +360,17 @@ impl Codes {
                     *d |= u8::from(v == value) * bit;
                 }
             }
+            // A contiguous row is packed in vectors; a strided view's row through one copy
+            // buffer for the group.
+            let mut copy = Vec::new();
             for (p, row) in rows(g) {
                 let bit = 1u8 << (p % 8);
-                // A contiguous row in vectors; a strided view through a copy of the row.
-                let owned;
                 let values = match row.as_slice() {
                     Some(values) => values,
                     None => {
-                        owned = row.to_vec();
-                        &owned[..]
+                        copy.clear();
+                        copy.extend(row.iter());
+                        &copy[..]
                     }
                 };
                 set(plus, values, 1, bit);
