@@ -374,8 +374,11 @@ fn work_counts_the_table_rows_of_each_kernel() {
                 w.adjoint.additions,
                 planes * 8.0 * groups * octets * ks + octets * 256.0 * ks
             );
-            // On AVX-512 the adjoint's rows are whole 512-bit vectors (16 values).
-            let row = if op.isa() == "avx512" { 16.0 } else { 8.0 };
+            // On AVX-512 the adjoint's rows are whole 512-bit vectors (16 values), but where
+            // the processor reads `f32` rows at the slab's width in 256-bit vectors.
+            let row = (op.adjoint_row_bytes(1) / 4) as f64;
+            let widened = op.isa() == "avx512" && row == 16.0;
+            assert!(widened || row == 8.0, "{} rows of {row} values", op.isa());
             assert_eq!(
                 w.adjoint.table_bytes,
                 planes * 8.0 * groups * octets * row * 4.0

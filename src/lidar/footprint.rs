@@ -13,7 +13,7 @@ use crate::real::Real;
 
 use super::codes::CodeAlphabet;
 use super::geometry::Geometry;
-use super::kernels::adjoint_wide::{adjoint_row_nch, wide_adjoint_nch};
+use super::kernels::adjoint_wide::wide_adjoint_nch;
 use super::kernels::quads::{gather_rows_wide, lines_as_mut, quad_row_read, CacheLine, QUAD_ROWS};
 use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
 use super::rdop::{
@@ -28,7 +28,7 @@ pub struct KernelWork {
     /// of every table built.
     pub additions: f64,
     /// Bytes of table rows read by the lookups (rows padded to whole chunks of eight values; on
-    /// AVX-512 to whole 512-bit vectors).
+    /// AVX-512 to whole 512-bit vectors, but see [`RdOperator::adjoint_row_bytes`]).
     pub table_bytes: f64,
 }
 
@@ -141,6 +141,14 @@ impl<T: Real> RdOperator<T> {
             .and_then(|v| v.checked_add(codes))
             .and_then(|v| v.checked_add(pulses))
             .ok_or_else(overflow)
+    }
+
+    /// Bytes of one row of the adjoint's tables for a depth slab of `8·nch` bins (1 ≤ `nch` ≤ 8)
+    /// as the kernels read it: the slab's values in chunks of eight, on AVX-512 widened to whole
+    /// 512-bit vectors, except `f32` rows on processors that execute 512-bit operations in two
+    /// halves (AMD's family 19h, Zen 4), which the 256-bit kernel reads at the slab's width.
+    pub fn adjoint_row_bytes(&self, nch: usize) -> usize {
+        8 * self.adjoint_nch(nch) * std::mem::size_of::<T>()
     }
 
     /// The additions and table bytes of one dense forward and one adjoint (with the threads of
@@ -304,7 +312,15 @@ fn gather_limit_wide<T: Real>(
     repeats: usize,
 ) -> Result<GatherLimit> {
     // The wide kernels' rows: whole 512-bit vectors on AVX-512 (the quad rows' width too).
-    let rl = 8 * adjoint_row_nch::<T>(isa, nch);
+    #[cfg(target_arch = "x86_64")]
+    let whole_512 = isa == Isa::Avx512;
+    #[cfg(not(target_arch = "x86_64"))]
+    let whole_512 = false;
+    let rl = 8 * if whole_512 {
+        wide_adjoint_nch::<T>(nch)
+    } else {
+        nch
+    };
     let row_bytes = rl * std::mem::size_of::<T>();
     let rows = prev_power_of_two((table_bytes / row_bytes).clamp(2, 1 << 16));
     let threads = rayon::current_num_threads().max(1);

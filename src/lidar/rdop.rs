@@ -376,7 +376,7 @@ impl<T: Real> RdOperator<T> {
     }
 
     /// Chunks of eight values per row of the adjoint's tables for a slab of `nch` chunks: whole
-    /// 512-bit vectors on AVX-512.
+    /// 512-bit vectors on AVX-512 but for `f32` rows on Zen 4 ([`adjoint_row_nch`]).
     pub(crate) fn adjoint_nch(&self, nch: usize) -> usize {
         adjoint_row_nch::<T>(self.isa, nch)
     }
