@@ -4,9 +4,9 @@
 //! rows are widened to whole vectors (an even number of chunks of eight `f32` values) and start on
 //! cache lines (on AVX2 on 32-byte boundaries, all that its vectors need), except `f32` rows on
 //! processors that execute 512-bit operations in halves, which the AVX2 kernel reads at the
-//! slab's width ([`narrow_f32_rows`]). Each pixel then adds
-//! its eight rows (one per octet) in vectors of sixteen `f32` or eight `f64` values (eight or four
-//! on AVX2) instead of chunks of eight, in the same order, lane by lane, as the generic kernel:
+//! slab's width ([`narrow_f32_rows`]). Each pixel then adds its eight rows (one per octet) in
+//! vectors of sixteen `f32` or eight `f64` values (eight or four on AVX2) instead of chunks of
+//! eight, in the same order, lane by lane, as the generic kernel:
 //! the sums are the same to the last bit. The partial sums hold the slab's bins only, and where
 //! the processor has GFNI a group's code bytes of a chunk are transposed in vectors (the same
 //! bits as the generic kernel's scalar transposes).
@@ -67,8 +67,9 @@ pub(crate) fn narrow_f32_rows() -> bool {
     false
 }
 
-/// [`adjoint_chunk`](super::adjoint_chunk) in vectors for rows of `nch` chunks, `nch` from
-/// [`adjoint_row_nch`], and sums of the slab's `slab_nch` chunks: the chunk's tables into
+/// [`adjoint_chunk`](super::adjoint_chunk) in vectors for rows of `nch` chunks (the slab's
+/// `slab_nch`, or on AVX-512 whole 512-bit vectors, [`wide_adjoint_nch`]; [`adjoint_row_nch`]
+/// chooses), and sums of the slab's `slab_nch` chunks: the chunk's tables into
 /// `tables` (64-byte aligned), each pixel's sum added to `out[(g·8 + i)·slab_nch ..]`, and with
 /// `flush` each group's partial sums then added to their `f64` sums there and cleared
 /// ([`flush_sums`](super::flush_sums)). The sums hold only the slab's bins: where the rows were
@@ -76,8 +77,8 @@ pub(crate) fn narrow_f32_rows() -> bool {
 /// not added, so the partial sums take a sixth less of the cache at 40 bins.
 ///
 /// # Panics
-/// If `isa` has no wide kernels ([`Isa::has_wide`]), `nch` is not whole vectors or not the
-/// slab's rows, or the buffers are too short (checked before the unchecked loops).
+/// If `isa` has no wide kernels ([`Isa::has_wide`]), `nch` is neither width, or the buffers are
+/// too short (checked before the unchecked loops).
 pub(crate) fn adjoint_chunk_wide<T: Real>(
     isa: Isa,
     nch: usize,
@@ -87,8 +88,12 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
     out: &mut [Lane<T>],
     flush: Option<&mut [[f64; 8]]>,
 ) {
+    #[cfg(target_arch = "x86_64")]
+    let widened = isa == Isa::Avx512 && nch == wide_adjoint_nch::<T>(slab_nch);
+    #[cfg(not(target_arch = "x86_64"))]
+    let widened = false;
     assert!(
-        (1..=8).contains(&slab_nch) && (nch == slab_nch || nch == wide_adjoint_nch::<T>(slab_nch)),
+        (1..=8).contains(&slab_nch) && (nch == slab_nch || widened),
         "row width"
     );
     assert!(
