@@ -13,7 +13,7 @@ use crate::real::Real;
 
 use super::codes::CodeAlphabet;
 use super::geometry::Geometry;
-use super::kernels::adjoint_wide::wide_adjoint_nch;
+use super::kernels::adjoint_wide::{vector_row_nch, wide_adjoint_nch};
 use super::kernels::quads::{gather_rows_wide, lines_as_mut, quad_row_read, CacheLine, QUAD_ROWS};
 use super::kernels::{gather_rows, octet_stride, Isa, Lane, ADJ_OCTETS};
 use super::rdop::{
@@ -312,15 +312,7 @@ fn gather_limit_wide<T: Real>(
     repeats: usize,
 ) -> Result<GatherLimit> {
     // The wide kernels' rows: whole 512-bit vectors on AVX-512 (the quad rows' width too).
-    #[cfg(target_arch = "x86_64")]
-    let whole_512 = isa == Isa::Avx512;
-    #[cfg(not(target_arch = "x86_64"))]
-    let whole_512 = false;
-    let rl = 8 * if whole_512 {
-        wide_adjoint_nch::<T>(nch)
-    } else {
-        nch
-    };
+    let rl = 8 * vector_row_nch::<T>(isa, nch);
     let row_bytes = rl * std::mem::size_of::<T>();
     let rows = prev_power_of_two((table_bytes / row_bytes).clamp(2, 1 << 16));
     let threads = rayon::current_num_threads().max(1);

@@ -27,16 +27,25 @@ pub(crate) fn wide_adjoint_nch<T: Real>(nch: usize) -> usize {
     nch.div_ceil(per_vector) * per_vector
 }
 
-/// Chunks of eight values per row of the adjoint's tables on `isa`: whole 512-bit vectors on
-/// AVX-512 ([`wide_adjoint_nch`]) unless [`narrow_f32_rows`]; on AVX2 a chunk is a whole 256-bit
-/// vector of `f32` and two of `f64`, and generic rows are chunks.
-pub(crate) fn adjoint_row_nch<T: Real>(isa: Isa, nch: usize) -> usize {
+/// Chunks of eight values per row of whole vectors on `isa`: 512-bit vectors on AVX-512
+/// ([`wide_adjoint_nch`]); on AVX2 a chunk is a whole 256-bit vector of `f32` and two of `f64`,
+/// and generic rows are chunks.
+pub(crate) fn vector_row_nch<T: Real>(isa: Isa, nch: usize) -> usize {
     #[cfg(target_arch = "x86_64")]
-    if isa == Isa::Avx512 && !(<T as Wide>::PER == 16 && narrow_f32_rows()) {
+    if isa == Isa::Avx512 {
         return wide_adjoint_nch::<T>(nch);
     }
     let _ = isa;
     nch
+}
+
+/// Chunks of eight values per row of the adjoint's tables on `isa`: whole vectors
+/// ([`vector_row_nch`]), but the slab's chunks for `f32` where [`narrow_f32_rows`].
+pub(crate) fn adjoint_row_nch<T: Real>(isa: Isa, nch: usize) -> usize {
+    if <T as Wide>::PER == 16 && narrow_f32_rows() {
+        return nch;
+    }
+    vector_row_nch::<T>(isa, nch)
 }
 
 /// Whether the AVX-512 adjoint reads `f32` rows of the slab's width in 256-bit vectors (the
@@ -68,11 +77,10 @@ pub(crate) fn narrow_f32_rows() -> bool {
 }
 
 /// [`adjoint_chunk`](super::adjoint_chunk) in vectors for rows of `nch` chunks (the slab's
-/// `slab_nch`, or on AVX-512 whole 512-bit vectors, [`wide_adjoint_nch`]; [`adjoint_row_nch`]
-/// chooses), and sums of the slab's `slab_nch` chunks: the chunk's tables into
-/// `tables` (64-byte aligned), each pixel's sum added to `out[(g·8 + i)·slab_nch ..]`, and with
-/// `flush` each group's partial sums then added to their `f64` sums there and cleared
-/// ([`flush_sums`](super::flush_sums)). The sums hold only the slab's bins: where the rows were
+/// `slab_nch`, or whole vectors, [`vector_row_nch`]; [`adjoint_row_nch`] chooses), and sums of
+/// the slab's `slab_nch` chunks: the chunk's tables into `tables` (64-byte aligned), each
+/// pixel's sum added to `out[(g·8 + i)·slab_nch ..]`, and with `flush` each group's partial sums
+/// then added to their `f64` sums there and cleared ([`flush_sums`](super::flush_sums)). The sums hold only the slab's bins: where the rows were
 /// widened by a chunk (`f32` on AVX-512, an odd `slab_nch`), the last vector's second half is
 /// not added, so the partial sums take a sixth less of the cache at 40 bins.
 ///
@@ -88,12 +96,9 @@ pub(crate) fn adjoint_chunk_wide<T: Real>(
     out: &mut [Lane<T>],
     flush: Option<&mut [[f64; 8]]>,
 ) {
-    #[cfg(target_arch = "x86_64")]
-    let widened = isa == Isa::Avx512 && nch == wide_adjoint_nch::<T>(slab_nch);
-    #[cfg(not(target_arch = "x86_64"))]
-    let widened = false;
     assert!(
-        (1..=8).contains(&slab_nch) && (nch == slab_nch || widened),
+        (1..=8).contains(&slab_nch)
+            && (nch == slab_nch || nch == vector_row_nch::<T>(isa, slab_nch)),
         "row width"
     );
     assert!(
@@ -346,11 +351,7 @@ mod tests {
                 continue;
             }
             // On AVX-512 both row widths, whichever this processor reads ([`narrow_f32_rows`]).
-            let mut widths = vec![SLAB, adjoint_row_nch::<T>(isa, SLAB)];
-            #[cfg(target_arch = "x86_64")]
-            if isa == Isa::Avx512 {
-                widths.push(wide_adjoint_nch::<T>(SLAB));
-            }
+            let mut widths = vec![SLAB, vector_row_nch::<T>(isa, SLAB)];
             widths.sort_unstable();
             widths.dedup();
             for nch in widths {
