@@ -2,7 +2,7 @@
 
     env -u OPENBLAS_CORETYPE -u OPENBLAS_L2_SIZE \\
         python python/benchmarks/numpy_ratio.py [--rdlidar PATH] [--size 100x100x40]
-        [--pulse-lens 10000,30000] [--repeats 5]
+        [--pulse-lens 10000,30000] [--repeats 5] [--rounds 1]
 
 For each precision (f32, f64) and pulse length K_p, with S the (M N, K) matrix of +-1 codes,
 X the (M N, K_s) scene and p the pulse:
@@ -12,7 +12,10 @@ X the (M N, K_s) scene and p the pulse:
 - rdlidar: ``rdlidar bench --json`` at the same size and precision (the dense forward and the
   adjoint), with ``RDLIDAR_ISA`` as set in the environment;
 
-median of --repeats timed calls after a warm-up each. Prints the BLAS that numpy ran (from
+median of --repeats timed calls after a warm-up each. With --rounds R > 1 both sides are timed R
+times in turn (rdlidar, numpy, rdlidar, ...) and each ratio is the median of the R rounds' ratios,
+with their range: on a shared machine whose load drifts, the two sides of a ratio are then
+measured minutes apart no more than one round. Prints the BLAS that numpy ran (from
 threadpoolctl: OpenBLAS's kernel, e.g. SkylakeX or Haswell), a markdown table of the times and
 the ratios numpy / rdlidar, and a second table of rdlidar's additions and table bytes per
 second against what the caches deliver to the same access pattern (``rdlidar bench``'s
@@ -56,7 +59,8 @@ def blas_kernel():
     )
 
 
-def numpy_times(m, n, ks, kp, dtype, repeats, rng):
+def numpy_problem(m, n, ks, kp, dtype, rng):
+    """The numpy forward and adjoint of a random problem, as functions of no arguments."""
     k = kp + ks - 1
     s = np.where(rng.random((m * n, k)) < 0.5, -1.0, 1.0).astype(dtype)
     x = rng.random((m * n, ks)).astype(dtype)
@@ -76,7 +80,7 @@ def numpy_times(m, n, ks, kp, dtype, repeats, rng):
         return s @ w
 
     forward()
-    return median_time(forward, repeats), median_time(adjoint, repeats)
+    return forward, adjoint
 
 
 def rdlidar_times(binary, size, kp, precision, repeats):
@@ -101,13 +105,29 @@ def rdlidar_times(binary, size, kp, precision, repeats):
     return json.loads(out.stdout)
 
 
+def ratio_cells(ours, theirs):
+    """The table cells of one operation: the medians of rdlidar's and numpy's times over the
+    rounds, and the median of the rounds' ratios (with their range when there are several)."""
+    ratios = [t / o for o, t in zip(ours, theirs)]
+    cell = f"{statistics.median(ratios):.2f}x"
+    if len(ratios) > 1:
+        cell += f" ({min(ratios):.2f}–{max(ratios):.2f})"
+    return (
+        f"{statistics.median(ours) * 1e3:.1f} ms | {statistics.median(theirs) * 1e3:.1f} ms "
+        f"| {cell}"
+    )
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rdlidar", default=os.environ.get("RDLIDAR_BIN") or shutil.which("rdlidar"))
     ap.add_argument("--size", default="100x100x40")
     ap.add_argument("--pulse-lens", default="10000,30000")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--rounds", type=int, default=1)
     a = ap.parse_args()
+    if a.repeats < 1 or a.rounds < 1:
+        raise SystemExit("--repeats and --rounds must be at least 1")
     if not a.rdlidar:
         raise SystemExit("give --rdlidar PATH (or RDLIDAR_BIN): the rdlidar binary to time")
     m, n, ks = (int(v) for v in a.size.lower().split("x"))
@@ -118,24 +138,31 @@ def main():
     rows = []
     for precision, dtype in (("f32", np.float32), ("f64", np.float64)):
         for kp in kps:
-            # rdlidar first: OpenBLAS's threads keep spinning for a while after numpy's last
-            # GEMM and would slow the subprocess's first timings.
-            v = rdlidar_times(a.rdlidar, a.size, kp, precision, a.repeats)
-            nf, na = numpy_times(m, n, ks, kp, dtype, a.repeats, rng)
-            rows.append((precision, kp, v, nf, na))
+            forward, adjoint = numpy_problem(m, n, ks, kp, dtype, rng)
+            rounds = []
+            for _ in range(a.rounds):
+                # rdlidar first: OpenBLAS's threads keep spinning for a while after numpy's
+                # last GEMM and would slow the subprocess's first timings.
+                v = rdlidar_times(a.rdlidar, a.size, kp, precision, a.repeats)
+                nf, na = median_time(forward, a.repeats), median_time(adjoint, a.repeats)
+                rounds.append((v, nf, na))
+            rows.append((precision, kp, rounds))
     print()
+    spread = " (range)" if a.rounds > 1 else ""
     print(
-        f"| {a.size} | K_p | rdlidar ISA, threads | forward rdlidar | numpy | ratio "
-        "| adjoint rdlidar | numpy | ratio |"
+        f"| {a.size} | K_p | rdlidar ISA, threads | forward rdlidar | numpy | ratio{spread} "
+        f"| adjoint rdlidar | numpy | ratio{spread} |"
     )
     print("|---|---:|---|---:|---:|---:|---:|---:|---:|")
-    for precision, kp, v, nf, na in rows:
-        rf, ra = v["forward"]["median_s"], v["adjoint"]["median_s"]
-        print(
-            f"| {precision} | {kp} | {v['isa']}, {v['threads']} | {rf * 1e3:.1f} ms "
-            f"| {nf * 1e3:.1f} ms | {nf / rf:.2f}x | {ra * 1e3:.1f} ms | {na * 1e3:.1f} ms "
-            f"| {na / ra:.2f}x |"
-        )
+    for precision, kp, rounds in rows:
+        v = rounds[0][0]
+        cells = []
+        for op, i in (("forward", 1), ("adjoint", 2)):
+            ours = [r[0][op]["median_s"] for r in rounds]
+            theirs = [r[i] for r in rounds]
+            cells.append(ratio_cells(ours, theirs))
+        print(f"| {precision} | {kp} | {v['isa']}, {v['threads']} | {cells[0]} | {cells[1]} |")
+    rows = [(precision, kp, rounds[0][0]) for precision, kp, rounds in rows]
     # The same run's rates against what the caches deliver to the kernels' access pattern
     # (random table rows summed, from L1 and from L2; `rdlidar bench` measures both).
     print()
@@ -144,7 +171,7 @@ def main():
         "| L1 limit GB/s | L2 limit GB/s | forward / L2 | adjoint / L2 |"
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for precision, kp, v, _, _ in rows:
+    for precision, kp, v in rows:
         f, d = v["rates"]["forward"], v["rates"]["adjoint"]
         l1, l2 = v["limits"]["l1"]["bytes_per_s"], v["limits"]["l2"]["bytes_per_s"]
         print(

@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 
@@ -38,3 +40,18 @@ def random_problem(m, n, ks, kp, seed, ternary=False):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def rdlidar_bin():
+    """The command line's binary, from RDLIDAR_BIN: a clear failure (never a skip) without it."""
+    path = os.environ.get("RDLIDAR_BIN")
+    if not path:
+        pytest.fail(
+            "RDLIDAR_BIN is not set: set it to the path of the rdlidar binary "
+            "(e.g. RDLIDAR_BIN=$PWD/target/release/rdlidar after cargo build --release)",
+            pytrace=False,
+        )
+    if not os.path.isfile(path) or not os.access(path, os.X_OK):
+        pytest.fail(f"RDLIDAR_BIN={path!r} is not an executable file", pytrace=False)
+    return path

@@ -41,21 +41,6 @@ def formats_of(arch):
 ARCH_FORMATS = [(a, f) for a in ARCHS for f in formats_of(a)]
 
 
-@pytest.fixture(scope="session")
-def rdlidar_bin():
-    """The command line's binary, from RDLIDAR_BIN: a clear failure (never a skip) without it."""
-    path = os.environ.get("RDLIDAR_BIN")
-    if not path:
-        pytest.fail(
-            "RDLIDAR_BIN is not set: set it to the path of the rdlidar binary "
-            "(e.g. RDLIDAR_BIN=$PWD/target/release/rdlidar after cargo build --release)",
-            pytrace=False,
-        )
-    if not os.path.isfile(path) or not os.access(path, os.X_OK):
-        pytest.fail(f"RDLIDAR_BIN={path!r} is not an executable file", pytrace=False)
-    return path
-
-
 def run_cli(binary, *args):
     out = subprocess.run([binary, *map(str, args)], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, f"rdlidar {' '.join(map(str, args))}: {out.stderr}"
