@@ -405,3 +405,32 @@ fn argmin_executor_drives_cgls_to_the_same_solution() {
     };
     assert!(ArgminCgls::<f64>::new(nan_damp).is_err());
 }
+
+/// A badly scaled problem in `f32`: a 1×1 operator of 10⁻¹⁸ or 10⁻²⁰, whose solution 10¹⁸ or
+/// 10²⁰ fits in `f32` although the step α = ‖Aᵀr‖²/‖Ap‖² that reaches it (10³⁶, 10⁴⁰) may not,
+/// and whose curvature ‖Ap‖² underflows to zero once the residual is at round-off.
+#[test]
+fn cgls_solves_badly_scaled_problems_to_round_off_instead_of_breaking_down() {
+    for a in [1e-18f32, 3e-19, 1e-20] {
+        let op = DenseMatrix::new(Array2::from_elem((1, 1), a)).unwrap();
+        let mut x = vec![0.0f32];
+        let params = CglsParams {
+            damp: 0.0,
+            stopping: Stopping {
+                max_iter: 10,
+                rel_residual: Some(1e-30),
+                ..Stopping::default()
+            },
+        };
+        let r = cgls(&op, &[1.0f32], &mut x, &params, &mut ()).unwrap();
+        let want = 1.0 / f64::from(a);
+        assert!(
+            // Within the precision of the subnormal products A·p (10⁻⁴⁰ at a = 10⁻²⁰).
+            (f64::from(x[0]) - want).abs() <= 1e-4 * want,
+            "a {a:e}: x {} ({:?})",
+            x[0],
+            r.termination
+        );
+        assert!(r.iterations <= 10, "a {a:e}: {}", r.iterations);
+    }
+}

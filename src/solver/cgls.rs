@@ -124,6 +124,18 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
         op.apply_with_scratch(&self.p, &mut self.q, &mut self.scratch);
         let pp = space::norm2_sq(space, &self.p);
         let delta = dot(&self.q, &self.q) + lambda * pp;
+        if delta == 0.0 && pp > 0.0 {
+            // A·p is zero to the last bit although p is not. p lies in the span of Aᵀ's columns,
+            // where A vanishes on nothing but zero: the normal-equation residual has fallen
+            // below what the precision resolves (A·p underflowed), and x is as converged as
+            // the arithmetic allows.
+            return Ok(Progress {
+                residual: (self.gamma / self.gamma0).sqrt(),
+                objective: self.objective,
+                change: 0.0,
+                ending: Some(Termination::Converged),
+            });
+        }
         if !(delta.is_finite() && delta > 0.0) {
             return Err(Error::Breakdown {
                 solver: Self::NAME,
@@ -131,8 +143,8 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
             });
         }
         let alpha = self.gamma / delta;
-        axpy(T::of_f64(alpha), &self.p, x);
-        axpy(T::of_f64(-alpha), &self.q, &mut self.r);
+        axpy_step(alpha, &self.p, x);
+        axpy_step(-alpha, &self.q, &mut self.r);
         op.apply_adjoint_with_scratch(&self.r, &mut self.s, &mut self.scratch);
         axpy(T::of_f64(-lambda), x, &mut self.s);
         let [gamma_new, xx] = space::sums(space, [dot(&self.s, &self.s), dot(x, x)]);
@@ -169,6 +181,19 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
     }
 }
 
+/// y += a·x; the products formed in `f64` when `a` itself does not fit in `T` (the step of a
+/// badly scaled problem in `f32`, whose products may still fit).
+fn axpy_step<T: Real>(a: f64, x: &[T], y: &mut [T]) {
+    let at = T::of_f64(a);
+    if at.is_finite() {
+        axpy(at, x, y);
+    } else {
+        for (yi, &xi) in y.iter_mut().zip(x) {
+            *yi = *yi + T::of_f64(a * xi.as_f64());
+        }
+    }
+}
+
 /// Solves min ‖Ax − y‖² + λ‖x‖² by CGLS (Hestenes–Stiefel conjugate gradients applied to
 /// (AᵀA + λI)x = Aᵀy without forming AᵀA), starting from `x`.
 ///
@@ -177,13 +202,16 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
 /// minimize the objective over growing Krylov subspaces, so the residual decreases monotonically.
 /// The residual of the [`Stopping`] rules is the normal-equation residual ‖Aᵀ(y − Ax) − λx‖
 /// relative to its value at the initial x; an exactly zero one ends the run as
-/// [`Termination::Converged`] ([`Termination::ZeroResidual`] before the first iteration).
+/// [`Termination::Converged`] ([`Termination::ZeroResidual`] before the first iteration), and
+/// so does one whose search direction A maps to exactly zero (the residual has fallen below what
+/// the precision resolves: A·p underflowed). A step too large for `T` (a badly scaled problem in
+/// `f32`) is applied with its products formed in `f64`.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] for a negative or non-finite λ or invalid stopping rules;
 /// [`Error::ShapeMismatch`] / [`Error::NonFinite`] for inputs that do not fit the operator or are
-/// not finite; [`Error::Breakdown`] if a search direction has zero curvature or the iteration
-/// produces non-finite values.
+/// not finite; [`Error::Breakdown`] if a search direction's curvature or the iteration's values
+/// are not finite.
 pub fn cgls<T, A, O>(
     op: &A,
     y: &[T],
