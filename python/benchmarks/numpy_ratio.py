@@ -14,8 +14,8 @@ X the (M N, K_s) scene and p the pulse:
 
 median of --repeats timed calls after a warm-up each. With --rounds R > 1 both sides are timed R
 times in turn (rdlidar, numpy, rdlidar, ...) and each ratio is the median of the R rounds' ratios,
-with their range: on a shared machine whose load drifts, the two sides of a ratio are then
-measured minutes apart no more than one round. Prints the BLAS that numpy ran (from
+with their range: on a shared machine whose load drifts, the two sides of each ratio are then
+timed back to back. Prints the BLAS that numpy ran (from
 threadpoolctl: OpenBLAS's kernel, e.g. SkylakeX or Haswell), a markdown table of the times and
 the ratios numpy / rdlidar, and a second table of rdlidar's additions and table bytes per
 second against what the caches deliver to the same access pattern (``rdlidar bench``'s
@@ -162,16 +162,17 @@ def main():
             theirs = [r[i] for r in rounds]
             cells.append(ratio_cells(ours, theirs))
         print(f"| {precision} | {kp} | {v['isa']}, {v['threads']} | {cells[0]} | {cells[1]} |")
-    rows = [(precision, kp, rounds[0][0]) for precision, kp, rounds in rows]
-    # The same run's rates against what the caches deliver to the kernels' access pattern
-    # (random table rows summed, from L1 and from L2; `rdlidar bench` measures both).
+    # The same run's rates (its first round's) against what the caches deliver to the kernels'
+    # access pattern (random table rows summed, from L1 and from L2; `rdlidar bench` measures
+    # both).
     print()
     print(
         "| rdlidar | K_p | forward Gadd/s | GB/s | adjoint Gadd/s | GB/s "
         "| L1 limit GB/s | L2 limit GB/s | forward / L2 | adjoint / L2 |"
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for precision, kp, v in rows:
+    for precision, kp, rounds in rows:
+        v = rounds[0][0]
         f, d = v["rates"]["forward"], v["rates"]["adjoint"]
         l1, l2 = v["limits"]["l1"]["bytes_per_s"], v["limits"]["l2"]["bytes_per_s"]
         print(
