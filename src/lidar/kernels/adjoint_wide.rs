@@ -80,9 +80,10 @@ pub(crate) fn narrow_f32_rows() -> bool {
 /// `slab_nch`, or whole vectors, [`vector_row_nch`]; [`adjoint_row_nch`] chooses), and sums of
 /// the slab's `slab_nch` chunks: the chunk's tables into `tables` (64-byte aligned), each
 /// pixel's sum added to `out[(g·8 + i)·slab_nch ..]`, and with `flush` each group's partial sums
-/// then added to their `f64` sums there and cleared ([`flush_sums`](super::flush_sums)). The sums hold only the slab's bins: where the rows were
-/// widened by a chunk (`f32` on AVX-512, an odd `slab_nch`), the last vector's second half is
-/// not added, so the partial sums take a sixth less of the cache at 40 bins.
+/// then added to their `f64` sums there and cleared ([`flush_sums`](super::flush_sums)). The
+/// sums hold only the slab's bins: where the rows were widened by a chunk (`f32` on AVX-512, an
+/// odd `slab_nch`), the last vector's second half is not added, so the partial sums take a sixth
+/// less of the cache at 40 bins.
 ///
 /// # Panics
 /// If `isa` has no wide kernels ([`Isa::has_wide`]), `nch` is neither width, or the buffers are
