@@ -249,3 +249,40 @@ fn an_observer_sees_every_iteration_and_can_stop_the_solver() {
         "{calls} calls, {iterations} iterations"
     );
 }
+
+/// The support pursuit's estimate of the 8×8×8 paper scene in `T` at K_p `kp` (noise-free), as
+/// `f64`, and its support applications.
+fn support_pursuit_in<T: Real>(g: Geometry, kp: usize) -> (Vec<f64>, usize) {
+    let op = problem::<T>(g, kp, 13);
+    let y = measure(&op, &paper_scene::<T>(g).unwrap());
+    let r = reconstruct(&op, &y, Method::SupportLs, &ReconstructOptions::default()).unwrap();
+    let x = r.scene.as_slice().iter().map(|v| v.as_f64()).collect();
+    (x, r.report.unwrap().support_applies)
+}
+
+#[test]
+fn f32_support_pursuit_stops_its_refits_at_round_off_with_the_f64_result() {
+    // In f32 the normal equations' relative residual levels off far above the refits' target
+    // (10⁻¹²): the refits must end where the fit stops moving by more than the measurements'
+    // rounding, not at their iteration limit (50 CGLS iterations, 100 support applications for
+    // the last refit alone), and find what f64 finds.
+    let g = Geometry::new(8, 8, 8).unwrap();
+    let ((x64, n64), (x32, n32)) = (
+        support_pursuit_in::<f64>(g, 600),
+        support_pursuit_in::<f32>(g, 600),
+    );
+    let truth = paper_scene::<f64>(g).unwrap();
+    let lit = truth.as_slice().iter().filter(|v| **v != 0.0).count();
+    assert_eq!(x64.iter().filter(|v| **v != 0.0).count(), lit);
+    for ((a, b), t) in x64.iter().zip(&x32).zip(truth.as_slice()) {
+        assert_eq!((*a != 0.0, *b != 0.0), (*t != 0.0, *t != 0.0));
+        assert!(
+            (a - b).abs() <= 1e-5 * t,
+            "{a} in f64, {b} in f32, truth {t}"
+        );
+    }
+    assert!(
+        n32 <= n64 + 20,
+        "f32 {n32} against f64 {n64} support applications"
+    );
+}
