@@ -239,6 +239,7 @@ fn fista_cases() -> Vec<(&'static str, FistaParams, Vec<f64>)> {
                     stagnation: Some(Stagnation {
                         rel: 1e-9,
                         window: 5,
+                        floor: 0.0,
                     }),
                     time_limit: None,
                 },

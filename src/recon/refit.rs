@@ -1,14 +1,12 @@
 //! Least squares on the support of an estimate: the debiasing step of the sparse solvers and the
 //! refit of [`Method::Auto`](super::Method::Auto)'s support stage.
 
-use std::collections::VecDeque;
-
 use crate::error::Result;
 use crate::lidar::LidarOperator;
 use crate::linalg::norm2_sq;
 use crate::operator::{Counted, LinearOperator};
 use crate::real::Real;
-use crate::solver::{cgls, CglsParams, Control, IterationInfo, Observer, Report, Stopping};
+use crate::solver::{cgls, CglsParams, Report, Stagnation, Stopping};
 use crate::space;
 
 /// CGLS iterations of one least-squares refit on a support.
@@ -39,53 +37,19 @@ pub(super) fn refit_support<T: Real>(
 }
 
 /// The normal equations' residual ‖A_Sᵀ(y − A_S·b)‖, relative to its value at the warm start, at
-/// which [`refit_support`] stops, unless round-off ends it first ([`RoundOff`]: always in `f32`,
-/// often in `f64`).
+/// which [`refit_support`] stops, unless round-off ends it first ([`ROUND_OFF_WINDOW`]: always
+/// in `f32`, often in `f64`).
 pub(super) const REFIT_TARGET: f64 = 1e-12;
 
 /// Iterations over which a refit must lower ‖y − A_S·b‖² by more than (ε·‖y‖)², ε the machine
-/// epsilon of the precision, to go on.
+/// epsilon of the precision, to go on: below that the fit's prediction A_S·b moves by less than
+/// the rounding of the measurements themselves, and further iterations only stir round-off (in
+/// `f32` the normal equations' relative residual levels off near 10⁻⁸ to 10⁻⁶, far above
+/// [`REFIT_TARGET`]). CGLS lowers the squared residual by exactly ‖A_S·(b_{k+1} − b_k)‖² in each
+/// iteration; a rise can only be round-off and ends the refit too. The rule reads the objective
+/// ½‖r‖², the same on every process of a split operator, so every process stops at the same
+/// iteration.
 const ROUND_OFF_WINDOW: usize = 3;
-
-/// Ends a refit whose last [`ROUND_OFF_WINDOW`] iterations together lowered the squared residual
-/// by at most (ε·‖y‖)²: the fit's prediction A_S·b then moves by less than the rounding of the
-/// measurements themselves, and further iterations only stir round-off (in `f32` the normal
-/// equations' relative residual levels off near 10⁻⁸ to 10⁻⁶, far above [`REFIT_TARGET`]). CGLS
-/// lowers the squared residual by exactly ‖A_S·(b_{k+1} − b_k)‖² in each iteration; a rise can
-/// only be round-off and ends the refit too. The objective is ½‖r‖², the same on every process of
-/// a split operator, so every process stops at the same iteration.
-struct RoundOff {
-    /// (ε·‖y‖)² / 2, in the objective's units.
-    floor: f64,
-    /// The last objectives, at most `ROUND_OFF_WINDOW + 1`.
-    recent: VecDeque<f64>,
-}
-
-impl RoundOff {
-    fn new<T: Real>(y: &[T]) -> Self {
-        RoundOff {
-            floor: 0.5 * T::EPS * T::EPS * norm2_sq(y),
-            recent: VecDeque::with_capacity(ROUND_OFF_WINDOW + 1),
-        }
-    }
-}
-
-impl<T> Observer<T> for RoundOff {
-    fn observe(&mut self, info: &IterationInfo<'_, T>) -> Control {
-        if self.recent.len() > ROUND_OFF_WINDOW {
-            self.recent.pop_front();
-        }
-        self.recent.push_back(info.objective);
-        match (self.recent.front(), self.recent.back()) {
-            (Some(&old), Some(&new))
-                if self.recent.len() > ROUND_OFF_WINDOW && old - new <= self.floor =>
-            {
-                Control::Stop
-            }
-            _ => Control::Continue,
-        }
-    }
-}
 
 /// [`refit_support`] to the relative residual `target` instead of [`REFIT_TARGET`].
 ///
@@ -110,6 +74,11 @@ pub(super) fn refit_support_to<T: Real>(
         stopping: Stopping {
             max_iter,
             rel_residual: Some(target),
+            stagnation: Some(Stagnation {
+                rel: 0.0,
+                window: ROUND_OFF_WINDOW,
+                floor: 0.5 * T::EPS * T::EPS * norm2_sq(y),
+            }),
             ..Stopping::default()
         },
     };
@@ -119,13 +88,7 @@ pub(super) fn refit_support_to<T: Real>(
     for _ in 0..rounds.max(1) {
         let restricted = counted.restrict_columns(support.clone())?;
         let mut b: Vec<T> = support.iter().map(|&v| x[v]).collect();
-        let rep = cgls(
-            restricted.as_ref(),
-            y,
-            &mut b,
-            &params,
-            &mut RoundOff::new(y),
-        )?;
+        let rep = cgls(restricted.as_ref(), y, &mut b, &params, &mut ())?;
         match &mut total {
             Some(t) => t.absorb(rep),
             None => total = Some(rep),

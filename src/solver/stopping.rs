@@ -27,13 +27,18 @@ pub struct Stopping {
     pub time_limit: Option<Duration>,
 }
 
-/// Objective stagnation: relative improvement below `rel` over `window` iterations.
+/// Objective stagnation: an improvement over `window` iterations of at most `rel` times the
+/// objective, or at most `floor` (in the objective's units), whichever is larger.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Stagnation {
     /// Relative improvement threshold.
     pub rel: f64,
     /// Number of iterations it is measured over.
     pub window: usize,
+    /// Absolute improvement threshold (0 for none): e.g. the objective's change below which an
+    /// iteration only stirs round-off.
+    #[serde(default)]
+    pub floor: f64,
 }
 
 impl Default for Stopping {
@@ -77,6 +82,7 @@ impl Stopping {
         positive("rel_change", self.rel_change)?;
         if let Some(s) = self.stagnation {
             positive("stagnation.rel", Some(s.rel))?;
+            positive("stagnation.floor", Some(s.floor))?;
             if s.window == 0 {
                 return Err(Error::param("stagnation.window", "must be at least 1"));
             }
@@ -121,7 +127,7 @@ impl StopRules {
                 self.recent.front(),
                 self.recent.back(),
             ) {
-                stagnated = (old - new) <= s.rel * old.abs().max(f64::MIN_POSITIVE);
+                stagnated = (old - new) <= (s.rel * old.abs().max(f64::MIN_POSITIVE)).max(s.floor);
             }
         }
         if self.stopping.rel_residual.is_some_and(|t| residual <= t) {
@@ -144,5 +150,47 @@ impl StopRules {
         } else {
             None
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Feeds `objectives` to rules with only the stagnation rule; the iteration (from 1) at which
+    /// it ends the run.
+    fn stagnates_at(s: Stagnation, objectives: &[f64]) -> Option<usize> {
+        let mut rules = StopRules::new(Stopping {
+            rel_residual: None,
+            stagnation: Some(s),
+            ..Stopping::default()
+        });
+        objectives
+            .iter()
+            .position(|&o| rules.converged(1.0, o, 1.0) == Some(Termination::Stagnation))
+            .map(|i| i + 1)
+    }
+
+    #[test]
+    fn stagnation_takes_the_larger_of_its_relative_and_absolute_thresholds() {
+        // Falls of 1 an iteration from 100: more than 0.1% of the objective each time; an
+        // absolute floor of 2 ends the run at the first comparison, one of 0.5 never.
+        let falling: Vec<f64> = (0..10).map(|i| 100.0 - f64::from(i)).collect();
+        let rel = |rel, floor| Stagnation {
+            rel,
+            window: 1,
+            floor,
+        };
+        assert_eq!(stagnates_at(rel(0.001, 0.0), &falling), None);
+        assert_eq!(stagnates_at(rel(0.0, 2.0), &falling), Some(2));
+        assert_eq!(stagnates_at(rel(0.0, 0.5), &falling), None);
+        // A rise ends the run whatever the thresholds.
+        assert_eq!(stagnates_at(rel(0.0, 0.0), &[5.0, 4.0, 4.5]), Some(3));
+        let bad = Stopping {
+            stagnation: Some(rel(0.0, -1.0)),
+            ..Stopping::default()
+        };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("stagnation.floor"), "{e}");
     }
 }
