@@ -647,9 +647,12 @@ impl<T: Real> LinearOperator<T> for RdOperator<T> {
                         }
                     }
                     let pixels = (8 * groups.len()).min(npix - 8 * groups.start);
-                    for (i, o) in out.chunks_exact(slab_nch).take(pixels).enumerate() {
-                        for jj in 0..(8 * slab_nch).min(ks - j0) {
-                            xb[i * ks + j0 + jj] = T::of_f64(o[jj / 8][jj % 8]);
+                    let width = (8 * slab_nch).min(ks - j0);
+                    let sums = out.chunks_exact(slab_nch).take(pixels);
+                    for (o, xp) in sums.zip(xb.chunks_exact_mut(ks)) {
+                        let (o, xp) = (&o.as_flattened()[..width], &mut xp[j0..j0 + width]);
+                        for (v, &s) in xp.iter_mut().zip(o) {
+                            *v = T::of_f64(s);
                         }
                     }
                 }
