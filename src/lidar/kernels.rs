@@ -605,7 +605,7 @@ pub(crate) fn adjoint_chunk<T: Real>(
     flush: Option<&mut [[f64; 8]]>,
 ) {
     assert!(flush.as_ref().is_none_or(|f| f.len() == out.len()), "sums");
-    adjoint_tables(isa, nch, a, tables);
+    adjoint_tables(isa, nch, a, tables, true);
     match nch {
         1 => adj_chunk_isa::<T, 1>(isa, a, tables, out, flush),
         2 => adj_chunk_isa::<T, 2>(isa, a, tables, out, flush),

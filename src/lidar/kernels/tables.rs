@@ -67,9 +67,12 @@ pub(crate) fn build_group_tables<T: Real>(
 /// The tables of a chunk: for octet o and byte b, Σ_t ±w_t (binary codes: + where bit t of b is
 /// set, − elsewhere) or Σ_{t ∈ b} w_t (ternary codes), where w_t = y[k]·p[k − j], k = 8·o + t,
 /// is the row every pixel's backprojection adds with its code's sign at sample k. Each table is
-/// built by doubling: 255 row additions from its first row.
+/// built by doubling: row additions from its first row; for binary codes only the rows below
+/// 128, each row b from 128 on being the negated row ¬b (the complement of b: every sign
+/// flipped), so that row ¬b = −row b exactly and a kernel may read either. With `upper` false
+/// those negated rows are not written (for kernels that read the rows below 128 only).
 #[inline(always)]
-fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>]) {
+fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], upper: bool) {
     let zero = [T::zero(); 8];
     let binary = a.minus.is_none();
     let k = a.y.len();
@@ -96,7 +99,8 @@ fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane
         // same rows in any order that has each row's earlier one ready. By blocks of 64 rows
         // (in L1), and in each block by z from the highest, so that w_z is read once for all
         // the rows that add it.
-        for block in (0..256usize).step_by(64) {
+        let built: usize = if binary { 128 } else { 256 };
+        for block in (0..built).step_by(64) {
             if block > 0 {
                 let z = block.trailing_zeros() as usize;
                 let wz = w[z];
@@ -114,29 +118,40 @@ fn adj_tables<T: Real, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane
                 }
             }
         }
+        if binary && upper {
+            let (lower, high) = t.split_at_mut(128 * NCH);
+            for (i, row) in high.chunks_exact_mut(NCH).enumerate() {
+                let from = &lower[(127 - i) * NCH..][..NCH];
+                for (r, f) in row.iter_mut().zip(from) {
+                    *r = f.map(|v| -v);
+                }
+            }
+        }
     }
 }
 
-multiversion!(fn adj_tables_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>]) => adj_tables);
+multiversion!(fn adj_tables_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &mut [Lane<T>], upper: bool) => adj_tables);
 
 /// Builds a chunk's tables ([`adj_tables`]) for rows of `nch` chunks, in a function of its own
 /// for each instruction set: compiled apart from the loops that read the tables, so that a change
-/// to either leaves the other's machine code as it was.
+/// to either leaves the other's machine code as it was. With `upper` false the negated rows of
+/// binary codes (128 on) are left unwritten.
 pub(crate) fn adjoint_tables<T: Real>(
     isa: Isa,
     nch: usize,
     a: &AdjChunk<'_, T>,
     tables: &mut [Lane<T>],
+    upper: bool,
 ) {
     match nch {
-        1 => adj_tables_isa::<T, 1>(isa, a, tables),
-        2 => adj_tables_isa::<T, 2>(isa, a, tables),
-        3 => adj_tables_isa::<T, 3>(isa, a, tables),
-        4 => adj_tables_isa::<T, 4>(isa, a, tables),
-        5 => adj_tables_isa::<T, 5>(isa, a, tables),
-        6 => adj_tables_isa::<T, 6>(isa, a, tables),
-        7 => adj_tables_isa::<T, 7>(isa, a, tables),
-        8 => adj_tables_isa::<T, 8>(isa, a, tables),
+        1 => adj_tables_isa::<T, 1>(isa, a, tables, upper),
+        2 => adj_tables_isa::<T, 2>(isa, a, tables, upper),
+        3 => adj_tables_isa::<T, 3>(isa, a, tables, upper),
+        4 => adj_tables_isa::<T, 4>(isa, a, tables, upper),
+        5 => adj_tables_isa::<T, 5>(isa, a, tables, upper),
+        6 => adj_tables_isa::<T, 6>(isa, a, tables, upper),
+        7 => adj_tables_isa::<T, 7>(isa, a, tables, upper),
+        8 => adj_tables_isa::<T, 8>(isa, a, tables, upper),
         _ => unreachable!("rows have 1 to 8 chunks"),
     }
 }

@@ -36,6 +36,57 @@ fn transpose8_swaps_samples_and_pixels() {
     }
 }
 
+/// For binary codes a chunk's tables hold row ¬b as row b negated to the bit, on every
+/// instruction set (the symmetric reads of the wide adjoint rest on it), and without the upper
+/// rows the lower ones are the same; ternary codes' rows are sums over the set bits, row 0 zero.
+#[test]
+fn binary_adjoint_tables_hold_each_complement_negated() {
+    const NCH: usize = 3;
+    let mut rng = ChaCha8Rng::seed_from_u64(28);
+    let k = 8 * ADJ_OCTETS;
+    let y: Vec<f32> = (0..k).map(|_| rng.random_range(-1.0..1.0)).collect();
+    // A pulse of alternating ones and zeros, laid out as the operator does (`AdjChunk::prev`).
+    let mut prev = vec![0.0f32; 16 * NCH + k];
+    for v in prev.iter_mut().skip(8 * NCH).step_by(2) {
+        *v = 1.0;
+    }
+    let (plus, minus) = random_planes(&mut rng, 1, k);
+    for isa in every_isa() {
+        for ternary in [false, true] {
+            let a = AdjChunk {
+                plus: GroupBytes::new(&plus[0], k, 0..1),
+                minus: ternary.then(|| GroupBytes::new(&minus[0], k, 0..1)),
+                y: &y,
+                prev: &prev,
+                base0: 8 * NCH + k - 1,
+                first_octet: 0,
+            };
+            let stride = octet_stride::<f32>(NCH);
+            let mut whole = vec![[f32::NAN; 8]; ADJ_OCTETS * stride];
+            let mut lower = whole.clone();
+            adjoint_tables(isa, NCH, &a, &mut whole, true);
+            adjoint_tables(isa, NCH, &a, &mut lower, false);
+            for o in 0..ADJ_OCTETS {
+                let row = |t: &[Lane<f32>], b: usize| t[o * stride + b * NCH..][..NCH].to_vec();
+                for b in 0..256 {
+                    let bits = |r: Vec<Lane<f32>>| r.concat().iter().map(|v| v.to_bits()).collect();
+                    let got: Vec<u32> = bits(row(&whole, b));
+                    if ternary || b < 128 {
+                        assert_eq!(got, bits(row(&lower, b)), "{isa:?} octet {o} row {b}");
+                    }
+                    if !ternary {
+                        let negated = row(&whole, 255 - b).iter().map(|l| l.map(|v| -v)).collect();
+                        assert_eq!(got, bits(negated), "{isa:?} octet {o} row {b}");
+                    }
+                }
+                if ternary {
+                    assert!(row(&whole, 0).concat().iter().all(|&v| v == 0.0));
+                }
+            }
+        }
+    }
+}
+
 /// The chunk kernel against the direct sum Σ_k s_i(k)·y[k]·p[k − j] on every instruction
 /// set, binary and ternary codes, with a K that is not a multiple of eight (the last octets
 /// run past the end) and two chunks.
