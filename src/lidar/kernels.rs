@@ -434,49 +434,6 @@ fn sparse_entry<T: Real>(
     }
 }
 
-/// z[k] = s[k]·y[k] for the pixel at bit `bit` of the code bytes: its codes applied to the
-/// measurements, decoded branch-free so that the loop vectorizes.
-#[inline(always)]
-fn signed_copy<T: Real>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) {
-    match minus {
-        None => {
-            for ((o, &c), &v) in z.iter_mut().zip(plus).zip(y) {
-                *o = if (c >> bit) & 1 == 1 { v } else { -v };
-            }
-        }
-        Some(minus) => {
-            for (((o, &cp), &cm), &v) in z.iter_mut().zip(plus).zip(minus).zip(y) {
-                let a = if (cp >> bit) & 1 == 1 { v } else { T::zero() };
-                let b = if (cm >> bit) & 1 == 1 { v } else { T::zero() };
-                *o = a - b;
-            }
-        }
-    }
-}
-
-/// *out = Σ a[i]·b[i]: eight lanes summed in `T` over blocks of 256 products, the block sums
-/// added in `f64`.
-#[inline(always)]
-fn lane_dot<T: Real>(a: &[T], b: &[T], out: &mut f64) {
-    let mut acc = 0.0f64;
-    for (ab, bb) in a.chunks(256).zip(b.chunks(256)) {
-        let mut lanes = [T::zero(); 8];
-        let (ac, bc) = (ab.chunks_exact(8), bb.chunks_exact(8));
-        let (ar, br) = (ac.remainder(), bc.remainder());
-        for (x, y) in ac.zip(bc) {
-            for l in 0..8 {
-                lanes[l] = lanes[l] + x[l] * y[l];
-            }
-        }
-        let mut tail = 0.0f64;
-        for (x, y) in ar.iter().zip(br) {
-            tail += x.as_f64() * y.as_f64();
-        }
-        acc += lanes.iter().map(|v| v.as_f64()).sum::<f64>() + tail;
-    }
-    *out = acc;
-}
-
 /// *out = Σ_k s(k)·y[k]·p[k] for the pixel at bit `bit` of the code bytes (`y`, `p` and the
 /// codes aligned on the same window): the restricted adjoint of one voxel in one pass over the
 /// codes, the measurements and the pulse. The products are summed in eight lanes of `T` over
@@ -569,9 +526,7 @@ macro_rules! multiversion {
 multiversion!(fn fwd_block_isa<T, const NCH: usize>(a: &FwdBlock<'_, T>, part: &mut [Lane<T>]) => fwd_block);
 multiversion!(fn adj_chunk_isa<T, const NCH: usize>(a: &AdjChunk<'_, T>, tables: &[Lane<T>], out: &mut [Lane<T>], flush: Option<&mut [[f64; 8]]>) => adj_chunk);
 multiversion!(fn sparse_entry_narrow<T>(amp: T, bit: u32, plus: &[u8], minus: Option<&[u8]>, pw: &[T], out: &mut [T]) => sparse_entry);
-multiversion!(fn signed_copy_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], z: &mut [T]) => signed_copy);
 multiversion!(fn signed_dot_narrow<T>(bit: u32, plus: &[u8], minus: Option<&[u8]>, y: &[T], p: &[T], out: &mut f64) => signed_dot);
-multiversion!(fn lane_dot_narrow<T>(a: &[T], b: &[T], out: &mut f64) => lane_dot);
 
 /// Runs the forward block kernel for a slab of `8·nch` bins.
 pub(crate) fn forward_block<T: Real>(
@@ -631,5 +586,5 @@ pub(crate) mod wide;
 
 pub(crate) use probe::gather_rows;
 pub(crate) use support_wide::{
-    lane_dot_isa, signed_copy_isa, signed_dot_isa, sparse_entries_isa, sparse_entry_isa, Entry,
+    depth_dots_isa, depth_entries_isa, depth_schedule, flush_into, Coded,
 };

@@ -18,8 +18,8 @@ use super::kernels::quads::{
 };
 use super::kernels::tables::build_group_tables;
 use super::kernels::{
-    adjoint_chunk, forward_block, octet_stride, sparse_entries_isa, sparse_entry_isa, AdjChunk,
-    Entry, FwdBlock, Isa, Lane, ADJ_OCTETS,
+    adjoint_chunk, depth_entries_isa, depth_schedule, flush_into, forward_block, octet_stride,
+    AdjChunk, Coded, FwdBlock, Isa, Lane, ADJ_OCTETS,
 };
 use super::pulse::single_pulse;
 
@@ -486,10 +486,17 @@ impl<T: Real> RdOperator<T> {
     }
 
     /// The sparse forward over nonzero voxels, in parallel over segments of samples.
+    ///
+    /// The entries go depth by depth (pixel by pixel within a depth): those of one depth share
+    /// the pulse's window and go to [`depth_entries_isa`] together. Their sums are
+    /// kept in `T` for at most `BATCH` entries, then added to the segment's sums in `f64`. The
+    /// pieces and the points where the sums go to `f64` follow from the entries alone, so every
+    /// segment, whatever the number of threads, adds the same values in the same order.
     fn forward_sparse(&self, entries: &[(usize, usize, T)], y: &mut [T]) {
         const BATCH: usize = 32;
         let k = self.codes.len();
         let kp = self.pulse.len();
+        let (order, pieces) = depth_schedule(entries, BATCH);
         let segs = (rayon::current_num_threads() * 4).clamp(1, k);
         let seg = k.div_ceil(segs);
         y.par_chunks_mut(seg).enumerate().for_each(|(si, yseg)| {
@@ -497,43 +504,31 @@ impl<T: Real> RdOperator<T> {
             let k1 = k0 + yseg.len();
             let mut acc = vec![0.0f64; yseg.len()];
             let mut buf = vec![T::zero(); yseg.len()];
-            // Every voxel covers the samples [K − K_p, K_p) of the segment (its core): there the
-            // entries go four at a time, on either side one by one.
-            let (c0, c1) = (k0.max(k - kp), k1.min(kp));
-            let mut core = Vec::with_capacity(BATCH);
-            for batch in entries.chunks(BATCH) {
-                core.clear();
-                for &(p, j, amp) in batch {
-                    let (g, bit) = (p / 8, (p % 8) as u32);
-                    let entry = |lo: usize, hi: usize| Entry {
-                        amp,
-                        bit,
+            let (mut amps, mut codes) = (Vec::with_capacity(BATCH), Vec::with_capacity(BATCH));
+            for (range, j, flush) in &pieces {
+                if *flush {
+                    flush_into(&mut acc, &mut buf);
+                }
+                let (lo, hi) = (k0.max(*j), k1.min(j + kp));
+                if lo >= hi {
+                    continue;
+                }
+                amps.clear();
+                codes.clear();
+                for &i in &order[range.clone()] {
+                    let (p, _, amp) = entries[i];
+                    let g = p / 8;
+                    amps.push(amp);
+                    codes.push(Coded {
+                        bit: (p % 8) as u32,
                         plus: &self.codes.plus_group(g)[lo..hi],
                         minus: self.codes.minus_group(g).map(|m| &m[lo..hi]),
-                        pw: &self.pulse[lo - j..hi - j],
-                    };
-                    let (lo, hi) = (k0.max(j), k1.min(j + kp));
-                    let mut single = |lo: usize, hi: usize| {
-                        if lo < hi {
-                            sparse_entry_isa(self.isa, &entry(lo, hi), &mut buf[lo - k0..hi - k0]);
-                        }
-                    };
-                    if c0 < c1 {
-                        single(lo, c0);
-                        single(c1, hi);
-                        core.push(entry(c0, c1));
-                    } else {
-                        single(lo, hi);
-                    }
+                    });
                 }
-                if c0 < c1 {
-                    sparse_entries_isa(self.isa, &core, &mut buf[c0 - k0..c1 - k0]);
-                }
-                for (a, b) in acc.iter_mut().zip(buf.iter_mut()) {
-                    *a += b.as_f64();
-                    *b = T::zero();
-                }
+                let (pw, out) = (&self.pulse[lo - j..hi - j], &mut buf[lo - k0..hi - k0]);
+                depth_entries_isa(self.isa, &amps, &codes, pw, out);
             }
+            flush_into(&mut acc, &mut buf);
             for (o, a) in yseg.iter_mut().zip(&acc) {
                 *o = T::of_f64(*a);
             }

@@ -1,5 +1,6 @@
 //! Tests of the kernels against direct sums, on every instruction set this CPU has.
 
+use super::support_wide::{signed_dot_isa, sparse_entry_isa, Entry};
 use super::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -205,37 +206,57 @@ pub(crate) fn direct_forward<T: Real>(
         .sum()
 }
 
-/// The one-pass restricted adjoint equals the signed copy followed by the windowed dot
-/// product and the direct sum, the signed copy equals s·y exactly, for both alphabets and
-/// precisions, on every instruction set, with lengths that leave tails.
-fn signed_dot_equals_the_copy_then_the_dot<T: Real>(tol: f64) {
+/// Random values in −1..1 and a random 0/1 pulse, both of length `n`.
+fn values_and_pulse<T: Real>(rng: &mut ChaCha8Rng, n: usize) -> (Vec<T>, Vec<T>) {
+    let y = (0..n)
+        .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
+        .collect();
+    let p = (0..n)
+        .map(|_| T::of_f64(f64::from(rng.random_range(0..2u8))))
+        .collect();
+    (y, p)
+}
+
+/// The restricted adjoint's sums for voxels of one depth: together ([`depth_dots_isa`], eight
+/// and four at a time and the rest one by one) and one at a time ([`signed_dot_isa`]) equal the
+/// direct sum Σ_k s_i(k)·y[k]·p[k], for 1 to 21 voxels, both alphabets and precisions, on
+/// every instruction set, with lengths around the kernels' blocks.
+fn depth_dots_match_the_direct_sum<T: Real>(tol: f64) {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    for n in [1usize, 7, 8, 15, 17, 255, 256, 257, 1000] {
-        let y: Vec<T> = (0..n)
-            .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
-            .collect();
-        let p: Vec<T> = (0..n)
-            .map(|_| T::of_f64(f64::from(rng.random_range(0..2u8))))
-            .collect();
-        let (plus, minus) = random_planes(&mut rng, 1, n);
-        for minus in [None, Some(minus[0].as_slice())] {
+    for n in [
+        1usize, 7, 8, 15, 17, 255, 256, 257, 511, 512, 513, 1000, 2100,
+    ] {
+        let (y, p) = values_and_pulse::<T>(&mut rng, n);
+        let (plus, minus) = random_planes(&mut rng, 21, n);
+        for ternary in [false, true] {
+            let codes: Vec<Coded<'_>> = (0..21)
+                .map(|v| Coded {
+                    bit: (v * 3 % 8) as u32,
+                    plus: &plus[v],
+                    minus: ternary.then_some(minus[v].as_slice()),
+                })
+                .collect();
+            let direct: Vec<f64> = codes
+                .iter()
+                .map(|c| {
+                    (0..n)
+                        .map(|k| code_of(c.plus, c.minus, c.bit, k) * (y[k] * p[k]).as_f64())
+                        .sum()
+                })
+                .collect();
             for isa in every_isa() {
-                for bit in [0, 3, 7] {
-                    let mut z = vec![T::zero(); n];
-                    signed_copy_isa(isa, bit, &plus[0], minus, &y, &mut z);
-                    for k in 0..n {
-                        let want = T::of_f64(code_of(&plus[0], minus, bit, k)) * y[k];
-                        assert!(z[k] == want, "{isa:?} {n} {bit}: copy at {k}");
+                for count in [1usize, 3, 4, 5, 8, 9, 12, 13, 16, 21] {
+                    let ctx = format!("{} {isa:?} n {n} ternary {ternary} voxels {count}", T::NAME);
+                    let mut together = vec![f64::NAN; count];
+                    depth_dots_isa(isa, &codes[..count], &y, &p, &mut together);
+                    for (v, c) in codes[..count].iter().enumerate() {
+                        let mut one = f64::NAN;
+                        signed_dot_isa(isa, c.bit, c.plus, c.minus, &y, &p, &mut one);
+                        let want = direct[v];
+                        let close = |got: f64| (got - want).abs() <= tol * (1.0 + want.abs());
+                        assert!(close(together[v]), "{ctx}: together, voxel {v}");
+                        assert!(close(one), "{ctx}: one at a time, voxel {v}");
                     }
-                    let (mut want, mut got) = (0.0, 0.0);
-                    lane_dot_isa(isa, &z, &p, &mut want);
-                    signed_dot_isa(isa, bit, &plus[0], minus, &y, &p, &mut got);
-                    let direct: f64 = (0..n)
-                        .map(|k| code_of(&plus[0], minus, bit, k) * y[k].as_f64() * p[k].as_f64())
-                        .sum();
-                    let ctx = format!("{} {isa:?} n {n} bit {bit}", T::NAME);
-                    assert!((got - want).abs() <= tol * (1.0 + want.abs()), "{ctx}");
-                    assert!((got - direct).abs() <= tol * (1.0 + direct.abs()), "{ctx}");
                 }
             }
         }
@@ -243,72 +264,73 @@ fn signed_dot_equals_the_copy_then_the_dot<T: Real>(tol: f64) {
 }
 
 #[test]
-fn signed_dot_equals_the_copy_then_the_dot_f32() {
-    signed_dot_equals_the_copy_then_the_dot::<f32>(1e-5);
+fn depth_dots_match_the_direct_sum_f32() {
+    depth_dots_match_the_direct_sum::<f32>(1e-5);
 }
 
 #[test]
-fn signed_dot_equals_the_copy_then_the_dot_f64() {
-    signed_dot_equals_the_copy_then_the_dot::<f64>(1e-12);
+fn depth_dots_match_the_direct_sum_f64() {
+    depth_dots_match_the_direct_sum::<f64>(1e-12);
 }
 
-/// The sparse forward's entries four at a time equal one at a time to the last bit, and the
-/// direct sum Σ_e a_e·s_e(k)·p_e[k], for 1 to 9 entries (whole quads and a rest), both alphabets
-/// and precisions, on every instruction set, with lengths that leave tails.
-fn entries_four_at_a_time_equal_one_at_a_time<T: Real>(tol: f64) {
+/// The sparse forward's entries of one depth together ([`depth_entries_isa`]) equal the direct
+/// sum Σ_e a_e·s_e(k)·p[k] added to what `out` held, for 1 to 21 entries (eight and four at a
+/// time and a rest), amplitudes of both signs, both alphabets and precisions, on every
+/// instruction set, with lengths that leave tails; one entry alone adds what
+/// [`sparse_entry_isa`] adds, to the bit.
+fn depth_entries_match_the_direct_sum<T: Real>(tol: f64) {
     let mut rng = ChaCha8Rng::seed_from_u64(14);
     for n in [3usize, 16, 40, 263] {
-        let (plus, minus) = random_planes(&mut rng, 9, n);
-        let pulses: Vec<Vec<T>> = (0..9)
-            .map(|_| {
-                (0..n)
-                    .map(|_| T::of_f64(f64::from(rng.random_range(0..2u8))))
-                    .collect()
-            })
-            .collect();
-        let amps: Vec<T> = (0..9)
-            .map(|_| T::of_f64(rng.random_range(0.1..1.0)))
-            .collect();
-        let start: Vec<T> = (0..n)
+        let (start, pulse) = values_and_pulse::<T>(&mut rng, n);
+        let (plus, minus) = random_planes(&mut rng, 21, n);
+        let amps: Vec<T> = (0..21)
             .map(|_| T::of_f64(rng.random_range(-1.0..1.0)))
             .collect();
         for ternary in [false, true] {
-            for count in 1..=9usize {
-                let entries: Vec<Entry<'_, T>> = (0..count)
-                    .map(|e| Entry {
-                        amp: amps[e],
-                        bit: (e % 8) as u32,
-                        plus: &plus[e],
-                        minus: ternary.then_some(minus[e].as_slice()),
-                        pw: &pulses[e],
-                    })
-                    .collect();
-                for isa in every_isa() {
-                    let mut quads = start.clone();
-                    sparse_entries_isa(isa, &entries, &mut quads);
-                    let mut single = start.clone();
-                    for e in &entries {
-                        sparse_entry_isa(isa, e, &mut single);
-                    }
+            let codes: Vec<Coded<'_>> = (0..21)
+                .map(|e| Coded {
+                    bit: (e * 5 % 8) as u32,
+                    plus: &plus[e],
+                    minus: ternary.then_some(minus[e].as_slice()),
+                })
+                .collect();
+            for isa in every_isa() {
+                for count in [1usize, 3, 4, 5, 8, 9, 12, 13, 16, 21] {
                     let ctx = format!(
                         "{} {isa:?} n {n} ternary {ternary} entries {count}",
                         T::NAME
                     );
-                    assert!(quads == single, "{ctx}");
+                    let mut got = start.clone();
+                    depth_entries_isa(isa, &amps[..count], &codes[..count], &pulse, &mut got);
                     for k in 0..n {
                         let direct = start[k].as_f64()
-                            + entries
-                                .iter()
+                            + (0..count)
                                 .map(|e| {
-                                    let s = code_of(e.plus, e.minus, e.bit, k);
-                                    e.amp.as_f64() * s * e.pw[k].as_f64()
+                                    let c = &codes[e];
+                                    let s = code_of(c.plus, c.minus, c.bit, k);
+                                    amps[e].as_f64() * s * pulse[k].as_f64()
                                 })
                                 .sum::<f64>();
-                        let got = quads[k].as_f64();
+                        let g = got[k].as_f64();
                         assert!(
-                            (got - direct).abs() <= tol * (1.0 + direct.abs()),
+                            (g - direct).abs() <= tol * (1.0 + direct.abs()),
                             "{ctx} at {k}"
                         );
+                    }
+                    if count == 1 {
+                        let mut single = start.clone();
+                        let c = &codes[0];
+                        let (bit, plus, minus) = (c.bit, c.plus, c.minus);
+                        let (amp, pw) = (amps[0], pulse.as_slice());
+                        let e = Entry {
+                            amp,
+                            bit,
+                            plus,
+                            minus,
+                            pw,
+                        };
+                        sparse_entry_isa(isa, &e, &mut single);
+                        assert!(single == got, "{ctx}: one entry");
                     }
                 }
             }
@@ -317,13 +339,13 @@ fn entries_four_at_a_time_equal_one_at_a_time<T: Real>(tol: f64) {
 }
 
 #[test]
-fn entries_four_at_a_time_equal_one_at_a_time_f32() {
-    entries_four_at_a_time_equal_one_at_a_time::<f32>(1e-5);
+fn depth_entries_match_the_direct_sum_f32() {
+    depth_entries_match_the_direct_sum::<f32>(1e-5);
 }
 
 #[test]
-fn entries_four_at_a_time_equal_one_at_a_time_f64() {
-    entries_four_at_a_time_equal_one_at_a_time::<f64>(1e-12);
+fn depth_entries_match_the_direct_sum_f64() {
+    depth_entries_match_the_direct_sum::<f64>(1e-12);
 }
 
 /// The 256-row forward block against the direct sum y[k] = Σ_p s_p(k)·Σ_j x[p, j]·p[k − j] on

@@ -102,12 +102,38 @@ pub trait Simd: Copy {
     unsafe fn v_ternary(plus: Self::M, minus: Self::M, a: Self::V) -> Self::V;
     /// `a` in the lanes of `plus`, `b` in the others.
     unsafe fn v_pick(plus: Self::M, a: Self::V, b: Self::V) -> Self::V;
+    /// A vector's values in `f64`, in as many `f64` vectors as they take.
+    type D: Copy;
+    /// Zeros in `f64`.
+    unsafe fn d_zero() -> Self::D;
+    /// The values of `v` in `f64` (exact).
+    unsafe fn d_widen(v: Self::V) -> Self::D;
+    /// a + b lane by lane.
+    unsafe fn d_add(a: Self::D, b: Self::D) -> Self::D;
+    /// a + b in the lanes of `plus`, `a` in the others.
+    unsafe fn d_add_where(plus: Self::M, a: Self::D, b: Self::D) -> Self::D;
+    /// The sum of the lanes, in a fixed order.
+    unsafe fn d_sum(a: Self::D) -> f64;
     /// The first half of the vector's values at `p` (aligned to half the vector's size), zeros
     /// in the other half: nothing past them is read.
     unsafe fn v_load_half(p: *const Self::T) -> Self::V;
     /// Adds the first half of `v` to the values at `p` (unaligned): nothing past them is read
     /// or written.
     unsafe fn v_add_half(p: *mut Self::T, v: Self::V);
+}
+
+/// l₀ + … + l₇ pairwise, in a fixed order.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn sum8(l: [f64; 8]) -> f64 {
+    ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))
+}
+
+/// l₀ + … + l₃ pairwise, in a fixed order.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn sum4(l: [f64; 4]) -> f64 {
+    (l[0] + l[2]) + (l[1] + l[3])
 }
 
 /// The mask of the first `min(n, bits)` lanes.
@@ -188,6 +214,37 @@ impl Simd for W512<f32> {
     unsafe fn v_pick(plus: __mmask16, a: __m512, b: __m512) -> __m512 {
         _mm512_mask_blend_ps(plus, b, a)
     }
+    type D = [__m512d; 2];
+    #[inline(always)]
+    unsafe fn d_zero() -> [__m512d; 2] {
+        [_mm512_setzero_pd(); 2]
+    }
+    #[inline(always)]
+    unsafe fn d_widen(v: __m512) -> [__m512d; 2] {
+        let high = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
+        [
+            _mm512_cvtps_pd(_mm512_castps512_ps256(v)),
+            _mm512_cvtps_pd(high),
+        ]
+    }
+    #[inline(always)]
+    unsafe fn d_add(a: [__m512d; 2], b: [__m512d; 2]) -> [__m512d; 2] {
+        [_mm512_add_pd(a[0], b[0]), _mm512_add_pd(a[1], b[1])]
+    }
+    #[inline(always)]
+    unsafe fn d_add_where(plus: __mmask16, a: [__m512d; 2], b: [__m512d; 2]) -> [__m512d; 2] {
+        let (low, high) = (plus as __mmask8, (plus >> 8) as __mmask8);
+        [
+            _mm512_mask_add_pd(a[0], low, a[0], b[0]),
+            _mm512_mask_add_pd(a[1], high, a[1], b[1]),
+        ]
+    }
+    #[inline(always)]
+    unsafe fn d_sum(a: [__m512d; 2]) -> f64 {
+        sum8(std::mem::transmute::<__m512d, [f64; 8]>(_mm512_add_pd(
+            a[0], a[1],
+        )))
+    }
     #[inline(always)]
     unsafe fn v_load_half(p: *const f32) -> __m512 {
         _mm512_zextps256_ps512(_mm256_load_ps(p))
@@ -265,6 +322,27 @@ impl Simd for W512<f64> {
     #[inline(always)]
     unsafe fn v_pick(plus: __mmask8, a: __m512d, b: __m512d) -> __m512d {
         _mm512_mask_blend_pd(plus, b, a)
+    }
+    type D = __m512d;
+    #[inline(always)]
+    unsafe fn d_zero() -> __m512d {
+        _mm512_setzero_pd()
+    }
+    #[inline(always)]
+    unsafe fn d_widen(v: __m512d) -> __m512d {
+        v
+    }
+    #[inline(always)]
+    unsafe fn d_add(a: __m512d, b: __m512d) -> __m512d {
+        _mm512_add_pd(a, b)
+    }
+    #[inline(always)]
+    unsafe fn d_add_where(plus: __mmask8, a: __m512d, b: __m512d) -> __m512d {
+        _mm512_mask_add_pd(a, plus, a, b)
+    }
+    #[inline(always)]
+    unsafe fn d_sum(a: __m512d) -> f64 {
+        sum8(std::mem::transmute::<__m512d, [f64; 8]>(a))
     }
     #[inline(always)]
     unsafe fn v_load_half(p: *const f64) -> __m512d {
@@ -351,6 +429,41 @@ impl Simd for W256<f32> {
     unsafe fn v_pick(plus: __m256, a: __m256, b: __m256) -> __m256 {
         _mm256_blendv_ps(b, a, plus)
     }
+    type D = [__m256d; 2];
+    #[inline(always)]
+    unsafe fn d_zero() -> [__m256d; 2] {
+        [_mm256_setzero_pd(); 2]
+    }
+    #[inline(always)]
+    unsafe fn d_widen(v: __m256) -> [__m256d; 2] {
+        let high = _mm256_extractf128_ps::<1>(v);
+        [
+            _mm256_cvtps_pd(_mm256_castps256_ps128(v)),
+            _mm256_cvtps_pd(high),
+        ]
+    }
+    #[inline(always)]
+    unsafe fn d_add(a: [__m256d; 2], b: [__m256d; 2]) -> [__m256d; 2] {
+        [_mm256_add_pd(a[0], b[0]), _mm256_add_pd(a[1], b[1])]
+    }
+    #[inline(always)]
+    unsafe fn d_add_where(plus: __m256, a: [__m256d; 2], b: [__m256d; 2]) -> [__m256d; 2] {
+        // The 32-bit lanes' sign bits, sign-extended to the 64-bit lanes that the blends read.
+        let m = _mm256_castps_si256(plus);
+        let low = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm256_castsi256_si128(m)));
+        let high = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm256_extracti128_si256::<1>(m)));
+        let zero = _mm256_setzero_pd();
+        [
+            _mm256_add_pd(a[0], _mm256_blendv_pd(zero, b[0], low)),
+            _mm256_add_pd(a[1], _mm256_blendv_pd(zero, b[1], high)),
+        ]
+    }
+    #[inline(always)]
+    unsafe fn d_sum(a: [__m256d; 2]) -> f64 {
+        sum4(std::mem::transmute::<__m256d, [f64; 4]>(_mm256_add_pd(
+            a[0], a[1],
+        )))
+    }
     #[inline(always)]
     unsafe fn v_load_half(p: *const f32) -> __m256 {
         _mm256_zextps128_ps256(_mm_load_ps(p))
@@ -431,6 +544,27 @@ impl Simd for W256<f64> {
     #[inline(always)]
     unsafe fn v_pick(plus: __m256d, a: __m256d, b: __m256d) -> __m256d {
         _mm256_blendv_pd(b, a, plus)
+    }
+    type D = __m256d;
+    #[inline(always)]
+    unsafe fn d_zero() -> __m256d {
+        _mm256_setzero_pd()
+    }
+    #[inline(always)]
+    unsafe fn d_widen(v: __m256d) -> __m256d {
+        v
+    }
+    #[inline(always)]
+    unsafe fn d_add(a: __m256d, b: __m256d) -> __m256d {
+        _mm256_add_pd(a, b)
+    }
+    #[inline(always)]
+    unsafe fn d_add_where(plus: __m256d, a: __m256d, b: __m256d) -> __m256d {
+        _mm256_add_pd(a, _mm256_blendv_pd(_mm256_setzero_pd(), b, plus))
+    }
+    #[inline(always)]
+    unsafe fn d_sum(a: __m256d) -> f64 {
+        sum4(std::mem::transmute::<__m256d, [f64; 4]>(a))
     }
     #[inline(always)]
     unsafe fn v_load_half(p: *const f64) -> __m256d {
