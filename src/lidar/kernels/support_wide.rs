@@ -12,10 +12,11 @@
 //! and read and write the measurements; the adjoint ([`depth_dots_isa`], on AVX-512) forms the
 //! products of the measurements and the pulse once for eight voxels, widens them to `f64` and
 //! adds them where each voxel's code is +1, with their plain sum kept once (Σ s·w = 2·Σ₊ w − Σ w),
-//! all in `f64`. Voxels left over go one at a time: a voxel's dot product in four independent
-//! accumulators, summed in blocks of 256 products in `T`, the block sums in `f64`, as the narrow
-//! kernels do (within a block the products are fused multiply-adds in four vectors' partial
-//! sums, so the last bits differ from the narrow kernels').
+//! all in `f64`. The forward's entries left over from its batches go one at a time, and on AVX2
+//! the adjoint goes voxel by voxel: a voxel's dot product in four independent accumulators,
+//! summed in blocks of 256 products in `T`, the block sums in `f64`, as the narrow kernels do
+//! (within a block the products are fused multiply-adds in four vectors' partial sums, so the
+//! last bits differ from the narrow kernels').
 
 #[cfg(target_arch = "x86_64")]
 use super::wide::{wide_pair, Simd};
@@ -140,7 +141,7 @@ pub(crate) struct Coded<'a> {
 /// slices of the window's length, the codes of one alphabet). With the wide kernels eight (then
 /// four) entries at a time: their signed amplitudes are summed first, then multiplied by the
 /// pulse and added to `out` once, so that the pulse and `out` are read once for eight entries and
-/// each entry costs a code test and an addition; the entries left over go one at a time.
+/// each entry costs a code test, a blend and an addition; the entries left over go one at a time.
 ///
 /// # Panics
 /// If a slice differs in length from `out`, `amps` and `codes` differ in length, or the codes
