@@ -161,30 +161,15 @@ pub(crate) fn depth_entries_isa<T: Real>(
     if isa.has_wide() {
         let wide = isa == Isa::Avx512;
         while amps.len() - done >= 4 {
-            // SAFETY: as in `sparse_entry_isa`, for each entry; the arrays hold 8 or 4 entries.
-            unsafe {
-                if amps.len() - done >= 8 {
-                    let (a, c) = (&amps[done..done + 8], &codes[done..done + 8]);
-                    let (a, c) = (a.try_into().expect("8"), c.try_into().expect("8"));
-                    match (wide, ternary) {
-                        (true, false) => depth_512::<T, 8, false>(a, c, pw, out),
-                        (true, true) => depth_512::<T, 8, true>(a, c, pw, out),
-                        (false, false) => depth_256::<T, 8, false>(a, c, pw, out),
-                        (false, true) => depth_256::<T, 8, true>(a, c, pw, out),
-                    }
-                    done += 8;
+            let (a, c) = (&amps[done..], &codes[done..]);
+            // SAFETY: as in `sparse_entry_isa`, for each entry.
+            done += unsafe {
+                if a.len() >= 8 {
+                    depth_batch::<T, 8>(wide, ternary, a, c, pw, out)
                 } else {
-                    let (a, c) = (&amps[done..done + 4], &codes[done..done + 4]);
-                    let (a, c) = (a.try_into().expect("4"), c.try_into().expect("4"));
-                    match (wide, ternary) {
-                        (true, false) => depth_512::<T, 4, false>(a, c, pw, out),
-                        (true, true) => depth_512::<T, 4, true>(a, c, pw, out),
-                        (false, false) => depth_256::<T, 4, false>(a, c, pw, out),
-                        (false, true) => depth_256::<T, 4, true>(a, c, pw, out),
-                    }
-                    done += 4;
+                    depth_batch::<T, 4>(wide, ternary, a, c, pw, out)
                 }
-            }
+            };
         }
     }
     for (&amp, c) in amps[done..].iter().zip(&codes[done..]) {
@@ -390,6 +375,32 @@ unsafe fn entry_wide<T: Real, S: Simd<T = T>, const TERNARY: bool>(
     for k in at..n {
         out[k] = out[k] + amp * pw[k] * T::of_f64(code_at::<TERNARY>(bit, plus, minus, k));
     }
+}
+
+/// The first N of `amps` and `codes` by [`depth_wide`] in the instruction set's vectors
+/// (512-bit if `wide`) and the codes' alphabet; returns N.
+///
+/// # Safety
+/// As [`depth_512`] and [`depth_256`]: the CPU has the instruction set's features, and the
+/// slices hold at least N entries of the window's length.
+#[cfg(target_arch = "x86_64")]
+unsafe fn depth_batch<T: Real, const N: usize>(
+    wide: bool,
+    ternary: bool,
+    amps: &[T],
+    codes: &[Coded<'_>],
+    pw: &[T],
+    out: &mut [T],
+) -> usize {
+    let a: &[T; N] = amps[..N].try_into().expect("N amplitudes");
+    let c: &[Coded<'_>; N] = codes[..N].try_into().expect("N codes");
+    match (wide, ternary) {
+        (true, false) => depth_512::<T, N, false>(a, c, pw, out),
+        (true, true) => depth_512::<T, N, true>(a, c, pw, out),
+        (false, false) => depth_256::<T, N, false>(a, c, pw, out),
+        (false, true) => depth_256::<T, N, true>(a, c, pw, out),
+    }
+    N
 }
 
 #[cfg(target_arch = "x86_64")]
