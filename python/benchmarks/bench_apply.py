@@ -6,7 +6,7 @@ a PyLops operator composed of the same model, all in one run.
 1. At the paper's size (100x100x40, f32, K_p 10000 and 30000): ``RdOperator.matvec`` on a
    dense scene and ``rmatvec``, and the operator restricted to the paper scene's nonzero
    voxels (``RdOperator.restrict``: its ``matvec`` is the sparse forward of that scene, its
-   ``rmatvec`` the restricted adjoint), median of N timed calls after a warm-up, against
+   ``rmatvec`` the restricted adjoint), median of N timed calls after 0.5 s of warm-up calls, against
    ``rdlidar bench --json`` (the Rust kernels timed in Rust on the same scene, same sizes and
    repeats): the four figures ``rdlidar bench`` prints.
 2. At a few small sizes (f64): the same operator composed in PyLops as
@@ -29,8 +29,14 @@ import numpy as np
 import rdlidar
 
 
-def median_time(f, repeats):
+def median_time(f, repeats, warm_up_s=0.5):
+    """The median of `repeats` timed calls of f, after calling it for at least warm_up_s seconds
+    (and at least once), as ``rdlidar bench`` does: a fresh process's first calls can run far
+    slower than its later ones."""
+    t0 = time.perf_counter()
     f()
+    while time.perf_counter() - t0 < warm_up_s:
+        f()
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()

@@ -12,10 +12,10 @@ X the (M N, K_s) scene and p the pulse:
 - rdlidar: ``rdlidar bench --json`` at the same size and precision (the dense forward and the
   adjoint), with ``RDLIDAR_ISA`` as set in the environment;
 
-median of --repeats timed calls after a warm-up each. With --rounds R > 1 both sides are timed R
-times in turn (rdlidar, numpy, rdlidar, ...) and each ratio is the median of the R rounds' ratios,
-with their range: on a shared machine whose load drifts, the two sides of each ratio are then
-timed back to back. Prints the BLAS that numpy ran (from
+median of --repeats timed calls after 0.5 s of warm-up calls each (as ``rdlidar bench``). With
+--rounds R > 1 both sides are timed R times in turn (rdlidar, numpy, rdlidar, ...) and each ratio
+is the median of the R rounds' ratios, with their range: on a shared machine whose load drifts,
+the two sides of each ratio are then timed back to back. Prints the BLAS that numpy ran (from
 threadpoolctl: OpenBLAS's kernel, e.g. SkylakeX or Haswell), a markdown table of the times and
 the ratios numpy / rdlidar, and a second table of rdlidar's additions and table bytes per
 second against what the caches deliver to the same access pattern (``rdlidar bench``'s
@@ -34,8 +34,14 @@ import time
 import numpy as np
 
 
-def median_time(f, repeats):
+def median_time(f, repeats, warm_up_s=0.5):
+    """The median of `repeats` timed calls of f, after calling it for at least warm_up_s seconds
+    (and at least once), as ``rdlidar bench`` does: a fresh process's first calls can run far
+    slower than its later ones."""
+    t0 = time.perf_counter()
     f()
+    while time.perf_counter() - t0 < warm_up_s:
+        f()
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()

@@ -191,7 +191,8 @@ impl Throughput {
     /// Measures the rates on this machine: builds the operator of
     /// [`Throughput::calibration_problem`] in f32 and f64 (Bernoulli pulse, ±1 codes, a scene
     /// with one return in every pixel, all seeded), runs the dense forward, the adjoint and the
-    /// sparse forward once as a warm-up and then `repeats` times each, and divides each
+    /// sparse forward after a warm-up ([`time_runs`](crate::report::timing::time_runs))
+    /// `repeats` times each, and divides each
     /// operation's work by its median time. Uses the current rayon thread pool.
     ///
     /// # Errors

@@ -18,9 +18,20 @@ pub struct Timing {
     pub min_s: f64,
 }
 
-/// Runs `f` once as a warm-up, then `repeats` (at least 1) timed times.
+/// Wall time of the warm-up before the timed runs, in seconds. A fresh process's first
+/// applications can run far slower than its later ones (docs/performance.md: the forward at
+/// 100×100×40, K_p 10 000, on two threads, a median of 17–18 ms after one warm-up run against
+/// 12.8–13.3 ms after 0.3 s of runs), so the warm-up lasts a given time, not a given count.
+pub const WARM_UP_S: f64 = 0.5;
+
+/// Runs `f` as a warm-up, at least once and for at least [`WARM_UP_S`] seconds, then `repeats`
+/// (at least 1) timed times.
 pub fn time_runs(repeats: usize, mut f: impl FnMut()) -> Timing {
+    let warm = Instant::now();
     f();
+    while warm.elapsed().as_secs_f64() < WARM_UP_S {
+        f();
+    }
     let mut t: Vec<f64> = (0..repeats.max(1))
         .map(|_| {
             let start = Instant::now();
@@ -47,7 +58,7 @@ pub struct OperatorTimings {
 }
 
 /// Times the dense forward and the sparse forward on the scene `x` and the adjoint on its
-/// measurements, each once as a warm-up and then `repeats` times.
+/// measurements, each after a warm-up ([`time_runs`]) `repeats` times.
 ///
 /// # Panics
 /// If `x` does not have one value per column of `op`.
@@ -77,8 +88,8 @@ pub fn time_operator<T: Real>(op: &RdOperator<T>, x: &[T], repeats: usize) -> Op
 
 /// Times the restricted adjoint: the adjoint for the nonzero voxels of the scene `x` only (the
 /// operator restricted to its support, [`LinearOperator::restrict_columns`], what the solvers'
-/// least squares on a support apply), on the scene's measurements, once as a warm-up and then
-/// `repeats` times.
+/// least squares on a support apply), on the scene's measurements, after a warm-up
+/// ([`time_runs`]) `repeats` times.
 ///
 /// # Panics
 /// If `x` does not have one value per column of `op`.

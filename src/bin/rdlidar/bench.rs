@@ -7,7 +7,7 @@ use rdlidar::lidar::{
     RdOperator, Seeds,
 };
 use rdlidar::limits::MemoryPlan;
-use rdlidar::report::timing::{time_operator, time_restricted_adjoint, Timing};
+use rdlidar::report::timing::{time_operator, time_restricted_adjoint, Timing, WARM_UP_S};
 use rdlidar::Real;
 use serde::Serialize;
 
@@ -19,8 +19,8 @@ use crate::common::{
 /// Time the forward, adjoint, sparse forward and restricted adjoint on a generated problem.
 ///
 /// Generates the paper scene, a Bernoulli pulse (seed SEED) and binary codes (seed SEED+1)
-/// before timing; no file is read or written. Each operation runs once as a warm-up, then
-/// --repeats times; the median and the minimum wall time are reported. "forward" is the
+/// before timing; no file is read or written. Each operation runs for at least 0.5 s (and at
+/// least once) as a warm-up, then --repeats times; the median and the minimum wall time are reported. "forward" is the
 /// dense table path over all pixels, "adjoint" the backprojection, "sparse forward" the
 /// forward product over the nonzero voxels of the scene only, "restricted adjoint" the adjoint
 /// for those voxels only (what least squares on a support applies).
@@ -46,7 +46,7 @@ pub struct BenchArgs {
     /// Print the timings as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Timed runs of each operation, after one warm-up run (1 … 10000).
+    /// Timed runs of each operation, after 0.5 s of warm-up runs (1 … 10000).
     #[arg(long, value_parser = parse_repeats, default_value_t = 7)]
     pub repeats: usize,
 }
@@ -194,7 +194,8 @@ fn print_table(report: &BenchReport, g: Geometry) -> CliResult {
         report.memory_bytes
     );
     outln!(
-        "one warm-up run, then {} timed runs per operation",
+        "{} s of warm-up, then {} timed runs per operation",
+        WARM_UP_S,
         report.repeats
     );
     outln!(
