@@ -6,9 +6,9 @@ a PyLops operator composed of the same model, all in one run.
 1. At the paper's size (100x100x40, f32, K_p 10000 and 30000): ``RdOperator.matvec`` on a
    dense scene and ``rmatvec``, and the operator restricted to the paper scene's nonzero
    voxels (``RdOperator.restrict``: its ``matvec`` is the sparse forward of that scene, its
-   ``rmatvec`` the restricted adjoint), median of N timed calls after 0.5 s of warm-up calls, against
-   ``rdlidar bench --json`` (the Rust kernels timed in Rust on the same scene, same sizes and
-   repeats): the four figures ``rdlidar bench`` prints.
+   ``rmatvec`` the restricted adjoint), median of N timed calls after 0.5 s of warm-up calls,
+   against ``rdlidar bench --json`` (the Rust kernels timed in Rust on the same scene, same
+   sizes and repeats): the four figures ``rdlidar bench`` prints.
 2. At a few small sizes (f64): the same operator composed in PyLops as
    ``HStack([Diagonal(s_i) * Convolve1D(pulse, fft) * Pad(0, K_p - 1)])`` over the pixels,
    checked to agree with rdlidar's, and both timed.

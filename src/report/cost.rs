@@ -192,8 +192,8 @@ impl Throughput {
     /// [`Throughput::calibration_problem`] in f32 and f64 (Bernoulli pulse, ±1 codes, a scene
     /// with one return in every pixel, all seeded), runs the dense forward, the adjoint and the
     /// sparse forward after a warm-up ([`time_runs`](crate::report::timing::time_runs))
-    /// `repeats` times each, and divides each
-    /// operation's work by its median time. Uses the current rayon thread pool.
+    /// `repeats` times each, and divides each operation's work by its median time. Uses the
+    /// current rayon thread pool.
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] if `pulse_len` or `repeats` is zero.

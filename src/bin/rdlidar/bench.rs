@@ -20,10 +20,11 @@ use crate::common::{
 ///
 /// Generates the paper scene, a Bernoulli pulse (seed SEED) and binary codes (seed SEED+1)
 /// before timing; no file is read or written. Each operation runs for at least 0.5 s (and at
-/// least once) as a warm-up, then --repeats times; the median and the minimum wall time are reported. "forward" is the
-/// dense table path over all pixels, "adjoint" the backprojection, "sparse forward" the
-/// forward product over the nonzero voxels of the scene only, "restricted adjoint" the adjoint
-/// for those voxels only (what least squares on a support applies).
+/// least once) as a warm-up, then --repeats times; the median and the minimum wall time are
+/// reported. "forward" is the dense table path over all pixels, "adjoint" the backprojection,
+/// "sparse forward" the forward product over the nonzero voxels of the scene only,
+/// "restricted adjoint" the adjoint for those voxels only (what least squares on a support
+/// applies).
 ///
 /// Each dense kernel's rate is also given as table additions and table bytes read per second,
 /// beside what this machine delivers to the same access pattern: random rows of the kernels'

@@ -148,9 +148,9 @@ fn dot_f64(a: &[f64], b: &[f64]) -> f64 {
 
 /// `out` = G·m for a symmetric K_s × K_s block G (row-major): Σ_d m_d G[d, ·], the rows of the
 /// zero entries of m skipped. Each value is summed over the rows in their order, a product and
-/// an addition at a time, as a row-by-row accumulation into `out` would; the columns go in
-/// blocks of up to 64 whose sums stay in registers through all the rows (summed through memory
-/// row after row, each addition waited for the store of the one before).
+/// an addition at a time, as a row-by-row accumulation into `out` would; but the columns go in
+/// blocks of up to 64 whose sums stay in registers through all the rows, instead of going
+/// through memory row after row, where each addition waits for the store of the one before.
 #[inline(always)]
 fn gram_times(gram: &[f64], m: &[f64], out: &mut [f64]) {
     let ks = m.len();
