@@ -393,20 +393,30 @@ unsafe fn gather_wide<T: Real, S: Simd<T = T>, const Z: usize>(
 ) {
     let per = S::PER;
     let base = table.as_ptr();
-    // Up to four interleaved sums, as many as the registers hold (all four on AVX-512 for rows
-    // of up to seven vectors; on AVX2's sixteen registers fewer for longer rows), so that the
-    // sums stay in registers.
-    let sets = ((S::REGS - 1) / Z).clamp(1, 4);
+    // Up to four interleaved sums, as many as the registers hold with two to spare (all four on
+    // AVX-512 for rows of up to seven vectors; on AVX2's sixteen registers fewer for longer rows:
+    // two for `f32` rows of five vectors, whose three sets with one register to spare were
+    // spilled to memory), so that the sums stay in registers.
+    let sets = ((S::REGS - 2) / Z).clamp(1, 4);
     let mut acc = [[S::v_zero(); Z]; 4];
-    let groups = index.chunks_exact(sets);
-    let rest = groups.remainder();
-    for group in groups.chain(std::iter::once(rest)) {
-        for (set, &r) in acc.iter_mut().zip(group) {
-            let row = base.add((r as usize & mask) * Z * per);
-            for z in 0..Z {
-                set[z] = S::v_add(set[z], S::v_load(row.add(z * per)));
-            }
+    let add_row = |set: &mut [S::V; Z], r: u16| {
+        let row = base.add((r as usize & mask) * Z * per);
+        for z in 0..Z {
+            set[z] = S::v_add(set[z], S::v_load(row.add(z * per)));
         }
+    };
+    // `sets` is a constant of the instance, so that the loop over the sets unrolls and every
+    // sum is indexed by a constant: the sums then stay in registers. (With the sets taken by a
+    // loop of run-time length, they were kept in memory, and the probe measured the stores and
+    // loads of its own sums instead of the cache.)
+    let mut groups = index.chunks_exact(sets);
+    for group in &mut groups {
+        for s in 0..sets {
+            add_row(&mut acc[s], group[s]);
+        }
+    }
+    for &r in groups.remainder() {
+        add_row(&mut acc[0], r);
     }
     let dst = out.as_mut_ptr();
     for z in 0..Z {
