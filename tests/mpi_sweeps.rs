@@ -70,10 +70,17 @@ fn compare_dealt_to_processes_writes_the_tables_of_one_process() {
     // An existing folder without --force: every process stops before running.
     let e = mpirun(2, &[&sweep[..], &["--out", s(&one)]].concat());
     assert_one_line_error(&e, &["one", "--force"]);
-    // Merging is one process's job.
+    // Merging is one process's job: the message says so, and nothing else.
     let e = mpirun(
         2,
         &["compare", "--merge", s(&shard), "--out", s(&t.path("m"))],
     );
-    assert_one_line_error(&e, &["compare", "one process"]);
+    assert_one_line_error(
+        &e,
+        &[
+            "rdlidar compare --merge runs on one process",
+            "run it without mpirun",
+        ],
+    );
+    assert!(!t.path("m").exists());
 }

@@ -261,6 +261,17 @@ fn check_output(a: &ExperimentArgs, config: &ExperimentConfig) -> CliResult<()> 
     Ok(())
 }
 
+/// Refuses a `--shard` count above the number of the sweep's problems (before anything is
+/// dealt: a share is made for each shard).
+fn check_shard(shard: Shard, config: &ExperimentConfig) -> CliResult {
+    shard.check(config).map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { reason, .. } => {
+            Failure::Message(format!("--shard {reason}"))
+        }
+        other => other.into(),
+    })
+}
+
 /// The files of an experiment that a --config file could be.
 const TABLES: [&str; 5] = [
     "config.toml",
@@ -294,9 +305,9 @@ pub fn merge(a: &CompareArgs, globals: &Globals) -> CliResult<ExitCode> {
     let outcome =
         experiment::merge_compare(&a.merge, &out, a.common.force).map_err(|e| match e {
             rdlidar::Error::InvalidParameter {
-                name: "merge",
+                name: name @ ("merge" | "out"),
                 reason,
-            } => Failure::Message(format!("--merge: {reason}")),
+            } => Failure::Message(format!("{}: {reason}", flag_of(name))),
             other => other.into(),
         })?;
     outln!(
@@ -336,7 +347,9 @@ pub fn run(
     globals: &Globals,
     ranks: &Ranks,
 ) -> CliResult<ExitCode> {
-    let (config, threads, quiet) = ranks.agree(experiment_config(which, a, preset, globals))?;
+    let resolved = experiment_config(which, a, preset, globals)
+        .and_then(|resolved| check_shard(shard, &resolved.0).map(|()| resolved));
+    let (config, threads, quiet) = ranks.agree(resolved)?;
     ranks.agree(if ranks.is_first() {
         check_output(a, &config)
     } else {

@@ -218,6 +218,7 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         Command::Adjoint(a) => with_tiles(&a.tiles),
         Command::Dottest(a) => with_tiles(&a.tiles),
         Command::Simulate(a) => simulate::splits(a).err().unwrap_or(""),
+        Command::Compare(a) if !a.merge.is_empty() => " --merge",
         _ => "",
     };
     let name = format!("{}{label}", command.name());

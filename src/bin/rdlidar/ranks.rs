@@ -66,9 +66,10 @@ impl Ranks {
         if !splits {
             return Err(format!(
                 "rdlidar {command} runs on one process, but it was launched as {size} \
-                 processes: under mpirun, forward, adjoint, dottest and reconstruct split the \
-                 pixel rows over the processes (simulate too, with --codes-format seed), \
-                 reconstruct --tiles deals the tiles to them, and compare its problems"
+                 processes: run it without mpirun (under mpirun, forward, adjoint, dottest and \
+                 reconstruct split the pixel rows over the processes, simulate too with \
+                 --codes-format seed, reconstruct --tiles deals the tiles to them, and compare \
+                 without --merge deals its problems to them)"
             )
             .into());
         }

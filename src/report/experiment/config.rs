@@ -160,16 +160,27 @@ impl ExperimentConfig {
     }
 
     /// Checks every field, naming the first offending one (`scene`, `pulse_lens`, `solvers`,
-    /// `snr_db`, `seeds`, `size`, `lit_fraction`, `out`).
+    /// `snr_db`, `seeds`, `size`, `lit_fraction`, `out`, `power_iterations`, `max_iter`).
     ///
     /// # Errors
     /// [`Error::InvalidParameter`] naming the field: an empty or repeated list entry, a zero
-    /// count, a non-finite SNR, a lit fraction outside [0, 1], or a problem too large for the
-    /// limits of [`crate::limits`] and [`MAX_SEEDS`], or one whose largest problem needs more
-    /// memory than is available ([`Error::TooLarge`]).
+    /// count, a non-finite SNR, a lit fraction outside [0, 1], an output folder name that is not
+    /// UTF-8, an iteration budget above [`MAX_BUDGET`], or a problem too large for the limits
+    /// of [`crate::limits`] and [`MAX_SEEDS`], or one whose largest problem needs more memory
+    /// than is available ([`Error::TooLarge`]).
     pub fn validate(&self) -> Result<()> {
         if self.out.as_os_str().is_empty() {
             return Err(Error::param("out", "the output folder name is empty"));
+        }
+        if self.out.to_str().is_none() {
+            return Err(Error::param(
+                "out",
+                format!(
+                    "{}: the folder name is not UTF-8 text, which config.toml and results.json \
+                     cannot hold",
+                    self.out.display()
+                ),
+            ));
         }
         let g = self.size;
         Geometry::new(g.m, g.n, g.ks)?;
@@ -273,12 +284,7 @@ impl ExperimentConfig {
             crate::limits::check_count("power_iterations", n, MAX_POWER_ITERATIONS)?;
         }
         for (m, l) in self.max_iter.iter() {
-            if l == 0 {
-                return Err(Error::param(
-                    "max_iter",
-                    format!("{m}: the iteration limit must be at least 1"),
-                ));
-            }
+            check_budget(m, l)?;
         }
         Ok(())
     }
@@ -308,7 +314,7 @@ impl ExperimentConfig {
             power_iterations: Option<usize>,
         }
         let mut doc = toml::Table::new();
-        doc.insert("seed".into(), toml::Value::Integer(self.seed as i64));
+        doc.insert("seed".into(), seed_value(self.seed));
         doc.insert(
             "precision".into(),
             toml::Value::String(self.precision.name().into()),
@@ -331,6 +337,47 @@ impl ExperimentConfig {
         toml::to_string(&doc)
             .map_err(|e| Error::param("config", format!("cannot write it as TOML: {e}")))
     }
+}
+
+/// A seed as TOML, whose integers end at `i64::MAX`: an integer up to that, the string of its
+/// digits above (read back by [`ConfigFile`]).
+fn seed_value(seed: u64) -> toml::Value {
+    match i64::try_from(seed) {
+        Ok(v) => toml::Value::Integer(v),
+        Err(_) => toml::Value::String(seed.to_string()),
+    }
+}
+
+/// A seed from TOML: an integer from 0, or any `u64` as a string of digits (how
+/// [`ExperimentConfig::to_toml`] writes a seed above `i64::MAX`).
+fn de_seed<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<Option<u64>, D::Error> {
+    struct Seed;
+    impl serde::de::Visitor<'_> for Seed {
+        type Value = u64;
+
+        fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(
+                f,
+                "a seed from 0 to {}: an integer, or its digits as a string",
+                u64::MAX
+            )
+        }
+
+        fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<u64, E> {
+            u64::try_from(v).map_err(|_| E::invalid_value(serde::de::Unexpected::Signed(v), &self))
+        }
+
+        fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<u64, E> {
+            Ok(v)
+        }
+
+        fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<u64, E> {
+            v.trim()
+                .parse()
+                .map_err(|_| E::invalid_value(serde::de::Unexpected::Str(v), &self))
+        }
+    }
+    d.deserialize_any(Seed).map(Some)
 }
 
 /// Some fields of an [`ExperimentConfig`], to be layered over it with
@@ -461,7 +508,9 @@ fn de_noise_levels<'de, D: Deserializer<'de>>(
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ConfigFile {
-    /// Base seed.
+    /// Base seed: an integer, or any `u64` as a string of digits (TOML's integers end at
+    /// `i64::MAX`, so `config.toml` writes a larger seed so).
+    #[serde(default, deserialize_with = "de_seed")]
     pub seed: Option<u64>,
     /// Precision of the computations.
     pub precision: Option<Precision>,
@@ -610,6 +659,58 @@ mod tests {
         assert_eq!(b.to_string(), "fista=3,model-based=2");
         assert!(IterationBudgets::parse("fista=0").is_err());
         assert!(IterationBudgets::parse("fista").is_err());
+    }
+
+    #[test]
+    fn seeds_beyond_toml_integers_are_written_as_digits_and_read_back() {
+        let big = i64::MAX as u64;
+        for seed in [0, big, big + 1, u64::MAX] {
+            let c = ExperimentConfig {
+                seed,
+                ..ExperimentConfig::compare_tiny()
+            };
+            let text = c.to_toml("compare").unwrap();
+            assert_eq!(ConfigFile::parse(&text).unwrap().seed, Some(seed), "{text}");
+        }
+        assert_eq!(ConfigFile::parse("seed = \"12\"\n").unwrap().seed, Some(12));
+        for bad in [
+            "seed = -1\n",
+            "seed = \"-1\"\n",
+            "seed = \"x\"\n",
+            "seed = 1.5\n",
+        ] {
+            let e = ConfigFile::parse(bad).unwrap_err().to_string();
+            assert!(
+                e.contains("line 1") && e.contains("a seed from 0"),
+                "{bad}: {e}"
+            );
+        }
+    }
+
+    #[test]
+    fn settings_config_toml_cannot_hold_are_refused() {
+        let budgets = IterationBudgets::parse(&format!("cgls={MAX_BUDGET}")).unwrap();
+        let c = ExperimentConfig {
+            max_iter: budgets,
+            ..ExperimentConfig::compare_tiny()
+        };
+        c.validate().unwrap();
+        let text = c.to_toml("compare").unwrap();
+        assert!(text.contains(&format!("cgls = {MAX_BUDGET}")), "{text}");
+        let e = IterationBudgets::parse(&format!("cgls={}", MAX_BUDGET + 1))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`max_iter`") && e.contains("config.toml"), "{e}");
+        #[cfg(unix)]
+        {
+            use std::os::unix::ffi::OsStrExt;
+            let c = ExperimentConfig {
+                out: std::ffi::OsStr::from_bytes(b"bad\xff").into(),
+                ..ExperimentConfig::compare_tiny()
+            };
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains("`out`") && e.contains("UTF-8"), "{e}");
+        }
     }
 
     #[test]

@@ -53,6 +53,27 @@ impl Shard {
     pub fn is_whole(self) -> bool {
         self.count == 1
     }
+
+    /// Checks that `config`'s sweep has a problem for each of the shards: shards deal whole
+    /// problems, so more shards than problems would leave some with nothing to run (and a merge
+    /// waiting for their folders).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`shard`) when there are more shards than problems.
+    pub fn check(self, config: &ExperimentConfig) -> Result<()> {
+        let problems = config.problems();
+        if self.count > problems {
+            let shard = self.to_string();
+            return Err(Error::param(
+                "shard",
+                format!(
+                    "{shard}: the sweep has {problems} problems (a simulation and every solver \
+                     on it, dealt whole), so at most {problems} shards"
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl fmt::Display for Shard {
@@ -88,13 +109,17 @@ impl SweepShare<'_> {
         self.space.part() == 0
     }
 
-    /// The problems of `config` this process runs, in sweep order.
+    /// The problems of `config` this process runs, in sweep order (none for a shard beyond
+    /// the number of problems; see [`Shard::check`]).
     pub fn cases(&self, config: &ExperimentConfig) -> Vec<Case> {
         let all = config.cases();
-        let job = pick(
-            &all,
-            &deal(config, &all, self.shard.count)[self.shard.index],
-        );
+        if self.shard.index >= all.len() {
+            return Vec::new();
+        }
+        // Every problem has positive work, so shares beyond the number of problems stay empty
+        // and the first ones are dealt as if there were no more: no share is made for those.
+        let shares = self.shard.count.min(all.len());
+        let job = pick(&all, &deal(config, &all, shares)[self.shard.index]);
         let mine = &deal(config, &job, self.space.parts())[self.space.part()];
         pick(&job, mine)
     }
@@ -250,6 +275,46 @@ mod tests {
             // Largest-first to the lightest share: no two shares differ by more than one problem.
             assert!(spread <= largest * (1.0 + 1e-12), "{count}: {loads:?}");
         }
+    }
+
+    #[test]
+    fn more_shards_than_problems_are_refused_and_make_no_share_each() {
+        let config = ExperimentConfig::compare_tiny();
+        let problems = config.problems();
+        let all = config.cases();
+        let count = problems + 5;
+        let shares = deal(&config, &all, count);
+        for index in [0, problems - 1, problems, count - 1] {
+            let share = SweepShare {
+                shard: Shard { index, count },
+                space: &WHOLE,
+            };
+            assert_eq!(share.cases(&config), pick(&all, &shares[index]), "{index}");
+        }
+        let huge = SweepShare {
+            shard: Shard {
+                index: 0,
+                count: usize::MAX,
+            },
+            space: &WHOLE,
+        };
+        assert_eq!(huge.cases(&config).len(), 1);
+        let fits = Shard {
+            index: 0,
+            count: problems,
+        };
+        fits.check(&config).unwrap();
+        let e = Shard {
+            index: 0,
+            count: usize::MAX,
+        }
+        .check(&config)
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`shard`") && e.contains(&format!("at most {problems} shards")),
+            "{e}"
+        );
     }
 
     #[test]

@@ -61,7 +61,7 @@ use serde::{Deserialize, Serialize};
 pub use config::{
     noise_text, parse_noise_level, parse_noise_levels, parse_pulse_lens, parse_scenes,
     parse_solvers, run_seed, ConfigFile, ExperimentConfig, ExperimentPatch, IterationBudgets,
-    NoiseLevel, Precision, SceneKind, DEFAULT_SOLVERS, MAX_POWER_ITERATIONS, MAX_SEEDS,
+    NoiseLevel, Precision, SceneKind, DEFAULT_SOLVERS, MAX_BUDGET, MAX_POWER_ITERATIONS, MAX_SEEDS,
 };
 pub use console::Console;
 pub use deal::{deal, in_sweep_order, Shard, SweepShare};

@@ -109,9 +109,12 @@ impl Run {
     ) -> Result<Outcome> {
         let start = Instant::now();
         config.validate()?;
+        share.shard.check(config)?;
         if self.keep_depths {
             figures::check_depth_figure(config)?;
         }
+        // config.toml is written after the sweep: a setting it cannot hold fails before any run.
+        config.to_toml(self.name)?;
         let staged = share.agree(if share.writes() {
             StagedDir::create(&config.out, force).map(Some)
         } else {

@@ -44,23 +44,24 @@ fn simulate_case<T: Real>(config: &ExperimentConfig, case: &Case) -> Result<Prob
     })
 }
 
-/// Runs one method on one problem; a solver's error becomes the row's `error`.
-fn run_one<T: Real>(
+/// The row of `method` on `case` in `precision` (`f32` or `f64`) before it runs: the problem,
+/// the solver and what follows from them (the grid, K, the regime, the iteration budget), no
+/// results, and no truth (`lit` and `true_returns` are 0).
+pub(super) fn blank_row(
     config: &ExperimentConfig,
     case: &Case,
-    problem: &Problem<T>,
     method: Method,
-) -> (Row, Option<Array2<i32>>) {
+    precision: &str,
+) -> Row {
     let g = config.size;
-    let lit = problem.truth.depth_map().lit();
     let budget = match method {
         Method::Backprojection | Method::BackprojectionDebiased => None,
         m => config.max_iter.get(m),
     };
-    let mut row = Row {
+    Row {
         scene: case.scene.name().into(),
         size: g.to_string(),
-        precision: T::NAME.into(),
+        precision: precision.into(),
         seed: case.seed,
         snr_db: case.snr_db,
         pulse_len: case.pulse_len,
@@ -70,12 +71,12 @@ fn run_one<T: Real>(
         solver: method.name().into(),
         method_used: method.name().into(),
         max_iter: budget,
-        lit,
+        lit: 0,
         exact: None,
         exact_pct: None,
         false_detections: None,
         missed: None,
-        true_returns: problem.truth.nnz(),
+        true_returns: 0,
         returns_exact: None,
         returns_false: None,
         depth_rmse_bins: None,
@@ -87,7 +88,22 @@ fn run_one<T: Real>(
         adjoint_applies: None,
         support_applies: None,
         error: None,
+    }
+}
+
+/// Runs one method on one problem; a solver's error becomes the row's `error`.
+fn run_one<T: Real>(
+    config: &ExperimentConfig,
+    case: &Case,
+    problem: &Problem<T>,
+    method: Method,
+) -> (Row, Option<Array2<i32>>) {
+    let mut row = Row {
+        lit: problem.truth.depth_map().lit(),
+        true_returns: problem.truth.nnz(),
+        ..blank_row(config, case, method, T::NAME)
     };
+    let budget = row.max_iter;
     let options = ReconstructOptions {
         max_iter: budget,
         progress: false,

@@ -78,6 +78,33 @@ impl std::str::FromStr for SceneKind {
     }
 }
 
+/// The largest iteration budget of an experiment: TOML's largest integer, so that
+/// `config.toml` holds every budget.
+pub const MAX_BUDGET: usize = i64::MAX as usize;
+
+/// Checks `method`'s iteration budget `limit`: 1 to [`MAX_BUDGET`].
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`max_iter`) naming the method.
+pub(super) fn check_budget(method: Method, limit: usize) -> Result<()> {
+    if limit == 0 {
+        return Err(Error::param(
+            "max_iter",
+            format!("{method}: the iteration limit must be at least 1"),
+        ));
+    }
+    if limit > MAX_BUDGET {
+        return Err(Error::param(
+            "max_iter",
+            format!(
+                "{method}: {limit} is more than the limit of {MAX_BUDGET} (the largest integer \
+                 config.toml holds)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Iteration limits per method, overriding the method's default limit
 /// ([`crate::recon::ReconstructOptions::max_iter`]). Methods without an entry keep their default.
 ///
@@ -116,13 +143,10 @@ impl IterationBudgets {
     /// Sets (`Some`) or clears (`None`) the limit of `method`.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] (`max_iter`) for a limit of 0.
+    /// [`Error::InvalidParameter`] (`max_iter`) for a limit of 0 or above [`MAX_BUDGET`].
     pub fn set(&mut self, method: Method, limit: Option<usize>) -> Result<()> {
-        if limit == Some(0) {
-            return Err(Error::param(
-                "max_iter",
-                format!("{method}: the iteration limit must be at least 1"),
-            ));
+        if let Some(limit) = limit {
+            check_budget(method, limit)?;
         }
         self.0[method_index(method)] = limit;
         Ok(())
