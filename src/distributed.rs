@@ -144,6 +144,24 @@ impl Space for MpiSpace {
     }
 
     fn gather(&self, local: &[f64]) -> Vec<f64> {
+        self.gather_of(local, 0.0)
+    }
+
+    fn gather_bytes(&self, local: &[u8]) -> Vec<u8> {
+        self.gather_of(local, 0u8)
+    }
+
+    fn offset(&self, local_len: usize) -> usize {
+        self.counts(local_len)[..self.rank()].iter().sum()
+    }
+}
+
+impl MpiSpace {
+    /// Every rank's `local` values, concatenated in rank order.
+    ///
+    /// # Panics
+    /// When the values exceed MPI's counts (2^31 − 1 per rank).
+    fn gather_of<V: mpi::datatype::Equivalence + Copy>(&self, local: &[V], zero: V) -> Vec<V> {
         let counts = self.counts(local.len());
         let total: usize = counts.iter().sum();
         let too_many = || -> ! {
@@ -161,13 +179,9 @@ impl Space for MpiSpace {
                 Some(i32::try_from(d).unwrap_or_else(|_| too_many()))
             })
             .collect();
-        let mut all = vec![0.0; total];
+        let mut all = vec![zero; total];
         let mut partition = PartitionMut::new(&mut all[..], counts, displs);
         self.comm.all_gather_varcount_into(local, &mut partition);
         all
-    }
-
-    fn offset(&self, local_len: usize) -> usize {
-        self.counts(local_len)[..self.rank()].iter().sum()
     }
 }

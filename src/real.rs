@@ -33,7 +33,7 @@ pub trait Real:
     + Sync
     + 'static
     + sealed::Sealed
-    + crate::lidar::kernels::wide::Wide
+    + crate::simd::Wide
 {
     /// Name of the type, `"f32"` or `"f64"`.
     const NAME: &'static str;

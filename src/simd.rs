@@ -1,6 +1,7 @@
 //! The vector operations of the wide kernels, in two flavours: 512-bit (AVX-512, sixteen `f32`
 //! or eight `f64` values a vector) and 256-bit (AVX2, eight or four), so that one generic kernel
-//! serves both precisions and both instruction sets.
+//! serves both precisions and both instruction sets. They live beside the scalars they extend:
+//! [`Wide`] is a supertrait of [`Real`](crate::Real).
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;

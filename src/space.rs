@@ -37,6 +37,13 @@ pub trait Space: Send + Sync + std::fmt::Debug {
     /// Every part's `local` values, concatenated in part order.
     fn gather(&self, local: &[f64]) -> Vec<f64>;
 
+    /// Every part's `local` bytes, concatenated in part order (for data that are not numbers:
+    /// texts, bit-packed codes). The default goes through [`Space::gather`], a value per byte.
+    fn gather_bytes(&self, local: &[u8]) -> Vec<u8> {
+        let sent: Vec<f64> = local.iter().map(|&b| f64::from(b)).collect();
+        self.gather(&sent).into_iter().map(|b| b as u8).collect()
+    }
+
     /// The number of unknowns in the parts before this one, given this part's `local_len`
     /// (the global index of this part's first unknown).
     fn offset(&self, local_len: usize) -> usize;
@@ -56,6 +63,9 @@ impl Space for Whole {
     fn sum(&self, _values: &mut [f64]) {}
     fn max(&self, _values: &mut [f64]) {}
     fn gather(&self, local: &[f64]) -> Vec<f64> {
+        local.to_vec()
+    }
+    fn gather_bytes(&self, local: &[u8]) -> Vec<u8> {
         local.to_vec()
     }
     fn offset(&self, _local_len: usize) -> usize {
@@ -254,8 +264,7 @@ pub fn gather_text(space: &dyn Space, local: &str) -> Vec<String> {
         return vec![local.to_string()];
     }
     let lengths = space.gather(&[local.len() as f64]);
-    let sent: Vec<f64> = local.bytes().map(f64::from).collect();
-    let bytes: Vec<u8> = space.gather(&sent).into_iter().map(|b| b as u8).collect();
+    let bytes = space.gather_bytes(local.as_bytes());
     let mut at = 0;
     lengths
         .iter()

@@ -507,3 +507,59 @@ fn the_photon_noise_model_reports_its_weighting_and_bad_models_are_refused() {
     assert!(stderr(&out).contains("--background"), "{}", stderr(&out));
     assert!(outputs(&dir).is_empty());
 }
+
+/// `auto` on valid data whose least-squares refits converge to what the arithmetic resolves
+/// (a search direction of zero curvature): the refit ends there, and auto goes on, where it
+/// once failed with "numerical breakdown". The two cases the failure was seen on.
+#[test]
+fn auto_ends_a_refit_at_zero_curvature_instead_of_failing() {
+    let dir = TempDir::new("zero-curvature");
+    for (size, kp, seed, snr) in [
+        ("16x16x8", "150", "2", None),
+        ("8x8x6", "60", "19", Some("20")),
+    ] {
+        let sim = dir.0.join(format!("sim-{size}-{seed}"));
+        let mut args = vec![
+            "simulate",
+            "--scene",
+            "paper",
+            "--quiet",
+            "--size",
+            size,
+            "--pulse-len",
+            kp,
+            "--seed",
+            seed,
+            "--out",
+            s(&sim),
+        ];
+        if let Some(db) = snr {
+            args.extend(["--snr-db", db]);
+        }
+        let out = rdlidar(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let ks = size.rsplit('x').next().unwrap();
+        let depth = dir.0.join(format!("depth-{size}-{seed}.npy"));
+        let out = rdlidar(&[
+            "reconstruct",
+            "--quiet",
+            "--pulse",
+            s(&sim.join("pulse.npy")),
+            "--codes",
+            s(&sim.join("codes.npy")),
+            "--meas",
+            s(&sim.join("meas.npy")),
+            "--depth-bins",
+            ks,
+            "--solver",
+            "auto",
+            "--out-depth",
+            s(&depth),
+            "--out-scene",
+            s(&dir.0.join(format!("xh-{size}-{seed}.npy"))),
+        ]);
+        assert!(out.status.success(), "{size} seed {seed}: {}", stderr(&out));
+        let d: Array2<i32> = read_npy(&depth).unwrap();
+        assert!(d.iter().any(|&v| v >= 0), "{size} seed {seed}: no return");
+    }
+}

@@ -655,3 +655,60 @@ fn a_process_that_dies_ends_the_job_without_output() {
     assert!(!depth.exists() && !scene.exists(), "an output was written");
     assert_eq!(crate::cli_support::listing(&tmp.0), vec!["a".to_string()]);
 }
+
+/// `auto` under `mpirun` runs every stage one process runs: on the paper scene at 16×16×8, K_p
+/// 150 and 15 dB one process keeps coarse-to-fine (the coarse grid needs the whole scene's
+/// codes, which the processes gather), and 2 and 3 processes (the second split's bands of 6, 5
+/// and 5 rows cut the coarse grid's 2×2 blocks) keep it too, with the one process's depth map.
+#[test]
+fn auto_under_mpirun_keeps_the_coarse_grid_stage_and_the_one_process_depth_map() {
+    let tmp = TempDir::new("mpi-auto-coarse");
+    let acq = simulate(
+        &tmp,
+        "coarse",
+        &[
+            "--size",
+            "16x16x8",
+            "--pulse-len",
+            "150",
+            "--snr-db",
+            "15",
+            "--seed",
+            "0",
+        ],
+        "codes.npy",
+    );
+    let run = |ranks: usize| -> (String, ArrayD<i32>) {
+        let depth = tmp.path(&format!("coarse-depth-{ranks}.npy"));
+        let args = [
+            "reconstruct",
+            "--pulse",
+            &acq.file("pulse.npy"),
+            "--codes",
+            &acq.file(acq.codes),
+            "--meas",
+            &acq.file("meas.npy"),
+            "--depth-bins",
+            "8",
+            "--solver",
+            "auto",
+            "--out-depth",
+            s(&depth),
+            "--out-scene",
+            s(&tmp.path(&format!("coarse-scene-{ranks}.npy"))),
+        ];
+        let text = if ranks == 1 {
+            ok(rdlidar(&args), "one process")
+        } else {
+            ok(mpirun(ranks, &args), &format!("-n {ranks}"))
+        };
+        (text, read_npy(&depth).unwrap())
+    };
+    let (one, depth) = run(1);
+    assert!(one.contains("solver coarse-to-fine"), "{one}");
+    for ranks in [2, 3] {
+        let (text, d) = run(ranks);
+        assert!(text.contains("solver coarse-to-fine"), "-n {ranks}: {text}");
+        assert_eq!(d, depth, "-n {ranks}: depth maps");
+    }
+}

@@ -494,26 +494,34 @@ fn check_methods(
     let mut out = Vec::new();
     for &method in methods {
         let whole = reconstruct(op, y, method, &options).unwrap();
-        if method == Method::CoarseToFine {
-            // It needs the whole scene in one process: every part refuses it.
-            for e in in_parts(op, 2, &|part| reconstruct(part, y, method, &options).err()) {
-                let e = e.expect("a part refuses coarse-to-fine").to_string();
-                assert!(e.contains("one process"), "{e}");
-            }
-            out.push(whole);
-            continue;
-        }
-        // Auto's coarse-to-fine stage needs the whole scene in one process, so split unknowns
-        // are compared with one part holding them all, which has no coarse stage either.
-        let reference = if whole
+        // Coarse-to-fine (alone or as auto's stage) needs the whole scene's codes: the parts
+        // gather them and solve the same coarse problem, then keep their own pixels. Where it
+        // runs, the split runs are compared stage by stage with one part holding every row (on
+        // one multi-return scene, auto's TV stage, not kept, stops at other iterations on the
+        // whole operator than on one part), and the kept scene with the whole's too.
+        let coarse = whole
             .stages
             .iter()
-            .any(|s| s.method == Method::CoarseToFine)
-        {
-            in_parts(op, 1, &|part| {
+            .any(|s| s.method == Method::CoarseToFine);
+        let reference = if coarse {
+            let one = in_parts(op, 1, &|part| {
                 reconstruct(part, y, method, &options).expect("one part's reconstruction")
             })
-            .remove(0)
+            .remove(0);
+            let (a, b) = (whole.scene.as_slice(), one.scene.as_slice());
+            assert!(
+                support(a) == support(b),
+                "{what}, {method}: one part's returns"
+            );
+            let worst = a
+                .iter()
+                .zip(b)
+                .map(|(u, v)| (u - v).abs())
+                .fold(0.0, f64::max);
+            let scale = space::norm_inf(&space::WHOLE, a).max(f64::MIN_POSITIVE);
+            assert!(worst <= 1e-8 * scale, "{what}, {method}: one part's scene");
+            assert_eq!(one.method_used, whole.method_used, "{what}, {method}");
+            one
         } else {
             whole.clone()
         };
@@ -556,7 +564,8 @@ fn auto_on_split_unknowns_is_auto_on_the_whole_in_noise_and_with_several_returns
     assert_eq!(stages(&r[0]), [Method::SupportLs, Method::ModelBased]);
     // Two or three returns per pixel, compressive: TV and the model-based fit, whose residual
     // is searched for hidden returns; the fit leaves more than a quarter of the data
-    // unexplained, so coarse-to-fine is tried (on the whole scene only), and not kept.
+    // unexplained, so coarse-to-fine is tried (the parts too, on the codes they gather), and
+    // not kept.
     let truth = semi_transparent_scene::<f64>(g, 2..=3, 9).unwrap();
     let (op, y) = measured(&truth, 1200, 9, None);
     let r = check_methods("semi-transparent", &op, &y, &[Method::Auto]);

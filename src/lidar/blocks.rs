@@ -15,6 +15,10 @@ use crate::real::Real;
 use super::measurement::LidarOperator;
 use super::pulse::zero_mean;
 
+/// Chunks of the voxels of a support application on the coarse grid, summed apart then added in
+/// order.
+const SUPPORT_CHUNKS: usize = 16;
+
 /// `A·U` for a lidar operator A over the whole scene (one ADC or several) and the upsampling U
 /// that copies each block's depth column to its pixels: the operator of the scene on the grid of
 /// blocks (⌈M/bm⌉ × ⌈N/bn⌉ pixels, K_s bins, C order). Its dense applications and correlations
@@ -353,9 +357,10 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
         let rows = y.len();
         let (sets, k) = (self.op.sets, self.op.k);
         let kp = self.op.pulse.len();
-        let threads = rayon::current_num_threads().max(1);
-        let chunk = self.voxels.len().div_ceil(threads).max(1);
-        let sums = self
+        // Chunks of voxels that depend on the support alone, their sums added in their order:
+        // the same values for any number of threads.
+        let chunk = self.voxels.len().div_ceil(SUPPORT_CHUNKS).max(1);
+        let partial: Vec<Vec<f64>> = self
             .voxels
             .par_chunks(chunk)
             .zip(x.par_chunks(chunk))
@@ -377,15 +382,13 @@ impl<T: Real> LinearOperator<T> for BlockSupport<'_, '_, T> {
                 }
                 acc
             })
-            .reduce(
-                || vec![0.0f64; rows],
-                |mut a, b| {
-                    for (u, v) in a.iter_mut().zip(b) {
-                        *u += v;
-                    }
-                    a
-                },
-            );
+            .collect();
+        let mut sums = vec![0.0f64; rows];
+        for part in partial {
+            for (u, v) in sums.iter_mut().zip(part) {
+                *u += v;
+            }
+        }
         for (i, (yi, s)) in y.iter_mut().zip(sums).enumerate() {
             *yi = T::of_f64(s * self.op.row_weight(i));
         }

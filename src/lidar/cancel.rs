@@ -207,6 +207,10 @@ where
         self.inner.whole_code_sets()
     }
 
+    fn gathered_code_sets(&self) -> Option<crate::Result<Vec<std::sync::Arc<super::Codes>>>> {
+        self.inner.gathered_code_sets()
+    }
+
     fn row_weights(&self) -> Option<&[T]> {
         self.inner.row_weights()
     }

@@ -582,7 +582,8 @@ pub(crate) mod tables;
 pub(crate) use tables::adjoint_tables;
 #[cfg(test)]
 mod tests;
-pub(crate) mod wide;
+/// The vector flavours of the scalars, from the ground floor.
+pub(crate) use crate::simd as wide;
 
 pub(crate) use probe::gather_rows;
 pub(crate) use support_wide::{

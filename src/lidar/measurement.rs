@@ -10,8 +10,9 @@ use std::sync::{Arc, OnceLock};
 use crate::error::{Error, Result};
 use crate::operator::{Counted, LinearOperator, Part, VStack, VoxelOperator};
 use crate::real::Real;
+use crate::space::Space;
 
-use super::codes::Codes;
+use super::codes::{packed_len, CodeAlphabet, Codes};
 use super::geometry::{Geometry, Regime};
 use super::pulse::single_pulse;
 use super::rdop::RdOperator;
@@ -63,6 +64,18 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
     /// rows, for operators built from them ([`BlockOperator`](super::BlockOperator)); `None`
     /// (the default) for codes not held in memory (streamed) or pixels split across processes.
     fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
+        None
+    }
+
+    /// The code sets of the whole scene, for an operator whose pixels are split across the
+    /// parts of its [`space`](LinearOperator::space) ([`Part`]): every part's own codes
+    /// gathered into every part, in the order of the pixels (a collective: every part calls it
+    /// at once). `None` (the default) for an operator whose pixels are not split, or whose codes
+    /// are not held in memory.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] for parts whose codes do not join into one grid.
+    fn gathered_code_sets(&self) -> Option<Result<Vec<Arc<Codes>>>> {
         None
     }
 
@@ -128,6 +141,9 @@ macro_rules! forward_lidar {
             fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
                 (**self).whole_code_sets()
             }
+            fn gathered_code_sets(&self) -> Option<Result<Vec<Arc<Codes>>>> {
+                (**self).gathered_code_sets()
+            }
             fn row_weights(&self) -> Option<&[T]> {
                 (**self).row_weights()
             }
@@ -165,6 +181,38 @@ impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Part<A> {
     fn observed_pixels(&self) -> Option<Vec<bool>> {
         self.inner().observed_pixels()
     }
+    fn gathered_code_sets(&self) -> Option<Result<Vec<Arc<Codes>>>> {
+        let sets = self.inner().whole_code_sets()?;
+        Some(
+            sets.iter()
+                .map(|c| gather_codes(self.space(), c).map(Arc::new))
+                .collect(),
+        )
+    }
+}
+
+/// The codes of every part's pixels, in part order (a collective).
+fn gather_codes(space: &dyn Space, codes: &Codes) -> Result<Codes> {
+    let len = codes.len();
+    match codes.alphabet() {
+        CodeAlphabet::Binary => {
+            let bytes = space.gather_bytes(&codes.to_packbits()?);
+            Codes::from_packbits(&bytes, bytes.len() / packed_len(len), len)
+        }
+        CodeAlphabet::Ternary => {
+            // Each entry −1, 0 or 1 as the byte of its value plus one.
+            let local: Vec<u8> = codes.to_dense().iter().map(|&v| (v + 1) as u8).collect();
+            let all: Vec<i8> = space
+                .gather_bytes(&local)
+                .into_iter()
+                .map(|b| b as i8 - 1)
+                .collect();
+            let pixels = all.len() / len;
+            let dense = ndarray::Array2::from_shape_vec((pixels, len), all)
+                .map_err(|e| Error::param("codes", e.to_string()))?;
+            Codes::from_dense(dense.view())
+        }
+    }
 }
 
 /// The lidar operator, every application counted: its sparse forward as a support
@@ -191,6 +239,9 @@ impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Counted<A> {
     }
     fn whole_code_sets(&self) -> Option<Vec<&Arc<Codes>>> {
         self.inner().whole_code_sets()
+    }
+    fn gathered_code_sets(&self) -> Option<Result<Vec<Arc<Codes>>>> {
+        self.inner().gathered_code_sets()
     }
     fn row_weights(&self) -> Option<&[T]> {
         self.inner().row_weights()

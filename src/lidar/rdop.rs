@@ -36,6 +36,15 @@ pub(super) const ADJ_BLOCK_BYTES: usize = 1024 * 1024;
 const ADJ_FLUSH_CHUNKS: usize = 16;
 /// Blocks whose lane partial sums are accumulated in `T` before a flush to `f64`.
 const FLUSH_BLOCKS: usize = 8;
+/// The dense forward's tasks at most: each holds K sums in `f64` until they are added.
+const MAX_FORWARD_TASKS: usize = 64;
+
+/// The tasks of the dense forward over `blocks` blocks: one per [`FLUSH_BLOCKS`] blocks, at
+/// most [`MAX_FORWARD_TASKS`]; a function of the blocks alone, so that the sums' order does not
+/// depend on the number of threads.
+fn forward_tasks(blocks: usize) -> usize {
+    blocks.div_ceil(FLUSH_BLOCKS).clamp(1, MAX_FORWARD_TASKS)
+}
 
 /// The depth slabs of K_s bins: (first bin, chunks of eight bins), at most [`SLAB`] bins each.
 pub(super) fn depth_slabs(ks: usize) -> Vec<(usize, usize)> {
@@ -401,17 +410,25 @@ impl<T: Real> RdOperator<T> {
     }
 
     /// The dense forward: every pixel through the tables.
+    ///
+    /// The blocks go to [`forward_tasks`] tasks of consecutive blocks whatever the number of
+    /// threads, each summing its own blocks in `f64`, and the tasks' sums are added in their
+    /// order: the same values for any thread count.
     fn forward_dense(&self, x: &[T], y: &mut [T]) {
         let k = self.codes.len();
         let nb = self.nblocks();
-        let tasks = rayon::current_num_threads().clamp(1, nb);
+        let tasks = forward_tasks(nb);
         let max_nch = self.slabs.iter().map(|s| s.1).max().unwrap_or(1);
-        let partial: Vec<Work<T>> = (0..tasks)
+        let partial: Vec<Vec<f64>> = (0..tasks)
             .into_par_iter()
             .map(|t| {
                 let mut w = self.pool.take();
-                resize(&mut w.y64, k, 0.0);
-                resize(&mut w.part, k, [T::zero(); 8]);
+                w.y64 = vec![0.0; k];
+                // A task leaves its lane sums at zero (its last flush), so a pooled buffer of
+                // the right length is ready.
+                if w.part.len() != k {
+                    resize(&mut w.part, k, [T::zero(); 8]);
+                }
                 if self.quads {
                     let lines = quad_lines::<T>(self.block_groups, max_nch);
                     resize(&mut w.lines, lines, CacheLine::default());
@@ -430,14 +447,13 @@ impl<T: Real> RdOperator<T> {
                         }
                     }
                 }
-                w
+                let sums = std::mem::take(&mut w.y64);
+                self.pool.give(w);
+                sums
             })
             .collect();
         for (i, yi) in y.iter_mut().enumerate() {
-            *yi = T::of_f64(partial.iter().map(|w| w.y64[i]).sum());
-        }
-        for w in partial {
-            self.pool.give(w);
+            *yi = T::of_f64(partial.iter().map(|s| s[i]).sum());
         }
     }
 

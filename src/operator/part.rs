@@ -126,6 +126,10 @@ impl<T: Real, A: VoxelOperator<T>> VoxelOperator<T> for Part<A> {
     fn column_norms(&self, columns: &[usize]) -> Vec<f64> {
         self.inner.column_norms(columns)
     }
+    /// A column is one unknown's: this part's operator holds all of it (no collective).
+    fn column(&self, c: usize) -> (usize, Vec<f64>) {
+        self.inner.column(c)
+    }
     fn structured_columns(&self) -> bool {
         self.inner.structured_columns()
     }

@@ -9,7 +9,8 @@ use crate::solver::{Observer, Report, Termination};
 use crate::space::{self, Space};
 
 use super::detect::normal_tail;
-use super::method::{estimate_returns_in, run, Method, ReconstructOptions};
+use super::method::{estimate_returns_in, run, Method};
+use super::options::ReconstructOptions;
 use super::peaks::returns;
 use super::pursuit::{
     explained_tolerance, relative_residual, support_pursuit, unexplained_returns, PursuitEnd,
@@ -51,7 +52,8 @@ fn keep_lowest_bic<T>(mut tried: Vec<Tried<T>>, k: usize, stages: &mut Vec<Stage
 pub struct Stage {
     /// The method the stage ran.
     pub method: Method,
-    /// ‖y − Ax‖ / ‖y‖ of its estimate (after the returns are extracted).
+    /// ‖y − Ax‖ / ‖y‖ of its estimate (after the returns are extracted); NaN, with no
+    /// report, for a stage that could not run (its verdict says why).
     pub relative_residual: f64,
     /// Nonzero voxels (returns) of its estimate.
     pub returns: usize,
@@ -65,6 +67,10 @@ pub struct Stage {
 
 impl std::fmt::Display for Stage {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.report.is_none() && self.relative_residual.is_nan() {
+            // A stage that did not run.
+            return write!(f, "{}: {}", self.method, self.verdict);
+        }
         write!(
             f,
             "{}: residual {:.2e}, {} returns",
@@ -364,14 +370,26 @@ fn coarse_stage<T: Real>(
     mut one: Tried<T>,
     mut stages: Vec<Stage>,
 ) -> Result<Auto<T>> {
-    if one.stage.relative_residual <= COARSE_RESIDUAL || op.whole_code_sets().is_none() {
+    if one.stage.relative_residual <= COARSE_RESIDUAL {
         return Ok(finish(one, stages));
     }
-    // An optional stage: if it fails (other than by cancellation), the fit stands.
+    // An optional stage: if it cannot run or fails (other than by cancellation), the fit stands
+    // and a stage says why.
+    let skipped = |why: String| Stage {
+        method: Method::CoarseToFine,
+        relative_residual: f64::NAN,
+        returns: 0,
+        report: None,
+        kept: false,
+        verdict: format!("not run: {why}"),
+    };
     let mut fine = match attempt(op, y, Method::CoarseToFine, options, observer) {
         Ok(fine) => fine,
         Err(e @ crate::error::Error::Cancelled { .. }) => return Err(e),
-        Err(_) => return Ok(finish(one, stages)),
+        Err(e) => {
+            stages.push(skipped(e.to_string()));
+            return Ok(finish(one, stages));
+        }
     };
     // Its amplitudes are tied along surfaces (better amplitudes for a little more residual); its
     // support is judged as the other fits' are, by least squares on it (where it holds at most

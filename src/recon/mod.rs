@@ -9,6 +9,7 @@ mod detect;
 mod method;
 mod metrics;
 mod names;
+mod options;
 mod peaks;
 mod photon;
 mod pursuit;
@@ -19,10 +20,11 @@ mod tiled;
 pub use auto::{Stage, COARSE_RESIDUAL, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
 pub use coarse::COARSE_BLOCK;
 pub use detect::{check_false_rate, normal_upper_quantile, DetectionTest};
-pub use method::{estimate_returns, Method, ReconstructOptions, MAX_RETURNS_ESTIMATE};
+pub use method::{estimate_returns, Method, MAX_RETURNS_ESTIMATE};
 pub use metrics::{
     compare, compare_depth, compare_observed, relative_error, Metrics, ObservedComparison,
 };
+pub use options::ReconstructOptions;
 pub use peaks::{PeakThreshold, PAPER_FRACTION, PAPER_QUANTILE};
 pub use photon::{NoiseModel, PhotonWeighting};
 pub use pursuit::explained_tolerance;

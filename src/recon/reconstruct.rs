@@ -17,7 +17,8 @@ use crate::solver::{refine_surfaces, Observer, RefineParams, Report};
 
 use super::auto::{auto, Stage};
 use super::detect::{check_false_rate, false_rate_test, DetectionTest};
-use super::method::{run, Method, ReconstructOptions};
+use super::method::{run, Method};
+use super::options::ReconstructOptions;
 use super::peaks::returns;
 use super::photon::{photon_weights, NoiseModel, PhotonWeighting};
 

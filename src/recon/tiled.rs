@@ -17,7 +17,8 @@ use crate::lidar::{
 };
 use crate::real::Real;
 
-use super::method::{Method, ReconstructOptions};
+use super::method::Method;
+use super::options::ReconstructOptions;
 use super::reconstruct::{reconstruct_observed, Reconstruction};
 use crate::solver::{Control, IterationInfo, Report, Termination};
 

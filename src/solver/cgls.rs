@@ -124,11 +124,12 @@ impl<T: Real, A: LinearOperator<T> + ?Sized> Iteration<T, A> for CglsIteration<T
         op.apply_with_scratch(&self.p, &mut self.q, &mut self.scratch);
         let pp = space::norm2_sq(space, &self.p);
         let delta = dot(&self.q, &self.q) + lambda * pp;
-        if delta == 0.0 && pp > 0.0 {
-            // A·p is zero to the last bit although p is not. p lies in the span of Aᵀ's columns,
-            // where A vanishes on nothing but zero: the normal-equation residual has fallen
-            // below what the precision resolves (A·p underflowed), and x is as converged as
-            // the arithmetic allows.
+        if delta == 0.0 {
+            // A·p is zero to the last bit, or p itself is: p lies in the span of Aᵀ's columns,
+            // where A vanishes on nothing but zero, so the normal-equation residual has fallen
+            // below what the precision resolves (A·p, or ‖p‖² itself, underflowed), and x is
+            // as converged as the arithmetic allows. A direction of zero curvature ends the run;
+            // it is not a breakdown.
             return Ok(Progress {
                 residual: (self.gamma / self.gamma0).sqrt(),
                 objective: self.objective,

@@ -79,7 +79,7 @@ where
             },
             ..*inner
         };
-        let mut objectives: Vec<f64> = Vec::with_capacity(limit);
+        let mut objectives: Vec<f64> = Vec::new();
         let mut go_on = |info: &IterationInfo<'_, T>| {
             objectives.push(info.objective);
             let k = objectives.len();
