@@ -15,7 +15,8 @@
 //! data of a file read) is computed first and compared with [`available_memory`]: the memory
 //! the system reports available (`MemAvailable` of `/proc/meminfo`, and the room left under a
 //! cgroup v2 memory limit), lowered further by the environment variable `RDLIDAR_MEMORY_LIMIT`
-//! (bytes, or with a suffix K, M, G, T in powers of 1024) when set. A request beyond it is an
+//! when set (see [`parse_bytes`] for its syntax: `4000000000`, `4G`, `4GiB`, `4GB`; a value that
+//! is not a byte count is refused, [`memory_limit`]). A request beyond it is an
 //! [`Error::TooLarge`] stating the bytes needed, what they are for, and what to change.
 
 use crate::error::{Error, Result};
@@ -111,10 +112,11 @@ impl MemoryPlan {
     /// `"lower --size or --pulse-len"`).
     ///
     /// # Errors
-    /// [`Error::TooLarge`] if the plan needs more than is available.
+    /// [`Error::TooLarge`] if the plan needs more than is available; the errors of
+    /// [`memory_limit`].
     pub fn check(&self, request: &str, change: &str) -> Result<()> {
         let needed = self.total();
-        match available_memory() {
+        match available_memory()? {
             Some(available) if needed > available as u128 => Err(Error::TooLarge {
                 request: request.to_string(),
                 needed,
@@ -127,18 +129,56 @@ impl MemoryPlan {
     }
 }
 
+/// The environment variable that lowers the memory budget of every request.
+pub const MEMORY_LIMIT_VAR: &str = "RDLIDAR_MEMORY_LIMIT";
+
 /// The memory a request may use, in bytes: what the system reports available, under a cgroup
 /// memory limit if there is one, and under `RDLIDAR_MEMORY_LIMIT` if set. `None` when nothing
 /// is known (then only the documented bounds apply).
-pub fn available_memory() -> Option<u64> {
+///
+/// # Errors
+/// Those of [`memory_limit`].
+pub fn available_memory() -> Result<Option<u64>> {
+    let env = memory_limit()?;
     let system = std::fs::read_to_string("/proc/meminfo")
         .ok()
         .and_then(|t| meminfo_available(&t));
     let cgroup = cgroup_room();
-    let env = std::env::var("RDLIDAR_MEMORY_LIMIT")
-        .ok()
-        .and_then(|v| parse_bytes(&v));
-    [system, cgroup, env].into_iter().flatten().min()
+    Ok([system, cgroup, env].into_iter().flatten().min())
+}
+
+/// The budget `RDLIDAR_MEMORY_LIMIT` sets, in bytes: `None` when the variable is not set or
+/// empty. Its syntax is [`parse_bytes`]'s.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] named `RDLIDAR_MEMORY_LIMIT` for any other value (a negative
+/// number, an unknown unit, text that is not a number, bytes that are not Unicode): a budget
+/// that was asked for is never ignored.
+pub fn memory_limit() -> Result<Option<u64>> {
+    let Some(value) = std::env::var_os(MEMORY_LIMIT_VAR) else {
+        return Ok(None);
+    };
+    let text = value.to_string_lossy();
+    if text.trim().is_empty() {
+        return Ok(None);
+    }
+    match parse_bytes(&text) {
+        Some(bytes) => Ok(Some(bytes)),
+        None => {
+            let mut shown: String = text.chars().take(40).collect();
+            if text.chars().count() > 40 {
+                shown.push('…');
+            }
+            Err(Error::param(
+                MEMORY_LIMIT_VAR,
+                format!(
+                    "expected a number of bytes ≥ 0, with an optional unit: K, M, G, T or KiB, \
+                     MiB, GiB, TiB (powers of 1024), kB, MB, GB, TB (powers of 1000), e.g. 4G \
+                     or 500MB; got {shown:?}"
+                ),
+            ))
+        }
+    }
 }
 
 /// `MemAvailable` of a `/proc/meminfo` text, in bytes.
@@ -165,18 +205,44 @@ fn cgroup_room() -> Option<u64> {
     Some(max.saturating_sub(current))
 }
 
-/// Parses `123`, `64K`, `1.5G`, `2T` (powers of 1024).
+/// Parses a byte count: a number ≥ 0 (`123`, `1.5e9`; a fraction of a byte is dropped),
+/// optionally followed by a unit, with or without a space and in either case: `K`, `M`, `G`,
+/// `T` and `KiB`, `MiB`, `GiB`, `TiB` in powers of 1024 (`64K`, `1.5G`, `5MiB`); `kB`, `MB`,
+/// `GB`, `TB` in powers of 1000, as the messages print sizes (`5MB` is 5 000 000 bytes); `B`
+/// for bytes. `None` for anything else: a negative number, an unknown unit, `inf` or `nan`,
+/// 2⁶⁴ bytes or more.
 pub fn parse_bytes(text: &str) -> Option<u64> {
+    const UNITS: [(&str, f64); 13] = [
+        ("kib", 1024.0),
+        ("mib", 1048576.0),
+        ("gib", 1073741824.0),
+        ("tib", 1099511627776.0),
+        ("kb", 1e3),
+        ("mb", 1e6),
+        ("gb", 1e9),
+        ("tb", 1e12),
+        ("k", 1024.0),
+        ("m", 1048576.0),
+        ("g", 1073741824.0),
+        ("t", 1099511627776.0),
+        ("b", 1.0),
+    ];
     let t = text.trim();
-    let (num, mult) = match t.chars().last()? {
-        'k' | 'K' => (&t[..t.len() - 1], 1u64 << 10),
-        'm' | 'M' => (&t[..t.len() - 1], 1 << 20),
-        'g' | 'G' => (&t[..t.len() - 1], 1 << 30),
-        't' | 'T' => (&t[..t.len() - 1], 1 << 40),
-        _ => (t, 1),
-    };
-    let v: f64 = num.trim().parse().ok()?;
-    let bytes = v * mult as f64;
+    let lower = t.to_ascii_lowercase();
+    let (num, mult) = UNITS
+        .iter()
+        .find(|(unit, _)| lower.ends_with(unit))
+        .map_or((t, 1.0), |&(unit, mult)| (&t[..t.len() - unit.len()], mult));
+    let num = num.trim_end();
+    // What `f64::from_str` takes but a count is not: a sign, `inf`, `nan`.
+    if num.starts_with(['-', '+'])
+        || !num
+            .chars()
+            .all(|c| c.is_ascii_digit() || matches!(c, '.' | 'e' | 'E' | '+' | '-'))
+    {
+        return None;
+    }
+    let bytes = num.parse::<f64>().ok()? * mult;
     (bytes.is_finite() && bytes >= 0.0 && bytes < u64::MAX as f64).then_some(bytes as u64)
 }
 
@@ -200,8 +266,22 @@ mod tests {
         assert_eq!(parse_bytes("1G"), Some(1 << 30));
         assert_eq!(parse_bytes("1.5k"), Some(1536));
         assert_eq!(parse_bytes("42"), Some(42));
-        assert_eq!(parse_bytes("-1"), None);
-        assert_eq!(parse_bytes("lots"), None);
+        assert_eq!(parse_bytes(" 42 "), Some(42));
+        assert_eq!(parse_bytes("1e9"), Some(1_000_000_000));
+        assert_eq!(parse_bytes("5MiB"), Some(5 << 20));
+        assert_eq!(parse_bytes("5 mib"), Some(5 << 20));
+        assert_eq!(parse_bytes("5MB"), Some(5_000_000));
+        assert_eq!(parse_bytes("5kB"), Some(5_000));
+        assert_eq!(parse_bytes("2 GB"), Some(2_000_000_000));
+        assert_eq!(parse_bytes("1TiB"), Some(1 << 40));
+        assert_eq!(parse_bytes("100B"), Some(100));
+        assert_eq!(parse_bytes("0"), Some(0));
+        for bad in [
+            "-1", "-1M", "+5", "lots", "", "MB", "5XB", "5 M B", "inf", "nan", "1e30", "5e",
+            "0x10", "5PB", "5MB5",
+        ] {
+            assert_eq!(parse_bytes(bad), None, "{bad:?}");
+        }
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! The scalar types the crate computes with.
 
-use std::fmt::{Debug, Display};
+use std::fmt::{Debug, Display, LowerExp};
 use std::iter::Sum;
 
 use num_traits::Float;
@@ -27,6 +27,7 @@ pub trait Real:
     + nalgebra::Scalar
     + Default
     + Display
+    + LowerExp
     + Debug
     + Sum
     + Send

@@ -375,6 +375,25 @@ fn a_second_interrupt_leaves_nothing_new() {
     }
 }
 
+// SIGTERM (`kill`, a batch system; `mpirun` sends it to every process of a job it stops, a
+// second before SIGKILL) killed the sweep at once and left its hidden staging folder beside
+// the output folder. It now quits at once leaving nothing new, with status 143.
+#[test]
+fn a_termination_leaves_nothing_new() {
+    let dir = TempDir::new("sigterm");
+    let out = dir.path("cmp");
+    let child = start_long_sweep(&dir, &out);
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let res = child.wait_with_output().unwrap();
+    assert_eq!(res.status.code(), Some(143), "{}", stderr(&res));
+    assert!(stderr(&res).contains("terminated"), "{}", stderr(&res));
+    assert!(dir.listing().is_empty(), "{:?}", dir.listing());
+}
+
 #[test]
 fn progress_is_logged_as_lines_when_stderr_is_not_a_terminal() {
     let dir = TempDir::new("lines");

@@ -13,6 +13,7 @@ mod cli;
 mod cli_adjoint;
 mod cli_architecture_variants;
 mod cli_architectures;
+mod cli_bad_input;
 mod cli_bench;
 mod cli_codes;
 mod cli_dottest;

@@ -21,7 +21,7 @@ const JOB_LIMIT: Duration = Duration::from_secs(120);
 
 /// The binary under `mpirun -q -n ranks` (one rayon thread per process, as root and
 /// oversubscribed if need be), its output captured.
-fn mpirun_command(ranks: usize) -> Command {
+pub(crate) fn mpirun_command(ranks: usize) -> Command {
     let mut c = Command::new("mpirun");
     c.args([
         "-q",

@@ -382,6 +382,20 @@ fn invalid_parameters_are_typed_errors() {
     let mut small = vec![1.0f32; 8];
     non_finite(add_gaussian(&mut small, 1e300, 0));
     assert_eq!(small, vec![1.0f32; 8]);
+    // A full scale beyond f32 puts every level beyond it: refused naming the full scale (it
+    // was a non-finite value in the measurements), in a model too; fine in f64.
+    param_err(
+        quantize(&mut small, 8, FullScale::Fixed(1e300)),
+        "full_scale",
+    );
+    let adc = NoiseModel::none().then(NoiseStage::Quantized {
+        bits: 8,
+        full_scale: FullScale::Fixed(1e300),
+    });
+    param_err(adc.apply(&mut small, 0), "full_scale");
+    assert_eq!(small, vec![1.0f32; 8]);
+    let mut wide = vec![1.0f64; 8];
+    assert!(quantize(&mut wide, 8, FullScale::Fixed(1e300)).is_ok());
 
     let model = NoiseModel::none()
         .then(NoiseStage::GaussianSigma { sigma: 0.1 })

@@ -117,7 +117,9 @@ def _real_array(a: Any, dtype: np.dtype, what: str) -> np.ndarray:
     if arr.dtype.kind not in "fiub":
         raise TypeError(f"{what}: expected a real numeric array, got dtype {arr.dtype}")
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-        out = np.ascontiguousarray(arr, dtype=dtype)
+        # ascontiguousarray makes a 0-d array 1-D: keep the shape given, so that a scalar
+        # where an array is expected is refused as the command line refuses it.
+        out = np.ascontiguousarray(arr, dtype=dtype).reshape(arr.shape)
     if arr.dtype != out.dtype and arr.size:
         with np.errstate(all="ignore"):
             lost = np.isfinite(arr) & ~np.isfinite(out)
@@ -556,7 +558,8 @@ def simulate(
             raise ValueError(f"out: {os.fspath(out)!r:.60} exists and is not a folder")
         if not os.path.isdir(parent):
             raise ValueError(f"out: the parent folder {parent!r:.60} does not exist")
-    if out is not None and not force and os.path.isdir(out) and os.listdir(out):
+    # The temporary files of a writer that was killed do not count (they are removed).
+    if out is not None and not force and os.path.isdir(out) and _rdlidar.holds_files(out):
         raise ValueError(
             f"out: {os.fspath(out)!r:.60} exists and is not empty; pass force=True to replace its "
             "scene.npy, pulse.npy, codes.npy, meas.npy and meta.json"

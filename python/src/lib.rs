@@ -19,13 +19,13 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use rdlidar::acquisition::{
-    check_finite, check_finite_result, check_pulse, pulse_in, simulation_meta, write_simulation,
-    Acquisition, AcquisitionFiles, Clipping, CodeStore, CodesFormat, InputNames, Reconstructed,
-    SimulationRequest, Streaming, Use,
+    check_finite, check_finite_result, check_pulse, pulse_in, simulation_meta,
+    write_simulation_cancellable, Acquisition, AcquisitionFiles, Clipping, CodeStore, CodesFormat,
+    InputNames, Reconstructed, SimulationRequest, Streaming, Use,
 };
 use rdlidar::lidar::{
-    simulate as simulate_scene, simulate_supplied, zero_mean, Architecture, Cancellable, Codes,
-    Geometry, Scene, SimulationSpec, TileSize, DEFAULT_TAU_S,
+    simulate_cancellable, zero_mean, Architecture, Cancellable, Codes, Geometry, Scene, Simulation,
+    SimulationSpec, TileSize, DEFAULT_TAU_S,
 };
 use rdlidar::operator::{BoxedOperator, DotTest, LinearOperator};
 use rdlidar::recon::{compare, Method, NoiseModel, ReconstructOptions, TileReconstruction};
@@ -448,7 +448,8 @@ impl PyOperator {
         if let Some(t) = tolerance {
             if !(t.is_finite() && t > 0.0) {
                 return Err(PyValueError::new_err(format!(
-                    "tolerance: must be positive and finite, got {t}"
+                    "tolerance: must be positive and finite, got {}",
+                    rdlidar::units::number(t)
                 )));
             }
             test = test.tolerance(t);
@@ -562,6 +563,74 @@ fn simulate<'py>(
     Ok(d)
 }
 
+/// The codes of a simulation as `simulate` returns them, with their shape.
+enum CodesArray {
+    /// int8 samples −1, 0, +1.
+    Int8(Vec<usize>, Vec<i8>),
+    /// ±1 samples packed as `np.packbits(S > 0, axis=-1)` writes them.
+    Packed(Vec<usize>, Vec<u8>),
+}
+
+/// The codes of `sim` as `format` gives them (none for seeded codes), pixel by pixel until
+/// `cancel` is raised; a coded aperture's inactive pixels have zero codes.
+fn codes_array<T>(
+    sim: &Simulation<T>,
+    format: CodesFormat,
+    cancel: &AtomicBool,
+) -> rdlidar::Result<Option<CodesArray>> {
+    let g = sim.spec.geometry;
+    let k = g.samples(sim.spec.pulse_len);
+    let sets = sim.code_sets.len();
+    let shape = |last: usize| match sim.spec.architecture {
+        Architecture::MultiAdc(_) => vec![sets, g.m, g.n, last],
+        _ => vec![g.m, g.n, last],
+    };
+    let go_on = || {
+        if cancel.load(Ordering::Relaxed) {
+            Err(rdlidar::Error::Cancelled {
+                what: "simulate".into(),
+            })
+        } else {
+            Ok(())
+        }
+    };
+    match format {
+        CodesFormat::Seed => Ok(None),
+        CodesFormat::Packed => {
+            let nb = k.div_ceil(8);
+            let mut bytes = Vec::with_capacity(sets * g.pixels() * nb);
+            for c in &sim.code_sets {
+                go_on()?;
+                bytes.extend(c.to_packbits()?);
+            }
+            Ok(Some(CodesArray::Packed(shape(nb), bytes)))
+        }
+        CodesFormat::Int8 => {
+            let keep = sim.active.as_ref().map(|active| {
+                let mut keep = vec![false; g.pixels()];
+                for &p in active {
+                    keep[p] = true;
+                }
+                keep
+            });
+            let mut dense = Vec::with_capacity(sets * g.pixels() * k);
+            for c in &sim.code_sets {
+                for p in 0..g.pixels() {
+                    if p.is_multiple_of(256) {
+                        go_on()?;
+                    }
+                    if keep.as_ref().is_some_and(|keep| !keep[p]) {
+                        dense.resize(dense.len() + k, 0);
+                    } else {
+                        dense.extend((0..k).map(|t| c.get(p, t)));
+                    }
+                }
+            }
+            Ok(Some(CodesArray::Int8(shape(k), dense)))
+        }
+    }
+}
+
 fn fill_simulation<'py, T: Real + numpy::Element + ndarray_npy::WritableElement>(
     py: Python<'py>,
     request: &SimulationRequest,
@@ -571,65 +640,37 @@ fn fill_simulation<'py, T: Real + numpy::Element + ndarray_npy::WritableElement>
     d: &Bound<'py, PyDict>,
 ) -> PyResult<()> {
     let format = request.codes_format;
-    let sim = py
-        .detach(|| {
-            let mut sim = match request.supplied_scene::<T>()? {
-                Some(scene) => simulate_supplied::<T>(spec, scene),
-                None => simulate_scene::<T>(spec),
-            }?;
-            sim.scene_source = request.scene_source();
-            Ok::<_, rdlidar::Error>(sim)
-        })
-        .map_err(value_error)?;
-    let meta = match out {
-        Some(dir) => py
-            .detach(|| write_simulation(dir, &sim, format, force))
-            .map_err(value_error)?,
-        None => simulation_meta(&sim, format),
-    };
-    let g = spec.geometry;
-    let k = g.samples(spec.pulse_len);
-    let multi = matches!(spec.architecture, Architecture::MultiAdc(_));
-    let codes: Option<Py<PyAny>> = match format {
-        CodesFormat::Seed => None,
-        CodesFormat::Packed => {
-            let nb = k.div_ceil(8);
-            let mut bytes = Vec::with_capacity(sim.code_sets.len() * g.pixels() * nb);
-            for c in &sim.code_sets {
-                bytes.extend(c.to_packbits().map_err(value_error)?);
-            }
-            let shape: Vec<usize> = if multi {
-                vec![sim.code_sets.len(), g.m, g.n, nb]
-            } else {
-                vec![g.m, g.n, nb]
-            };
-            let a = numpy::ndarray::ArrayD::from_shape_vec(shape, bytes)
+    // The work runs with the GIL released on a thread of its own while this one watches for
+    // Ctrl-C, as the solvers do: a Ctrl-C cancels it at its next step and leaves nothing in
+    // `out`.
+    let observer = PyObserver::new(None);
+    let cancel = &observer.cancel;
+    let result = observer.watch(py, || {
+        let supplied = request.supplied_scene::<T>()?;
+        let mut sim = simulate_cancellable::<T>(spec, supplied, cancel)?;
+        sim.scene_source = request.scene_source();
+        let codes = codes_array(&sim, format, cancel)?;
+        // The files last: once they are in place, there is nothing left to cancel.
+        let meta = match out {
+            Some(dir) => write_simulation_cancellable(dir, &sim, format, force, cancel)?,
+            None => simulation_meta(&sim, format),
+        };
+        Ok::<_, rdlidar::Error>((sim, meta, codes))
+    });
+    if let Some(e) = observer.failure() {
+        return Err(e);
+    }
+    let (sim, meta, codes) = result.map_err(value_error)?;
+    let k = spec.geometry.samples(spec.pulse_len);
+    let codes: Option<Py<PyAny>> = match codes {
+        None => None,
+        Some(CodesArray::Int8(shape, dense)) => {
+            let a = numpy::ndarray::ArrayD::from_shape_vec(shape, dense)
                 .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
             Some(a.into_pyarray(py).into_any().unbind())
         }
-        CodesFormat::Int8 => {
-            let mut dense = Vec::with_capacity(sim.code_sets.len() * g.pixels() * k);
-            for c in &sim.code_sets {
-                let mut s = c.to_dense();
-                if let Some(active) = &sim.active {
-                    let mut keep = vec![false; g.pixels()];
-                    for &p in active {
-                        keep[p] = true;
-                    }
-                    for (p, mut row) in s.outer_iter_mut().enumerate() {
-                        if !keep[p] {
-                            row.fill(0);
-                        }
-                    }
-                }
-                dense.extend(s.iter().copied());
-            }
-            let shape: Vec<usize> = if multi {
-                vec![sim.code_sets.len(), g.m, g.n, k]
-            } else {
-                vec![g.m, g.n, k]
-            };
-            let a = numpy::ndarray::ArrayD::from_shape_vec(shape, dense)
+        Some(CodesArray::Packed(shape, bytes)) => {
+            let a = numpy::ndarray::ArrayD::from_shape_vec(shape, bytes)
                 .map_err(|e| PyValueError::new_err(format!("codes: {e}")))?;
             Some(a.into_pyarray(py).into_any().unbind())
         }
@@ -805,7 +846,8 @@ fn fista<'py>(
         Some(s) if s.is_finite() && s > 0.0 => StepRule::Fixed { lipschitz: 1.0 / s },
         Some(s) => {
             return Err(PyValueError::new_err(format!(
-                "step: must be positive and finite, got {s}"
+                "step: must be positive and finite, got {}",
+                rdlidar::units::number(s)
             )))
         }
         None => StepRule::default(),
@@ -1134,6 +1176,13 @@ fn metrics<'py>(
     Ok(d)
 }
 
+/// Whether the folder `path` holds files (the temporary files that a killed writer left aside):
+/// an output folder that only `force` may write into.
+#[pyfunction]
+fn holds_files(path: std::path::PathBuf) -> PyResult<bool> {
+    rdlidar::io::holds_files(&path).map_err(value_error)
+}
+
 /// The names of the reconstruction methods, as `reconstruct` takes them.
 #[pyfunction]
 fn solvers() -> Vec<&'static str> {
@@ -1143,6 +1192,12 @@ fn solvers() -> Vec<&'static str> {
 /// The Rust core of the `rdlidar` Python package.
 #[pymodule]
 fn _rdlidar(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // NumPy's C API is set up by the first array made, and the setup runs Python code
+    // (numpy.lib.NumpyVersion), where an exception such as a pending Ctrl-C becomes a panic of
+    // rust-numpy (a PanicException): set it up now, at import, before any work can be
+    // interrupted.
+    PyModule::import(m.py(), "numpy")?;
+    let _api = Vec::<f64>::new().into_pyarray(m.py());
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<PyOperator>()?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
@@ -1150,5 +1205,6 @@ fn _rdlidar(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fista, m)?)?;
     m.add_function(wrap_pyfunction!(metrics, m)?)?;
     m.add_function(wrap_pyfunction!(solvers, m)?)?;
+    m.add_function(wrap_pyfunction!(holds_files, m)?)?;
     Ok(())
 }

@@ -165,3 +165,64 @@ def test_bad_simulations_and_metrics():
     with pytest.raises(ValueError) as e:
         rdlidar.metrics(np.zeros((2, 2, 3)), np.zeros((2, 2, 4)))
     one_line(e, "estimate")
+
+
+# A bad-input campaign (B01 ... B08 of tests/cli_bad_input.rs): the same rules as the command
+# line's.
+
+
+@pytest.mark.parametrize("value", ["5XB", "-1", "lots", "1e30", "-5MB", "5 M B"])
+def test_b01_an_invalid_memory_limit_is_refused_not_ignored(monkeypatch, value):
+    monkeypatch.setenv("RDLIDAR_MEMORY_LIMIT", value)
+    with pytest.raises(ValueError) as e:
+        rdlidar.simulate(size=(4, 4, 4), pulse_len=50)
+    one_line(e, "RDLIDAR_MEMORY_LIMIT", repr(value).replace("'", '"'))
+
+
+@pytest.mark.parametrize("value,shown", [("5MB", "5 MB"), ("5MiB", "5.24 MB"), ("5M", "5.24 MB")])
+def test_b01_memory_limits_with_units_are_applied(monkeypatch, value, shown):
+    monkeypatch.setenv("RDLIDAR_MEMORY_LIMIT", value)
+    with pytest.raises(MemoryError) as e:
+        rdlidar.simulate(size=(200, 200, 40), pulse_len=100)  # a scene of 12.8 MB
+    one_line(e, f"the {shown} of memory")
+    monkeypatch.setenv("RDLIDAR_MEMORY_LIMIT", "1G")
+    assert rdlidar.simulate(size=(4, 4, 4), pulse_len=50).meas.shape == (53,)
+
+
+def test_b02_numbers_of_any_size_are_echoed_in_a_few_characters():
+    # clipped=1e-300 gave a message of 763 characters, the level in full decimal.
+    sim = rdlidar.simulate(size=(8, 8, 6), pulse_len=100, seed=3)
+    cases = [
+        (lambda: rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 6, solver="cgls",
+                                     clipped=1e-300), ("clipped", "1e-300")),
+        (lambda: rdlidar.simulate(size=(8, 8, 6), pulse_len=100, snr_db=-1e308),
+         ("snr_db", "-1e308")),
+    ]
+    for call, needles in cases:
+        with pytest.raises(ValueError) as e:
+            call()
+        one_line(e, *needles)
+        msg = str(e.value)
+        assert len(msg) < 300 and "00000000" not in msg, msg
+
+
+def test_b03_a_full_scale_beyond_float32_names_full_scale(tmp_path):
+    out = tmp_path / "run"
+    with pytest.raises(ValueError) as e:
+        rdlidar.simulate(size=(8, 8, 6), pulse_len=100, adc_bits=8, full_scale=1e300,
+                         dtype=np.float32, out=out)
+    one_line(e, "full_scale", "1e300", "f32", "f64")
+    assert not out.exists()
+    sim = rdlidar.simulate(size=(8, 8, 6), pulse_len=100, adc_bits=8, full_scale=1e300)
+    assert np.isfinite(sim.meas).all()
+
+
+def test_b04_a_0d_pulse_is_refused_as_on_the_command_line(problem):
+    _, codes = problem
+    for p in (np.float64(1.0), np.array(1.0), 1.0):
+        with pytest.raises(ValueError) as e:
+            rdlidar.RdOperator(p, codes[..., :5], 5)  # K = 1 + 5 - 1
+        one_line(e, "pulse", "1-D")
+        with pytest.raises(ValueError) as e:
+            rdlidar.reconstruct(p, codes[..., :5], np.zeros(5), 5)
+        one_line(e, "pulse", "1-D")

@@ -48,7 +48,7 @@ impl FromStr for Clipping {
 impl fmt::Display for Clipping {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Clipping::Level(level) => write!(f, "|y| ≥ {level}"),
+            Clipping::Level(level) => write!(f, "|y| ≥ {}", crate::units::number(*level)),
             Clipping::Top => write!(f, "each ADC's top and bottom codes"),
         }
     }
@@ -63,7 +63,10 @@ impl Clipping {
         match self {
             Clipping::Level(level) if !(level.is_finite() && level > 0.0) => Err(Error::param(
                 "clipped",
-                format!("the clipping level must be finite and > 0, got {level}"),
+                format!(
+                    "the clipping level must be finite and > 0, got {}",
+                    crate::units::number(level)
+                ),
             )),
             c => Ok(c),
         }

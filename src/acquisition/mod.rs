@@ -74,7 +74,8 @@ pub use reconstructed::{observe_nothing, Reconstructed};
 pub use rules::{check_finite, check_finite_result, check_pulse, count_of, pulse_in};
 pub use share::Share;
 pub use simulation::{
-    codes_shape, simulation_meta, write_simulation, CodesFormat, SimulationRequest, SCENES,
+    codes_shape, simulation_meta, write_simulation, write_simulation_cancellable, CodesFormat,
+    SimulationRequest, SCENES,
 };
 
 /// Seeded codes of one ADC larger than this (as packed bits) are regenerated block by block

@@ -4,6 +4,7 @@
 //! seeded codes), `meas.npy` and `meta.json`.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use ndarray_npy::WritableElement;
 
@@ -202,7 +203,7 @@ impl SimulationRequest {
             if !(0.0..=1.0).contains(&f) {
                 return Err(Error::param(
                     "lit_fraction",
-                    format!("must be in [0, 1], got {f}"),
+                    format!("must be in [0, 1], got {}", crate::units::number(f)),
                 ));
             }
         }
@@ -210,13 +211,16 @@ impl SimulationRequest {
             if !(0.0..1.0).contains(&p) {
                 return Err(Error::param(
                     "ternary_zero_prob",
-                    format!("must be in [0, 1), got {p}"),
+                    format!("must be in [0, 1), got {}", crate::units::number(p)),
                 ));
             }
         }
         if let Some(s) = self.snr_db {
             if !s.is_finite() {
-                return Err(Error::param("snr_db", format!("must be finite, got {s}")));
+                return Err(Error::param(
+                    "snr_db",
+                    format!("must be finite, got {}", crate::units::number(s)),
+                ));
             }
         }
         let (photon_noise, quantization) = self.noise_stages()?;
@@ -224,7 +228,7 @@ impl SimulationRequest {
             if !(f > 0.0 && f <= 1.0) {
                 return Err(Error::param(
                     "aperture",
-                    format!("must be in (0, 1], got {f}"),
+                    format!("must be in (0, 1], got {}", crate::units::number(f)),
                 ));
             }
         }
@@ -482,7 +486,31 @@ pub fn write_simulation<T: Real + WritableElement>(
     format: CodesFormat,
     force: bool,
 ) -> Result<SimulationMeta> {
+    write_simulation_cancellable(dir, sim, format, force, &AtomicBool::new(false))
+}
+
+/// [`write_simulation`], cancelled by `cancel`: once it is raised (from another thread, e.g. on
+/// Ctrl-C), the writing stops before its next file and leaves nothing new behind.
+///
+/// # Errors
+/// As [`write_simulation`]; [`Error::Cancelled`] when `cancel` was raised.
+pub fn write_simulation_cancellable<T: Real + WritableElement>(
+    dir: &Path,
+    sim: &Simulation<T>,
+    format: CodesFormat,
+    force: bool,
+    cancel: &AtomicBool,
+) -> Result<SimulationMeta> {
     io::check_output_dir(dir, force, &format!("its {}", SIMULATION_FILES.join(", ")))?;
+    let go_on = || {
+        if cancel.load(Ordering::Relaxed) {
+            Err(Error::Cancelled {
+                what: format!("writing {}", dir.display()),
+            })
+        } else {
+            Ok(())
+        }
+    };
     let meta = simulation_meta(sim, format);
     let mut json = serde_json::to_string_pretty(&meta)
         .map_err(|e| io::file_error(dir, format!("cannot format meta.json: {e}")))?;
@@ -498,6 +526,9 @@ pub fn write_simulation<T: Real + WritableElement>(
     if created {
         std::fs::create_dir(dir)
             .map_err(|e| io::file_error(dir, format!("cannot create the directory: {e}")))?;
+    } else {
+        // What a writer killed in this folder left (check_output_dir did not count it).
+        io::remove_stale_temporaries(dir);
     }
     let g = sim.spec.geometry;
     let written = (|| -> Result<Vec<PathBuf>> {
@@ -505,10 +536,14 @@ pub fn write_simulation<T: Real + WritableElement>(
         let grid = (g.m, g.n);
         let codes = &sim.code_sets[0];
         let multi = matches!(sim.spec.architecture, Architecture::MultiAdc(_));
-        let mut staged: Vec<StagedFile> = vec![
-            io::stage_array(f_scene, sim.scene.data())?,
-            io::stage_array(f_pulse, &ndarray::ArrayView1::from(sim.pulse.as_slice()))?,
-        ];
+        go_on()?;
+        let mut staged: Vec<StagedFile> = vec![io::stage_array(f_scene, sim.scene.data())?];
+        go_on()?;
+        staged.push(io::stage_array(
+            f_pulse,
+            &ndarray::ArrayView1::from(sim.pulse.as_slice()),
+        )?);
+        go_on()?;
         // Seeded codes have no file: meta.json describes them.
         match (format, multi, &sim.active) {
             (CodesFormat::Seed, _, _) => {}
@@ -529,8 +564,10 @@ pub fn write_simulation<T: Real + WritableElement>(
                 staged.push(io::stage_packed_codes(f_codes, grid, codes)?)
             }
         }
+        go_on()?;
         staged.push(io::stage_array(f_meas, &meas)?);
         staged.push(io::stage_bytes(f_meta, json.as_bytes())?);
+        go_on()?;
         io::commit_all(staged)
     })();
     match written {

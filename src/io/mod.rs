@@ -8,7 +8,11 @@
 //! (`.NAME.tmp-<pid>-<n>`), which is flushed, synced to disk and then renamed over the destination.
 //! On any error the temporary file is removed, so a destination is either left as it was or
 //! replaced by a complete file, never by a partial one. A destination that exists and is not a
-//! regular file (a device such as `/dev/null`, a FIFO) is written in place, never renamed over.
+//! regular file (a device such as `/dev/null`, a FIFO) is written in place, never renamed over;
+//! a socket is refused. A process that must quit at once (Ctrl-C) removes its temporary files
+//! with [`abandon_staged_files`]; those of a process that was killed (`kill -9`) are recognised
+//! by the process id in their name and removed by the next write into their folder
+//! ([`remove_stale_temporaries`]).
 //!
 //! ```no_run
 //! use rdlidar::io::{read_pulse, write_measurements};
@@ -25,10 +29,12 @@ pub mod npy;
 #[cfg(feature = "images")]
 mod png;
 
+use std::ffi::OsStr;
 use std::fs::{File, OpenOptions};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard};
 
 use crate::error::{Error, Result};
 
@@ -104,7 +110,8 @@ pub fn same_destination(a: &Path, b: &Path) -> bool {
 
 /// Checks, before any work, that outputs can be written into the folder `dir`: an existing
 /// folder must be empty unless `force` (`replaced` names what `--force` would replace), a new one
-/// needs an existing parent. Nothing is created.
+/// needs an existing parent. The temporary files of writers that no longer run (see
+/// [`remove_stale_temporaries`]) do not count. Nothing is created.
 ///
 /// # Errors
 /// [`Error::File`] naming `dir`: it is not a folder, it is not empty (without `force`), it cannot
@@ -114,9 +121,7 @@ pub fn check_output_dir(dir: &Path, force: bool, replaced: &str) -> Result<()> {
         if !dir.is_dir() {
             return Err(file_error(dir, "exists and is not a folder (--out)"));
         }
-        let mut entries = std::fs::read_dir(dir)
-            .map_err(|e| file_error(dir, format!("cannot read the folder: {e}")))?;
-        if entries.next().is_some() && !force {
+        if holds_files(dir)? && !force {
             return Err(file_error(
                 dir,
                 format!(
@@ -140,11 +145,69 @@ pub fn check_output_dir(dir: &Path, force: bool, replaced: &str) -> Result<()> {
     Ok(())
 }
 
+/// What an existing path that is not a regular file is, in words: `"a FIFO"`, `"a socket"`, `"a
+/// character device"`, `"a block device"`, `"a folder"`. `None` for a regular file (after
+/// symbolic links) and for a path that does not exist.
+pub fn special_file_kind(path: &Path) -> Option<&'static str> {
+    let meta = std::fs::metadata(path).ok()?;
+    let kind = meta.file_type();
+    if kind.is_file() {
+        return None;
+    }
+    if kind.is_dir() {
+        return Some("a folder");
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_fifo() {
+            return Some("a FIFO");
+        }
+        if kind.is_socket() {
+            return Some("a socket");
+        }
+        if kind.is_char_device() {
+            return Some("a character device");
+        }
+        if kind.is_block_device() {
+            return Some("a block device");
+        }
+    }
+    Some("not a regular file")
+}
+
+/// Whether the folder `dir` holds anything but the temporary files of writers that no longer
+/// run (see [`remove_stale_temporaries`]): what makes an output folder not empty.
+///
+/// # Errors
+/// [`Error::File`] naming `dir` if it cannot be read.
+pub fn holds_files(dir: &Path) -> Result<bool> {
+    let mut entries = std::fs::read_dir(dir)
+        .map_err(|e| file_error(dir, format!("cannot read the folder: {e}")))?;
+    Ok(entries.any(|entry| match entry {
+        Ok(entry) => !stale_temporary(dir, &entry.file_name()),
+        Err(_) => true,
+    }))
+}
+
 /// Opens an existing destination that is not a regular file for writing in place. A FIFO
 /// without a reader is refused at once instead of waiting for one: it is opened without
-/// blocking (ENXIO when nobody reads), then switched back to blocking writes.
+/// blocking (ENXIO when nobody reads), then switched back to blocking writes. A socket is
+/// refused: it cannot be opened as a file.
 fn open_in_place(dest: &Path) -> Result<File> {
-    let fail = |e: std::io::Error| file_error(dest, format!("cannot open for writing: {e}"));
+    let kind = special_file_kind(dest).unwrap_or("not a regular file");
+    if kind == "a socket" {
+        return Err(file_error(
+            dest,
+            "is a socket, not a file: an output cannot be written to a socket",
+        ));
+    }
+    let fail = |e: std::io::Error| {
+        file_error(
+            dest,
+            format!("is {kind}, which cannot be opened for writing: {e}"),
+        )
+    };
     #[cfg(unix)]
     {
         use std::os::unix::fs::OpenOptionsExt;
@@ -154,7 +217,7 @@ fn open_in_place(dest: &Path) -> Result<File> {
             .custom_flags(libc::O_NONBLOCK)
             .open(dest)
             .map_err(|e| {
-                if e.raw_os_error() == Some(libc::ENXIO) {
+                if e.raw_os_error() == Some(libc::ENXIO) && kind == "a FIFO" {
                     file_error(dest, "is a FIFO that nobody reads: start its reader first")
                 } else {
                     fail(e)
@@ -179,6 +242,98 @@ fn open_in_place(dest: &Path) -> Result<File> {
 /// Distinguishes the temporary files of one process.
 static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
 
+/// The temporary files of this process's staged files, from their creation until they are
+/// renamed into place or removed. The lock is held while one is created, renamed or removed,
+/// so that [`abandon_staged_files`] sees every one and none appears after it.
+static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn live() -> MutexGuard<'static, Vec<PathBuf>> {
+    LIVE.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// What [`abandon_staged_files`] returns: while it is held, no staged file can be created,
+/// renamed into place or dropped (those calls wait for it). The process is to exit holding it.
+#[derive(Debug)]
+#[must_use = "the process must exit while it holds this, or staged files wait forever"]
+pub struct AbandonedStaging {
+    _live: MutexGuard<'static, Vec<PathBuf>>,
+}
+
+/// Removes the temporary file of every staged file of this process not yet renamed into place,
+/// waiting first for a set being renamed by [`commit_all`] to be complete: for a process that
+/// must quit at once (Ctrl-C, SIGTERM), which exits while it holds the value returned. Each
+/// destination is then either as it was or a complete file, and no temporary file is left.
+pub fn abandon_staged_files() -> AbandonedStaging {
+    let live = live();
+    for tmp in live.iter() {
+        let _ = std::fs::remove_file(tmp);
+    }
+    AbandonedStaging { _live: live }
+}
+
+/// Whether the process `pid` runs (on this machine). Without a way to know, every process runs.
+pub(crate) fn process_runs(pid: u32) -> bool {
+    #[cfg(unix)]
+    {
+        let Ok(pid) = libc::pid_t::try_from(pid) else {
+            return false;
+        };
+        if pid <= 0 {
+            return false;
+        }
+        // SAFETY: signal 0 only checks that the process exists and may be signalled.
+        let sent = unsafe { libc::kill(pid, 0) };
+        sent == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = pid;
+        true
+    }
+}
+
+/// Whether `name`, in the folder `dir`, is the temporary file of a staged file (`.NAME.tmp-PID-N`)
+/// whose writer no longer runs: a process killed while it wrote (`kill -9`, a power cut, or a
+/// version of this crate without an interrupt handler). No one can complete or rename it.
+fn stale_temporary(dir: &Path, name: &OsStr) -> bool {
+    let Some(name) = name.to_str() else {
+        return false;
+    };
+    let Some((head, tail)) = name.rsplit_once(".tmp-") else {
+        return false;
+    };
+    let Some((pid, n)) = tail.split_once('-') else {
+        return false;
+    };
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    if head.len() < 2 || !head.starts_with('.') || !digits(pid) || !digits(n) {
+        return false;
+    }
+    let Ok(pid) = pid.parse::<u32>() else {
+        return true;
+    };
+    if pid == std::process::id() {
+        let path = dir.join(name);
+        return !live().contains(&path);
+    }
+    !process_runs(pid)
+}
+
+/// Removes the temporary files of staged files in `dir` whose writers no longer run (see
+/// [`check_output_dir`]), so that a write into a folder a killed process was writing leaves
+/// nothing of it. Best effort: a file that cannot be removed stays. Returns how many were
+/// removed.
+pub fn remove_stale_temporaries(dir: &Path) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .filter(|entry| stale_temporary(dir, &entry.file_name()))
+        .filter(|entry| std::fs::remove_file(entry.path()).is_ok())
+        .count()
+}
+
 /// A file written under a temporary name next to its destination and renamed into place by
 /// [`StagedFile::commit`].
 ///
@@ -198,8 +353,9 @@ static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
 /// ```
 ///
 /// A destination that exists and is not a regular file (a character device such as
-/// `/dev/null`, a FIFO, a socket) is never renamed over: it is opened and written in place,
-/// and committing only flushes it.
+/// `/dev/null`, a FIFO) is never renamed over: it is opened and written in place, and
+/// committing only flushes it. A socket is refused, and so is a destination that stopped being
+/// a regular file while the temporary file was written.
 #[derive(Debug)]
 pub struct StagedFile {
     dest: PathBuf,
@@ -214,8 +370,8 @@ impl StagedFile {
     /// Creates the temporary file for `dest` in `dest`'s directory.
     ///
     /// # Errors
-    /// [`Error::File`] naming `dest` if it has no file name or the temporary file cannot be created
-    /// (e.g. the directory does not exist or is not writable).
+    /// [`Error::File`] naming `dest` if it has no file name, is a socket, or the temporary file
+    /// cannot be created (e.g. the directory does not exist or is not writable).
     pub fn create(dest: impl AsRef<Path>) -> Result<Self> {
         let dest = dest.as_ref().to_path_buf();
         let name = dest
@@ -246,14 +402,16 @@ impl StagedFile {
         loop {
             let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
             let tmp = dir.join(format!(".{name}.tmp-{pid}-{n}"));
+            let mut live = live();
             match OpenOptions::new().write(true).create_new(true).open(&tmp) {
                 Ok(file) => {
+                    live.push(tmp.clone());
                     return Ok(StagedFile {
                         dest,
                         tmp: Some(tmp),
                         writer: Some(BufWriter::with_capacity(1 << 20, file)),
                         committed: false,
-                    })
+                    });
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && attempts < 64 => {
                     attempts += 1;
@@ -316,17 +474,35 @@ impl StagedFile {
     /// Syncs the data (if not done yet) and renames the temporary file over the destination.
     ///
     /// # Errors
-    /// [`Error::File`] naming the destination if syncing or renaming fails; the temporary file is
-    /// removed and the destination left as it was.
+    /// [`Error::File`] naming the destination if syncing or renaming fails, or if the
+    /// destination is no longer a regular file (a FIFO or a socket made there meanwhile); the
+    /// temporary file is removed and the destination left as it was.
     pub fn commit(mut self) -> Result<()> {
         self.sync()?;
+        let mut live = live();
+        let renamed = self.rename_into_place(&mut live);
+        drop(live);
+        // On an error, `self` is dropped after the lock and removes its temporary file.
+        renamed
+    }
+
+    /// Renames the synced temporary file over the destination, `live` (the list of temporary
+    /// files, locked) told. A destination written in place is only marked committed.
+    fn rename_into_place(&mut self, live: &mut Vec<PathBuf>) -> Result<()> {
         let Some(tmp) = self.tmp.clone() else {
             self.committed = true;
             return Ok(());
         };
+        if let Some(kind) = special_file_kind(&self.dest) {
+            return Err(file_error(
+                &self.dest,
+                format!("is now {kind}, no longer a regular file: not replaced"),
+            ));
+        }
         std::fs::rename(&tmp, &self.dest)
             .map_err(|e| file_error(&self.dest, format!("cannot rename into place: {e}")))?;
         self.committed = true;
+        live.retain(|p| p != &tmp);
         // Make the rename itself durable where directories can be synced (best effort).
         if let Some(dir) = self.dest.parent() {
             let dir = if dir.as_os_str().is_empty() {
@@ -347,7 +523,9 @@ impl Drop for StagedFile {
         if !self.committed {
             self.writer.take();
             if let Some(tmp) = &self.tmp {
+                let mut live = live();
                 let _ = std::fs::remove_file(tmp);
+                live.retain(|p| p != tmp);
             }
         }
     }
@@ -383,22 +561,31 @@ pub fn stage_bytes(dest: impl AsRef<Path>, contents: &[u8]) -> Result<StagedFile
     Ok(staged)
 }
 
-/// Renames staged files into place, in order.
+/// Syncs staged files, then renames them into place, in order. The renames are made together:
+/// a process quitting at once meanwhile ([`abandon_staged_files`]) waits for the whole set.
 ///
 /// If a rename fails, the files not yet renamed are removed and the error returned; the files
 /// renamed before it stay in place (the caller decides whether to remove them). The returned
 /// paths on success are the destinations, in order.
 ///
 /// # Errors
-/// [`Error::File`] naming the file whose rename failed.
-pub fn commit_all(files: Vec<StagedFile>) -> Result<Vec<PathBuf>> {
-    let mut done = Vec::with_capacity(files.len());
-    for f in files {
-        let dest = f.path().to_path_buf();
-        f.commit()?;
-        done.push(dest);
+/// [`Error::File`] naming the file whose sync or rename failed.
+pub fn commit_all(mut files: Vec<StagedFile>) -> Result<Vec<PathBuf>> {
+    for f in &mut files {
+        f.sync()?;
     }
-    Ok(done)
+    let mut done = Vec::with_capacity(files.len());
+    let renamed = {
+        let mut live = live();
+        files.iter_mut().try_for_each(|f| {
+            f.rename_into_place(&mut live)?;
+            done.push(f.dest.clone());
+            Ok::<(), Error>(())
+        })
+    };
+    // Dropped without the lock: the files not renamed remove their temporary files.
+    drop(files);
+    renamed.map(|()| done)
 }
 
 /// Writes `contents` to `dest` atomically (see [`write_atomic`]).

@@ -262,7 +262,10 @@ pub fn aperture_pixels(pixels: usize, fraction: f64, seed: u64) -> Result<Vec<us
     if !(fraction > 0.0 && fraction <= 1.0) || pixels == 0 {
         return Err(Error::param(
             "aperture",
-            format!("the fraction must be in (0, 1] of at least one pixel, got {fraction}"),
+            format!(
+                "the fraction must be in (0, 1] of at least one pixel, got {}",
+                crate::units::number(fraction)
+            ),
         ));
     }
     let x = fraction * pixels as f64;

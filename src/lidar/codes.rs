@@ -266,7 +266,7 @@ impl Codes {
         if !(0.0..1.0).contains(&zero_prob) {
             return Err(Error::param(
                 "zero_prob",
-                format!("must be in [0, 1), got {zero_prob}"),
+                format!("must be in [0, 1), got {}", crate::units::number(zero_prob)),
             ));
         }
         let groups = pixels.div_ceil(8);

@@ -60,8 +60,8 @@ pub use scenes::{
 pub(crate) use scenes::{bin_of_fraction, checked};
 pub use seeded::{SeededCodes, SEEDED_CODES_GENERATOR};
 pub use simulate::{
-    simulate, simulate_split, simulate_split_supplied, simulate_supplied, AdcQuantization,
-    PhotonNoise, SceneSpec, Seeds, Simulation, SimulationSpec,
+    simulate, simulate_cancellable, simulate_split, simulate_split_supplied, simulate_supplied,
+    AdcQuantization, PhotonNoise, SceneSpec, Seeds, Simulation, SimulationSpec,
 };
 pub use streamed::{StreamedOperator, STREAM_BLOCK_BYTES};
 pub use support::SupportOperator;

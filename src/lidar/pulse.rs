@@ -33,7 +33,7 @@ impl<T: Real> Pulse<T> {
                 format!(
                     "sample at index {i} is negative ({}): a pulse is light intensity, which \
                      must be ≥ 0",
-                    p[i]
+                    crate::units::number(p[i])
                 ),
             ));
         }
@@ -92,7 +92,10 @@ impl<T: Real> Pulse<T> {
         if !(duty > 0.0 && duty <= 1.0) {
             return Err(Error::param(
                 "duty",
-                format!("the probability of a 1 must be in (0, 1], got {duty}"),
+                format!(
+                    "the probability of a 1 must be in (0, 1], got {}",
+                    crate::units::number(duty)
+                ),
             ));
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);

@@ -16,7 +16,10 @@ pub fn depth_bin_m(tau_s: f64) -> Result<f64> {
     } else {
         Err(Error::param(
             "tau_s",
-            format!("the sampling period must be finite and > 0 seconds, got {tau_s}"),
+            format!(
+                "the sampling period must be finite and > 0 seconds, got {}",
+                crate::units::number(tau_s)
+            ),
         ))
     }
 }

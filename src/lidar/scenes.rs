@@ -207,7 +207,10 @@ pub fn random_opaque_scene<T: Real>(g: Geometry, lit_fraction: f64, seed: u64) -
     if !(0.0..=1.0).contains(&lit_fraction) {
         return Err(Error::param(
             "lit_fraction",
-            format!("must be in [0, 1], got {lit_fraction}"),
+            format!(
+                "must be in [0, 1], got {}",
+                crate::units::number(lit_fraction)
+            ),
         ));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -276,7 +279,10 @@ pub fn attenuate<T: Real>(scene: &Scene<T>, near: f64) -> Result<Scene<T>> {
     if !(near.is_finite() && near > 0.0) {
         return Err(Error::param(
             "near",
-            format!("must be finite and positive, got {near}"),
+            format!(
+                "must be finite and positive, got {}",
+                crate::units::number(near)
+            ),
         ));
     }
     let mut x = scene.data().clone();

@@ -16,6 +16,7 @@
 //! # }
 //! ```
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
@@ -253,6 +254,22 @@ impl SimulationSpec {
             .add("measurements", samples.saturating_mul(2), size))
     }
 
+    /// Checks, before any work, that the ADC's levels are finite in `T` (a fixed full scale
+    /// beyond the range of `f32` would turn every quantized sample into an infinity).
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`full_scale`), as [`NoiseStage::validate_in`].
+    pub fn check_quantization<T: Real>(&self) -> Result<()> {
+        match self.quantization {
+            Some(q) => NoiseStage::Quantized {
+                bits: q.bits,
+                full_scale: q.full_scale,
+            }
+            .validate_in::<T>(),
+            None => Ok(()),
+        }
+    }
+
     /// Number of measurements per ADC, K = K_p + K_s − 1.
     ///
     /// # Errors
@@ -341,7 +358,7 @@ impl<T: Real> Simulation<T> {
 /// that overflows, a zero-size tile, an aperture fraction outside (0, 1], too many ADCs, a
 /// ternary zero probability outside [0, 1)); the generators' and operators' errors.
 pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
-    simulate_inner(spec, None)
+    simulate_inner(spec, None, &AtomicBool::new(false))
 }
 
 /// [`simulate`] of `scene`, which the caller supplies: `spec.scene` must be
@@ -351,7 +368,21 @@ pub fn simulate<T: Real>(spec: &SimulationSpec) -> Result<Simulation<T>> {
 /// [`Error::InvalidParameter`] (`scene`) for another scene kind or a scene of another grid;
 /// the errors of [`simulate`].
 pub fn simulate_supplied<T: Real>(spec: &SimulationSpec, scene: Scene<T>) -> Result<Simulation<T>> {
-    simulate_inner(spec, Some(scene))
+    simulate_inner(spec, Some(scene), &AtomicBool::new(false))
+}
+
+/// [`simulate`] (of the scene `supplied`, if any, as [`simulate_supplied`]), cancelled by
+/// `cancel`: once it is raised (from another thread, e.g. on Ctrl-C), the simulation stops at
+/// its next step (the scene, the pulse, each code set, each tile, the measurement, the noise).
+///
+/// # Errors
+/// As [`simulate`] and [`simulate_supplied`]; [`Error::Cancelled`] when `cancel` was raised.
+pub fn simulate_cancellable<T: Real>(
+    spec: &SimulationSpec,
+    supplied: Option<Scene<T>>,
+    cancel: &AtomicBool,
+) -> Result<Simulation<T>> {
+    simulate_inner(spec, supplied, cancel)
 }
 
 /// The scene of `spec`: `supplied` (checked against the spec) or the generated one.
@@ -383,19 +414,29 @@ fn scene_of<T: Real>(spec: &SimulationSpec, supplied: Option<Scene<T>>) -> Resul
 fn simulate_inner<T: Real>(
     spec: &SimulationSpec,
     supplied: Option<Scene<T>>,
+    cancel: &AtomicBool,
 ) -> Result<Simulation<T>> {
     let g = spec.geometry;
     let k = spec.samples()?;
     let seeds = spec.seeds();
     let arch = spec.architecture;
-    spec.memory_plan::<T>()?.check(
-        &format!(
-            "simulating {g} with K_p = {}{}",
-            spec.pulse_len,
-            arch.describe_suffix()
-        ),
-        "lower --size, --pulse-len or --adcs",
-    )?;
+    let request = format!(
+        "simulating {g} with K_p = {}{}",
+        spec.pulse_len,
+        arch.describe_suffix()
+    );
+    let go_on = || {
+        if cancel.load(Ordering::Relaxed) {
+            Err(Error::Cancelled {
+                what: request.clone(),
+            })
+        } else {
+            Ok(())
+        }
+    };
+    spec.memory_plan::<T>()?
+        .check(&request, "lower --size, --pulse-len or --adcs")?;
+    spec.check_quantization::<T>()?;
     let groups = match arch {
         Architecture::Tiles(t) => Some(tiles(g, t.m, t.n)?),
         _ => None,
@@ -405,6 +446,7 @@ fn simulate_inner<T: Real>(
         _ => None,
     };
     let scene = scene_of(spec, supplied)?;
+    go_on()?;
     let pulse = Pulse::<T>::bernoulli(spec.pulse_len, seeds.pulse())?;
     if spec.seeded_codes && spec.ternary_zero_prob.is_some() {
         return Err(Error::param(
@@ -415,6 +457,7 @@ fn simulate_inner<T: Real>(
     let seeded = spec.seeded()?;
     let code_sets = (0..arch.code_sets())
         .map(|set| {
+            go_on()?;
             let seed = seeds.code_set(set);
             match (spec.ternary_zero_prob, &seeded) {
                 (_, Some(s)) => s.materialize(set),
@@ -440,6 +483,7 @@ fn simulate_inner<T: Real>(
         Some(groups) => {
             let mut y = Vec::with_capacity(groups.len() * k);
             for group in groups {
+                go_on()?;
                 let op = coded_aperture(g, sim.pulse.as_slice(), &sim.code_sets[0], group)?;
                 let mut rows = vec![T::zero(); op.nrows()];
                 op.apply(sim.scene.as_slice(), &mut rows);
@@ -448,12 +492,14 @@ fn simulate_inner<T: Real>(
             y
         }
         None => {
+            go_on()?;
             let op = sim.operator()?;
             let mut y = vec![T::zero(); op.nrows()];
             op.apply(sim.scene.as_slice(), &mut y);
             y
         }
     };
+    go_on()?;
     sim.measured(y)
 }
 
@@ -566,7 +612,7 @@ fn simulate_split_inner<T: Real>(
     supplied: Option<Scene<T>>,
 ) -> Result<Simulation<T>> {
     if space.parts() == 1 {
-        return simulate_inner(spec, supplied);
+        return simulate_inner(spec, supplied, &AtomicBool::new(false));
     }
     let g = spec.geometry;
     let seeded = spec.seeded()?.ok_or_else(|| {
@@ -610,6 +656,7 @@ fn simulate_split_inner<T: Real>(
         ),
         "lower --size or --pulse-len, or use more processes",
     )?;
+    spec.check_quantization::<T>()?;
     let seeds = spec.seeds();
     let scene = scene_of(spec, supplied)?;
     let pulse = Pulse::<T>::bernoulli(spec.pulse_len, seeds.pulse())?;

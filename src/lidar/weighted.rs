@@ -75,7 +75,10 @@ impl<'a, T: Real> RowWeighted<'a, T> {
         if let Some(i) = w.iter().position(|v| !(v.is_finite() && *v >= T::zero())) {
             return Err(Error::param(
                 "weights",
-                format!("weight {i} is {}: weights must be finite and >= 0", w[i]),
+                format!(
+                    "weight {i} is {}: weights must be finite and >= 0",
+                    crate::units::number(w[i])
+                ),
             ));
         }
         if w.iter().all(|v| *v == T::zero()) {

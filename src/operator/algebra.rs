@@ -128,7 +128,10 @@ impl<A, T: Real> Scaled<A, T> {
         if !alpha.is_finite() {
             return Err(Error::param(
                 "alpha",
-                format!("scale factor must be finite, got {alpha}"),
+                format!(
+                    "scale factor must be finite, got {}",
+                    crate::units::number(alpha)
+                ),
             ));
         }
         Ok(Scaled { a, alpha })
@@ -203,7 +206,10 @@ impl<A, B, T: Real> Sum<A, B, T> {
         if !beta.is_finite() {
             return Err(Error::param(
                 "beta",
-                format!("coefficient must be finite, got {beta}"),
+                format!(
+                    "coefficient must be finite, got {}",
+                    crate::units::number(beta)
+                ),
             ));
         }
         Ok(Sum { a, b, beta })

@@ -81,7 +81,10 @@ pub fn operator_norm<T: Real, A: LinearOperator<T> + ?Sized>(
     if !(params.tol.is_finite() && params.tol > 0.0) {
         return Err(Error::param(
             "tol",
-            format!("must be a positive finite number, got {}", params.tol),
+            format!(
+                "must be a positive finite number, got {}",
+                crate::units::number(params.tol)
+            ),
         ));
     }
     let (m, n) = (op.nrows(), op.ncols());

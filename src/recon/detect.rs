@@ -73,7 +73,10 @@ pub fn check_false_rate(alpha: f64) -> Result<()> {
     } else {
         Err(Error::param(
             "false_rate",
-            format!("the false-detection rate must lie strictly between 0 and 1, got {alpha}"),
+            format!(
+                "the false-detection rate must lie strictly between 0 and 1, got {}",
+                crate::units::number(alpha)
+            ),
         ))
     }
 }

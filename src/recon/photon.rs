@@ -61,7 +61,10 @@ impl NoiseModel {
             NoiseModel::Photon { background } if !(background.is_finite() && background >= 0.0) => {
                 Err(Error::param(
                     "background",
-                    format!("the background must be finite and >= 0, got {background}"),
+                    format!(
+                        "the background must be finite and >= 0, got {}",
+                        crate::units::number(background)
+                    ),
                 ))
             }
             _ => Ok(()),

@@ -355,7 +355,10 @@ impl Cost {
         {
             return Err(Error::param(
                 "throughput",
-                format!("every rate must be finite and > 0, got {bad}"),
+                format!(
+                    "every rate must be finite and > 0, got {}",
+                    crate::units::number(*bad)
+                ),
             ));
         }
         let overflow = |what: &str| {

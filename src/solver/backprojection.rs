@@ -86,20 +86,26 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
     if !(params.normalization.is_finite() && params.normalization > 0.0) {
         return Err(Error::param(
             "normalization",
-            format!("must be positive and finite, got {}", params.normalization),
+            format!(
+                "must be positive and finite, got {}",
+                crate::units::number(params.normalization)
+            ),
         ));
     }
     match params.threshold {
         Threshold::Absolute(v) if !v.is_finite() => {
             return Err(Error::param(
                 "threshold",
-                format!("must be finite, got {v}"),
+                format!("must be finite, got {}", crate::units::number(v)),
             ))
         }
         Threshold::RelativeToMax(f) if !(0.0..=1.0).contains(&f) => {
             return Err(Error::param(
                 "threshold",
-                format!("relative threshold must be in [0, 1], got {f}"),
+                format!(
+                    "relative threshold must be in [0, 1], got {}",
+                    crate::units::number(f)
+                ),
             ))
         }
         Threshold::PeakQuantile { quantile, fraction }
@@ -108,14 +114,16 @@ pub fn backprojection<T: Real, A: LinearOperator<T> + ?Sized>(
             return Err(Error::param(
                 "threshold",
                 format!(
-                    "peak quantile and fraction must be in [0, 1], got {quantile} and {fraction}"
+                    "peak quantile and fraction must be in [0, 1], got {} and {}",
+                    crate::units::number(quantile),
+                    crate::units::number(fraction)
                 ),
             ))
         }
         Threshold::Auto { k } if !(k.is_finite() && k >= 0.0) => {
             return Err(Error::param(
                 "threshold",
-                format!("k must be finite and ≥ 0, got {k}"),
+                format!("k must be finite and ≥ 0, got {}", crate::units::number(k)),
             ))
         }
         _ => {}

@@ -42,7 +42,10 @@ impl CglsParams {
         if !(self.damp.is_finite() && self.damp >= 0.0) {
             return Err(Error::param(
                 "damp",
-                format!("λ must be finite and ≥ 0, got {}", self.damp),
+                format!(
+                    "λ must be finite and ≥ 0, got {}",
+                    crate::units::number(self.damp)
+                ),
             ));
         }
         Ok(())

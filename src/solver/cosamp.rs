@@ -63,7 +63,10 @@ impl CosampParams {
         if !(self.inner.damp.is_finite() && self.inner.damp >= 0.0) {
             return Err(Error::param(
                 "inner.damp",
-                format!("must be finite and ≥ 0, got {}", self.inner.damp),
+                format!(
+                    "must be finite and ≥ 0, got {}",
+                    crate::units::number(self.inner.damp)
+                ),
             ));
         }
         check_tolerance("fixed_point_tol", self.fixed_point_tol)

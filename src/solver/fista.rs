@@ -133,20 +133,29 @@ impl FistaParams {
         if !(value.is_finite() && value >= 0.0) {
             return Err(Error::param(
                 "lambda",
-                format!("{what} must be finite and ≥ 0, got {value}"),
+                format!(
+                    "{what} must be finite and ≥ 0, got {}",
+                    crate::units::number(value)
+                ),
             ));
         }
         match self.step {
             StepRule::PowerIteration { settings, margin } => validate_power_step(&settings, margin),
             StepRule::Backtracking { eta } if !(eta.is_finite() && eta > 1.0) => Err(Error::param(
                 "eta",
-                format!("must be a finite number > 1, got {eta}"),
+                format!(
+                    "must be a finite number > 1, got {}",
+                    crate::units::number(eta)
+                ),
             )),
             StepRule::Backtracking { .. } => Ok(()),
             StepRule::Fixed { lipschitz } if !(lipschitz.is_finite() && lipschitz > 0.0) => {
                 Err(Error::param(
                     "lipschitz",
-                    format!("must be a finite number > 0, got {lipschitz}"),
+                    format!(
+                        "must be a finite number > 0, got {}",
+                        crate::units::number(lipschitz)
+                    ),
                 ))
             }
             StepRule::Fixed { .. } => Ok(()),

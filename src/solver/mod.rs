@@ -382,13 +382,19 @@ pub(crate) fn validate_power_step(settings: &PowerIteration, margin: f64) -> Res
     if !(settings.tol.is_finite() && settings.tol > 0.0) {
         return Err(Error::param(
             "power_iteration.tol",
-            format!("must be a positive finite number, got {}", settings.tol),
+            format!(
+                "must be a positive finite number, got {}",
+                crate::units::number(settings.tol)
+            ),
         ));
     }
     if !(margin.is_finite() && margin >= 1.0) {
         return Err(Error::param(
             "margin",
-            format!("must be a finite number ≥ 1, got {margin}"),
+            format!(
+                "must be a finite number ≥ 1, got {}",
+                crate::units::number(margin)
+            ),
         ));
     }
     Ok(())
@@ -427,7 +433,10 @@ pub(crate) fn check_tolerance(name: &'static str, value: f64) -> Result<()> {
     if !(value.is_finite() && value >= 0.0) {
         return Err(Error::param(
             name,
-            format!("must be a finite number ≥ 0, got {value}"),
+            format!(
+                "must be a finite number ≥ 0, got {}",
+                crate::units::number(value)
+            ),
         ));
     }
     Ok(())

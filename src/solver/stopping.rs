@@ -74,7 +74,10 @@ impl Stopping {
         let positive = |name: &'static str, v: Option<f64>| match v {
             Some(t) if !(t.is_finite() && t >= 0.0) => Err(Error::param(
                 name,
-                format!("must be a finite number ≥ 0, got {t}"),
+                format!(
+                    "must be a finite number ≥ 0, got {}",
+                    crate::units::number(t)
+                ),
             )),
             _ => Ok(()),
         };

@@ -277,11 +277,19 @@ pub fn check_finite_result<T: Real>(
 pub type Input<'a> = (&'a Path, &'a str);
 
 /// Checks, before any work, that an output file (given by `flag`) can be created where asked and
-/// is none of the `inputs` (the same file after symbolic links, hard links included).
+/// is none of the `inputs` (the same file after symbolic links, hard links included). A FIFO or
+/// a device is written in place; a socket cannot be written to.
 pub fn check_out_file(out: &Path, flag: &str, inputs: &[Input<'_>]) -> CliResult {
     if out.is_dir() {
         return Err(format!(
             "{}: {flag} is a directory, expected a file name",
+            out.display()
+        )
+        .into());
+    }
+    if io::special_file_kind(out) == Some("a socket") {
+        return Err(format!(
+            "{}: {flag} is a socket, not a file: an output cannot be written to a socket",
             out.display()
         )
         .into());

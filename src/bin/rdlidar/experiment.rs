@@ -15,6 +15,7 @@ use crate::common::{
     Globals, Precision,
 };
 use crate::ranks::Ranks;
+use crate::signals::{self, Signal};
 
 /// The options of `demo` (and of the command with no subcommand) and `compare`.
 ///
@@ -356,14 +357,19 @@ pub fn run(
         Ok(())
     })?;
     set_threads(threads, "threads")?;
-    ctrlc::set_handler(move || {
+    // SIGTERM (`kill`, a batch system, `mpirun` stopping the job with SIGKILL a second later)
+    // quits at once: nothing new is left, not even the staging folder.
+    signals::handle(move |signal| {
+        if signal == Signal::Terminate {
+            errln!("\nterminated: quitting without writing results");
+            experiment::abandon_staged_and_exit(signal.exit_code());
+        }
         if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
             errln!("\ninterrupted again: quitting without writing results");
-            experiment::abandon_staged_and_exit(130);
+            experiment::abandon_staged_and_exit(signal.exit_code());
         }
         errln!("\nCtrl-C: stopping after the current run (Ctrl-C again to quit at once)");
-    })
-    .map_err(|e| format!("cannot handle Ctrl-C: {e}"))?;
+    })?;
 
     let kps: Vec<String> = config.pulse_lens.iter().map(usize::to_string).collect();
     let levels: Vec<String> = config

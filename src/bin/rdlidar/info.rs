@@ -63,7 +63,8 @@ pub fn run(a: &InfoArgs) -> crate::common::CliResult {
             let s = ps * 1e-12;
             if !(s.is_finite() && s > 0.0) {
                 return Err(format!(
-                    "--tau-ps: the sampling period must be finite and > 0, got {ps}"
+                    "--tau-ps: the sampling period must be finite and > 0, got {}",
+                    rdlidar::units::number(ps)
                 )
                 .into());
             }

@@ -1,5 +1,6 @@
 //! The `rdlidar` command line: flags and dispatch; a file per subcommand.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -14,6 +15,7 @@ mod info;
 mod ranks;
 mod reconstruct;
 mod selfcheck;
+mod signals;
 mod simulate;
 mod stress;
 
@@ -22,6 +24,7 @@ use experiment::{CompareArgs, Experiment, ExperimentArgs, Preset};
 use ranks::Ranks;
 use rdlidar::lidar::TileSize;
 use rdlidar::report::experiment::Shard;
+use signals::Signal;
 
 /// Compressive time-of-flight lidar by random demodulation.
 ///
@@ -35,7 +38,8 @@ use rdlidar::report::experiment::Shard;
 /// the file or flag; the exit status is 1 (2 for usage errors) and no output file is left behind.
 /// A closed pipe on stdout ends a command quietly with status 141. Sizes and counts have bounds
 /// and a request needing more memory than is available is refused before allocating
-/// (RDLIDAR_MEMORY_LIMIT=BYTES lowers the budget); see docs/reliability.md.
+/// (RDLIDAR_MEMORY_LIMIT=BYTES lowers the budget: bytes, or with a unit, 4G or 4GiB in powers
+/// of 1024, 4GB in powers of 1000; any other value is refused); see docs/reliability.md.
 ///
 /// Built with the feature `mpi`, forward, adjoint, dottest, reconstruct and simulate
 /// --codes-format seed run under `mpirun -n R` with the pixel rows split over the R processes,
@@ -98,7 +102,8 @@ enum Command {
     /// (rows are appended there to results.csv.partial and results.jsonl.partial as each run
     /// finishes); Ctrl-C stops after the current run and still writes the tables and figures
     /// of the finished runs (exit status 130); a second Ctrl-C quits at once, leaving nothing
-    /// new.
+    /// new, and so does SIGTERM (exit status 143; `mpirun` sends it to every process of a job
+    /// it stops, Ctrl-C included, and kills them a second later).
     ///
     /// Example: `rdlidar demo --pulse-lens 10000,30000 --solvers backprojection-debiased,model-based --out run1`
     Demo(ExperimentArgs),
@@ -182,6 +187,12 @@ impl Command {
 }
 
 fn run(cli: Cli) -> CliResult<ExitCode> {
+    // A memory budget that was asked for is never ignored: a value that is not a byte count is
+    // refused before anything runs.
+    rdlidar::limits::memory_limit().map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { name, reason } => format!("{name}: {reason}"),
+        other => other.to_string(),
+    })?;
     let globals = Globals {
         threads: cli.threads,
         seed: cli.seed,
@@ -223,6 +234,13 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
     };
     let name = format!("{}{label}", command.name());
     let ranks = Ranks::start(&name, command.splits())?;
+    // The experiments stop after the run under way on a first Ctrl-C; the other commands quit.
+    match &command {
+        Command::Demo(_) => {}
+        Command::Compare(a) if a.merge.is_empty() => {}
+        Command::Simulate(a) => quit_on_signals((!a.out.exists()).then(|| a.out.clone()))?,
+        _ => quit_on_signals(None)?,
+    }
     let done = |()| ExitCode::SUCCESS;
     match command {
         Command::Demo(a) => experiment::run(
@@ -258,6 +276,26 @@ fn run(cli: Cli) -> CliResult<ExitCode> {
         Command::Bench(a) => bench::run(&a, &globals).map(done),
         Command::Stress(a) => stress::run(&a, &globals),
     }
+}
+
+/// Quits at once on Ctrl-C or SIGTERM (exit status 130 or 143), leaving no partial output: the
+/// temporary files of the outputs being written are removed (an output renamed into place
+/// meanwhile is complete), so is `created`, the output folder this run made, if it holds
+/// nothing, and so is the staging folder of `compare --merge`.
+fn quit_on_signals(created: Option<PathBuf>) -> CliResult {
+    signals::handle(move |signal| {
+        let _held = rdlidar::io::abandon_staged_files();
+        if let Some(dir) = &created {
+            let _ = std::fs::remove_dir(dir);
+        }
+        let what = match signal {
+            Signal::Interrupt => "interrupted",
+            Signal::Terminate => "terminated",
+        };
+        errln!("\n{what}: quitting; no partial output is left");
+        rdlidar::report::experiment::abandon_staged_and_exit(signal.exit_code());
+    })?;
+    Ok(())
 }
 
 fn main() -> ExitCode {

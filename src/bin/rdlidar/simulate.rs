@@ -13,6 +13,7 @@ use rdlidar::lidar::{
     simulate, simulate_split, simulate_split_supplied, simulate_supplied, Geometry, SimulationSpec,
     TileSize, SEEDED_CODES_GENERATOR,
 };
+use rdlidar::units::number;
 use rdlidar::Real;
 
 use crate::common::{
@@ -90,7 +91,9 @@ impl SceneKind {
 /// DIR is created if needed (its parent must exist). An existing non-empty DIR is refused
 /// unless --force is given, which replaces the five files and leaves other files alone.
 /// Files are written under temporary names and renamed into place once all are complete; on
-/// an error nothing is left behind.
+/// an error nothing is left behind, and Ctrl-C or SIGTERM quits at once the same way (exit
+/// status 130 or 143). Temporary files that a killed run left in DIR do not make it
+/// non-empty, and are removed.
 ///
 /// Example: `rdlidar simulate --scene paper --size 100x100x40 --pulse-len 10000 --seed 0 --out run0`
 #[derive(clap::Args, Debug)]
@@ -269,7 +272,13 @@ fn simulate_into<T: Real + WritableElement>(
                 format!("mpirun -n {}: {reason}", ranks.processes())
             }
             rdlidar::Error::InvalidParameter { name, reason } => {
-                format!("{}: {reason}", flag(name))
+                // A full scale beyond the range of f32: the flag that computes in f64.
+                let hint = if reason.ends_with("compute in f64") {
+                    " (--precision f64)"
+                } else {
+                    ""
+                };
+                format!("{}: {reason}{hint}", flag(name))
             }
             e @ (rdlidar::Error::TooLarge { .. } | rdlidar::Error::ShapeMismatch { .. }) => {
                 e.to_string()
@@ -343,17 +352,18 @@ fn noise_text(meta: &SimulationMeta) -> String {
     let mut parts = Vec::new();
     if let (Some(p), Some(mean)) = (n.photons, n.mean_photons) {
         parts.push(format!(
-            "photon noise ({p} photons per unit intensity, background {}; {mean:.3e} photons per \
+            "photon noise ({} photons per unit intensity, background {}; {mean:.3e} photons per \
              sample on average)",
-            n.background.unwrap_or(0.0)
+            number(p),
+            number(n.background.unwrap_or(0.0))
         ));
     }
     if let Some(s) = n.snr_db {
-        parts.push(format!("Gaussian noise at {s} dB SNR"));
+        parts.push(format!("Gaussian noise at {} dB SNR", number(s)));
     }
     if let Some(bits) = n.adc_bits {
         let scale = match (n.full_scale_auto, n.full_scale) {
-            (Some(false), Some(f)) => format!("full scale {f}"),
+            (Some(false), Some(f)) => format!("full scale {}", number(f)),
             _ => "full scale at the largest sample".into(),
         };
         parts.push(format!(

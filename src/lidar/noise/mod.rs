@@ -55,7 +55,10 @@ fn check_snr_db(snr_db: f64) -> Result<()> {
     } else {
         Err(Error::param(
             "snr_db",
-            format!("the SNR must be a finite number of decibels, got {snr_db}"),
+            format!(
+                "the SNR must be a finite number of decibels, got {}",
+                crate::units::number(snr_db)
+            ),
         ))
     }
 }
@@ -66,7 +69,10 @@ fn check_sigma(sigma: f64) -> Result<()> {
     } else {
         Err(Error::param(
             "sigma",
-            format!("the noise standard deviation must be finite and >= 0, got {sigma}"),
+            format!(
+                "the noise standard deviation must be finite and >= 0, got {}",
+                crate::units::number(sigma)
+            ),
         ))
     }
 }
@@ -84,14 +90,21 @@ pub fn sigma_for_snr(power: f64, snr_db: f64) -> Result<f64> {
     if !(power.is_finite() && power >= 0.0) {
         return Err(Error::param(
             "power",
-            format!("the signal power must be finite and >= 0, got {power}"),
+            format!(
+                "the signal power must be finite and >= 0, got {}",
+                crate::units::number(power)
+            ),
         ));
     }
     let sigma = (power / 10f64.powf(snr_db / 10.0)).sqrt();
     if !sigma.is_finite() {
         return Err(Error::param(
             "snr_db",
-            format!("an SNR of {snr_db} dB gives a non-finite noise level for power {power}"),
+            format!(
+                "an SNR of {} dB gives a non-finite noise level for power {}",
+                crate::units::number(snr_db),
+                crate::units::number(power)
+            ),
         ));
     }
     Ok(sigma)
@@ -147,7 +160,10 @@ fn check_photons(photons: f64) -> Result<()> {
     } else {
         Err(Error::param(
             "photons",
-            format!("the photon count per unit intensity must be finite and > 0, got {photons}"),
+            format!(
+                "the photon count per unit intensity must be finite and > 0, got {}",
+                crate::units::number(photons)
+            ),
         ))
     }
 }
@@ -158,7 +174,10 @@ fn check_background(background: f64) -> Result<()> {
     } else {
         Err(Error::param(
             "background",
-            format!("the background level must be finite and >= 0, got {background}"),
+            format!(
+                "the background level must be finite and >= 0, got {}",
+                crate::units::number(background)
+            ),
         ))
     }
 }
@@ -186,7 +205,10 @@ fn check_poisson<T: Real>(
         if v < 0.0 {
             return Err(Error::param(
                 "intensity",
-                format!("light cannot be negative, got intensity[{k}] = {v}"),
+                format!(
+                    "light cannot be negative, got intensity[{k}] = {}",
+                    crate::units::number(v)
+                ),
             ));
         }
         max_intensity = max_intensity.max(v);
@@ -315,7 +337,10 @@ pub fn unmodulated_light_of<T: Real>(
     if let Some((k, v)) = pulse.iter().enumerate().find(|(_, v)| v.as_f64() < 0.0) {
         return Err(Error::param(
             "pulse",
-            format!("light cannot be negative, got pulse[{k}] = {v}"),
+            format!(
+                "light cannot be negative, got pulse[{k}] = {}",
+                crate::units::number(*v)
+            ),
         ));
     }
     let x = scene.as_slice();
@@ -338,7 +363,10 @@ pub fn unmodulated_light_of<T: Real>(
         if let Some(v) = col.iter().find(|v| v.as_f64() < 0.0) {
             return Err(Error::param(
                 "scene",
-                format!("reflectivity cannot be negative, got {v}"),
+                format!(
+                    "reflectivity cannot be negative, got {}",
+                    crate::units::number(*v)
+                ),
             ));
         }
         for (acc, &v) in profile.iter_mut().zip(col) {
@@ -397,10 +425,36 @@ fn check_full_scale(full_scale: FullScale) -> Result<()> {
     match full_scale {
         FullScale::Fixed(f) if !(f.is_finite() && f > 0.0) => Err(Error::param(
             "full_scale",
-            format!("the full scale must be finite and > 0, got {f}"),
+            format!(
+                "the full scale must be finite and > 0, got {}",
+                crate::units::number(f)
+            ),
         )),
         _ => Ok(()),
     }
+}
+
+/// Checks that the levels of a fixed full scale are finite in `T`: the outermost, ±(F − Δ/2),
+/// overflows `f32` when F is beyond its range.
+fn check_levels<T: Real>(bits: u32, full_scale: FullScale) -> Result<()> {
+    let FullScale::Fixed(f) = full_scale else {
+        return Ok(());
+    };
+    let outer = f - f / 2f64.powi(bits as i32);
+    if T::of_f64(outer).is_finite() {
+        return Ok(());
+    }
+    Err(Error::param(
+        "full_scale",
+        format!(
+            "the full scale {} puts the ADC's outermost levels ±{} beyond the range of {} \
+             (largest {}): lower the full scale or compute in f64",
+            crate::units::number(f),
+            crate::units::number(outer),
+            T::NAME,
+            crate::units::number(<T as num_traits::Float>::max_value())
+        ),
+    ))
 }
 
 fn quantize_stage<T: Real>(work: &mut [T], bits: u32, full_scale: FullScale) -> QuantizationReport {
@@ -450,8 +504,8 @@ fn quantize_stage<T: Real>(work: &mut [T], bits: u32, full_scale: FullScale) -> 
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] (`bits`) unless 1 ≤ b ≤ 32, (`full_scale`) for a fixed full scale
-/// that is not finite and > 0; [`Error::NonFinite`] for a NaN or infinite value in `y` or a level
-/// that overflows `T`.
+/// that is not finite and > 0 or whose levels overflow `T`; [`Error::NonFinite`] for a NaN or
+/// infinite value in `y`.
 pub fn quantize<T: Real>(
     y: &mut [T],
     bits: u32,
@@ -459,6 +513,7 @@ pub fn quantize<T: Real>(
 ) -> Result<QuantizationReport> {
     check_bits(bits)?;
     check_full_scale(full_scale)?;
+    check_levels::<T>(bits, full_scale)?;
     check_finite(y, "measurements")?;
     let mut work = y.to_vec();
     let report = quantize_stage(&mut work, bits, full_scale);

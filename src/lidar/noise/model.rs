@@ -59,6 +59,20 @@ impl NoiseStage {
             }
         }
     }
+
+    /// Checks the stage's parameters for measurements in `T`: those of
+    /// [`NoiseStage::validate`], and a fixed full scale whose ADC levels are finite in `T`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] naming the offending parameter (`full_scale` for levels
+    /// beyond the range of `T`).
+    pub fn validate_in<T: Real>(&self) -> Result<()> {
+        self.validate()?;
+        match *self {
+            NoiseStage::Quantized { bits, full_scale } => check_levels::<T>(bits, full_scale),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// What one stage of [`NoiseModel::apply`] did.
@@ -199,15 +213,18 @@ impl NoiseModel {
     /// Everything is validated first and `y` is written only on success.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] for an invalid stage parameter, or (`intensity`) when a
-    /// photon-noise stage has no intensity; the errors of the individual stages otherwise.
+    /// [`Error::InvalidParameter`] for an invalid stage parameter (see
+    /// [`NoiseStage::validate_in`]), or (`intensity`) when a photon-noise stage has no
+    /// intensity; the errors of the individual stages otherwise.
     pub fn apply_with_intensity<T: Real>(
         &self,
         y: &mut [T],
         intensity: Option<&[T]>,
         seed: u64,
     ) -> Result<NoiseReport> {
-        self.validate()?;
+        self.stages
+            .iter()
+            .try_for_each(NoiseStage::validate_in::<T>)?;
         check_finite(y, "measurements")?;
         let signal_power = mean_power(y);
         for stage in &self.stages {

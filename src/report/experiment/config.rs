@@ -262,7 +262,10 @@ impl ExperimentConfig {
                 if !v.is_finite() {
                     return Err(Error::param(
                         "snr_db",
-                        format!("the SNR must be a finite number of dB, got {v}"),
+                        format!(
+                            "the SNR must be a finite number of dB, got {}",
+                            crate::units::number(*v)
+                        ),
                     ));
                 }
             }
@@ -277,7 +280,10 @@ impl ExperimentConfig {
         if !(0.0..=1.0).contains(&self.lit_fraction) {
             return Err(Error::param(
                 "lit_fraction",
-                format!("must be in [0, 1], got {}", self.lit_fraction),
+                format!(
+                    "must be in [0, 1], got {}",
+                    crate::units::number(self.lit_fraction)
+                ),
             ));
         }
         if let Some(n) = self.power_iterations {

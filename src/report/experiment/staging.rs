@@ -56,6 +56,10 @@ impl StagedDir {
             Some(_) => parent_dir(out),
             None => out.to_path_buf(),
         };
+        remove_stale_staging(&base, &name);
+        if out.is_dir() {
+            crate::io::remove_stale_temporaries(out);
+        }
         let staging = base.join(format!(".{name}.staging-{}", std::process::id()));
         if staging.exists() {
             std::fs::remove_dir_all(&staging).map_err(|e| {
@@ -151,6 +155,28 @@ impl Drop for StagedDir {
             *guard = None;
         }
         let _ = std::fs::remove_dir_all(&self.staging);
+    }
+}
+
+/// Removes the staging folders `.NAME.staging-PID` in `base` of processes that no longer run (a
+/// process killed before it could clean up, `kill -9`), best effort.
+fn remove_stale_staging(base: &Path, name: &str) {
+    let Ok(entries) = std::fs::read_dir(base) else {
+        return;
+    };
+    let prefix = format!(".{name}.staging-");
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(pid) = file_name
+            .to_str()
+            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !crate::io::process_runs(pid) {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
     }
 }
 

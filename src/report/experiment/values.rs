@@ -304,7 +304,8 @@ pub(super) fn noise_level(v: f64) -> std::result::Result<NoiseLevel, String> {
         Ok(Some(v))
     } else {
         Err(format!(
-            "the SNR must be a finite number of dB (or none / inf for noise-free), got {v}"
+            "the SNR must be a finite number of dB (or none / inf for noise-free), got {}",
+            crate::units::number(v)
         ))
     }
 }

@@ -95,7 +95,10 @@ impl ReflectorAmpParams {
             ("decision", self.decision),
         ] {
             if !(v > 0.0 && v < 1.0) {
-                return Err(Error::param(name, format!("must be in (0, 1), got {v}")));
+                return Err(Error::param(
+                    name,
+                    format!("must be in (0, 1), got {}", crate::units::number(v)),
+                ));
             }
         }
         if self.stable_support == Some(0) {

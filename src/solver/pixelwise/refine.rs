@@ -68,13 +68,16 @@ impl RefineParams {
         if !(self.tie.is_finite() && self.tie >= 0.0) {
             return Err(Error::param(
                 "tie",
-                format!("must be ≥ 0, got {}", self.tie),
+                format!("must be ≥ 0, got {}", crate::units::number(self.tie)),
             ));
         }
         if !(self.disagreement.is_finite() && self.disagreement >= 0.0) {
             return Err(Error::param(
                 "disagreement",
-                format!("must be ≥ 0, got {}", self.disagreement),
+                format!(
+                    "must be ≥ 0, got {}",
+                    crate::units::number(self.disagreement)
+                ),
             ));
         }
         if self.iterations == 0 {
@@ -84,7 +87,7 @@ impl RefineParams {
             if !(g.is_finite() && g >= 0.0) {
                 return Err(Error::param(
                     "patch_gain",
-                    format!("must be finite and ≥ 0, got {g}"),
+                    format!("must be finite and ≥ 0, got {}", crate::units::number(g)),
                 ));
             }
         }

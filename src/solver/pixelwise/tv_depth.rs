@@ -376,13 +376,19 @@ impl TvDepthParams {
         if !(self.lambda.is_finite() && self.lambda >= 0.0) {
             return Err(Error::param(
                 "lambda",
-                format!("must be finite and ≥ 0, got {}", self.lambda),
+                format!(
+                    "must be finite and ≥ 0, got {}",
+                    crate::units::number(self.lambda)
+                ),
             ));
         }
         if !(self.neighbour_floor > 0.0 && self.neighbour_floor <= 1.0) {
             return Err(Error::param(
                 "neighbour_floor",
-                format!("must be in (0, 1], got {}", self.neighbour_floor),
+                format!(
+                    "must be in (0, 1], got {}",
+                    crate::units::number(self.neighbour_floor)
+                ),
             ));
         }
         if self.neighbour_iterations == 0 || self.neighbour_start == 0 {
@@ -398,7 +404,10 @@ impl TvDepthParams {
             ("neighbour_gate", self.neighbour_gate),
         ] {
             if !(0.0..1.0).contains(&v) {
-                return Err(Error::param(name, format!("must be in [0, 1), got {v}")));
+                return Err(Error::param(
+                    name,
+                    format!("must be in [0, 1), got {}", crate::units::number(v)),
+                ));
             }
         }
         self.model.validate()?;

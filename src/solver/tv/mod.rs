@@ -115,7 +115,10 @@ impl TvParams {
         if !(self.lambda.is_finite() && self.lambda >= 0.0) {
             return Err(Error::param(
                 "lambda",
-                format!("must be finite and ≥ 0, got {}", self.lambda),
+                format!(
+                    "must be finite and ≥ 0, got {}",
+                    crate::units::number(self.lambda)
+                ),
             ));
         }
         self.stopping.validate()
@@ -167,7 +170,10 @@ fn check_values(name: &str, a: ArrayView2<'_, f64>, nonnegative: bool) -> Result
         if nonnegative && v < 0.0 {
             return Err(Error::param(
                 "w",
-                format!("weights must be ≥ 0, got w[{i}, {j}] = {v}"),
+                format!(
+                    "weights must be ≥ 0, got w[{i}, {j}] = {}",
+                    crate::units::number(v)
+                ),
             ));
         }
     }

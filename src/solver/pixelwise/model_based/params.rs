@@ -156,13 +156,19 @@ impl ModelBasedParams {
         if !(self.max_support_fraction > 0.0 && self.max_support_fraction <= 1.0) {
             return Err(Error::param(
                 "max_support_fraction",
-                format!("must be in (0, 1], got {}", self.max_support_fraction),
+                format!(
+                    "must be in (0, 1], got {}",
+                    crate::units::number(self.max_support_fraction)
+                ),
             ));
         }
         if !(self.inner.damp.is_finite() && self.inner.damp >= 0.0) {
             return Err(Error::param(
                 "inner.damp",
-                format!("must be finite and ≥ 0, got {}", self.inner.damp),
+                format!(
+                    "must be finite and ≥ 0, got {}",
+                    crate::units::number(self.inner.damp)
+                ),
             ));
         }
         Ok(())
