@@ -21,7 +21,7 @@ pub enum Error {
         found: usize,
     },
     /// A parameter is outside its valid range.
-    #[error("invalid parameter `{name}`: {reason}")]
+    #[error("invalid parameter {name}: {reason}")]
     InvalidParameter {
         /// The parameter's name.
         name: &'static str,

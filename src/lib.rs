@@ -67,6 +67,7 @@ pub mod real;
 pub mod recon;
 #[cfg(feature = "report")]
 pub mod report;
+pub mod settings;
 pub(crate) mod simd;
 pub mod solver;
 pub mod space;

@@ -43,7 +43,7 @@ fn the_bar_is_the_normal_upper_quantile() {
 fn a_rate_outside_zero_to_one_is_refused_before_solving() {
     for alpha in [0.0, 1.0, -0.1, 1.5, f64::NAN, f64::INFINITY] {
         let e = check_false_rate(alpha).unwrap_err().to_string();
-        assert!(e.contains("`false_rate`"), "{alpha}: {e}");
+        assert!(e.contains("false_rate:"), "{alpha}: {e}");
         let g = Geometry::new(4, 4, 4).unwrap();
         let op = problem::<f64>(g, 30, 1);
         let y = vec![1.0; g.samples(30)];
@@ -52,7 +52,7 @@ fn a_rate_outside_zero_to_one_is_refused_before_solving() {
             ..ReconstructOptions::default()
         };
         let e = reconstruct(&op, &y, Method::Cgls, &options).unwrap_err();
-        assert!(e.to_string().contains("`false_rate`"), "{alpha}: {e}");
+        assert!(e.to_string().contains("false_rate:"), "{alpha}: {e}");
     }
 }
 

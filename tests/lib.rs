@@ -61,6 +61,7 @@ mod recon_architectures;
 mod reconstruct;
 mod scenes;
 mod seeded_codes;
+mod settings;
 mod simulate_noise;
 mod solvers;
 mod sparse_solvers;

@@ -680,6 +680,7 @@ fn auto_under_mpirun_keeps_the_coarse_grid_stage_and_the_one_process_depth_map()
     );
     let run = |ranks: usize| -> (String, ArrayD<i32>) {
         let depth = tmp.path(&format!("coarse-depth-{ranks}.npy"));
+        let scene = tmp.path(&format!("coarse-scene-{ranks}.npy"));
         let args = [
             "reconstruct",
             "--pulse",
@@ -695,7 +696,7 @@ fn auto_under_mpirun_keeps_the_coarse_grid_stage_and_the_one_process_depth_map()
             "--out-depth",
             s(&depth),
             "--out-scene",
-            s(&tmp.path(&format!("coarse-scene-{ranks}.npy"))),
+            s(&scene),
         ];
         let text = if ranks == 1 {
             ok(rdlidar(&args), "one process")

@@ -553,17 +553,8 @@ def simulate(
     if out is not None and not isinstance(out, (str, os.PathLike)):
         raise TypeError(f"out: expected a path, got {type(out).__name__}")
     if out is not None:
-        parent = os.path.dirname(os.path.abspath(os.fspath(out)))
-        if os.path.exists(out) and not os.path.isdir(out):
-            raise ValueError(f"out: {os.fspath(out)!r:.60} exists and is not a folder")
-        if not os.path.isdir(parent):
-            raise ValueError(f"out: the parent folder {parent!r:.60} does not exist")
-    # The temporary files of a writer that was killed do not count (they are removed).
-    if out is not None and not force and os.path.isdir(out) and _rdlidar.holds_files(out):
-        raise ValueError(
-            f"out: {os.fspath(out)!r:.60} exists and is not empty; pass force=True to replace its "
-            "scene.npy, pulse.npy, codes.npy, meas.npy and meta.json"
-        )
+        # The library's rules, before any work (a killed writer's temporaries do not count).
+        _rdlidar.check_simulation_dir(os.fspath(out), bool(force))
     d = _rdlidar.simulate(
         scene,
         _size(size),

@@ -21,7 +21,7 @@ use pyo3::types::{PyDict, PyList};
 use rdlidar::acquisition::{
     check_finite, check_finite_result, check_pulse, pulse_in, simulation_meta,
     write_simulation_cancellable, Acquisition, AcquisitionFiles, Clipping, CodeStore, CodesFormat,
-    InputNames, Reconstructed, SimulationRequest, Streaming, Use,
+    InputNames, ReconstructRequest, Reconstructed, SimulationRequest, Streaming, Use,
 };
 use rdlidar::lidar::{
     simulate_cancellable, zero_mean, Architecture, Cancellable, Codes, Geometry, Scene, Simulation,
@@ -29,6 +29,7 @@ use rdlidar::lidar::{
 };
 use rdlidar::operator::{BoxedOperator, DotTest, LinearOperator};
 use rdlidar::recon::{compare, Method, NoiseModel, ReconstructOptions, TileReconstruction};
+use rdlidar::settings::FrontEnd;
 use rdlidar::solver::{
     fista as fista_solver, Control, FistaParams, IterationInfo, Lambda, Report, Restart, StepRule,
     Stopping,
@@ -38,12 +39,10 @@ use rdlidar::Real;
 /// A library error as Python expects it: `MemoryError` for a request beyond memory,
 /// `ValueError` naming the argument for bad values and shapes.
 fn value_error(e: rdlidar::Error) -> PyErr {
+    let text = FrontEnd::Python.render(&e);
     match e {
-        rdlidar::Error::InvalidParameter { name, reason } => {
-            PyValueError::new_err(format!("{name}: {reason}"))
-        }
-        e @ rdlidar::Error::TooLarge { .. } => PyMemoryError::new_err(e.to_string()),
-        e => PyValueError::new_err(e.to_string()),
+        rdlidar::Error::TooLarge { .. } => PyMemoryError::new_err(text),
+        _ => PyValueError::new_err(text),
     }
 }
 
@@ -922,83 +921,54 @@ fn reconstruct<'py>(
     noise: &str,
     background: Option<f64>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
-    let noise = noise_model(noise, background)?;
-    let method: Method = solver
-        .parse()
-        .map_err(|e: rdlidar::Error| PyValueError::new_err(format!("solver: {e}")))?;
-    let clipped = clipped
-        .map(str::parse::<Clipping>)
-        .transpose()
-        .map_err(value_error)?;
-    if max_iter == Some(0) {
-        return Err(PyValueError::new_err("max_iter: must be at least 1"));
-    }
     if operator.debiased {
         return Err(PyValueError::new_err(
             "operator: reconstruct needs the operator of the physical pulse, not debiased",
         ));
     }
-    if let Some(alpha) = false_rate {
-        rdlidar::recon::check_false_rate(alpha).map_err(value_error)?;
-    }
-    let options = ReconstructOptions {
-        max_iter,
-        seed,
-        false_rate,
-        noise,
-        ..ReconstructOptions::default()
-    };
-    // The solvers keep a few scenes: the estimate, iterates, gradients, the debiased twin's.
-    let job = Job {
-        method,
-        options,
+    let noise = noise.parse::<NoiseModel>().map_err(value_error)?;
+    let job = ReconstructRequest {
+        method: solver.parse().map_err(value_error)?,
+        options: ReconstructOptions {
+            max_iter,
+            seed,
+            false_rate,
+            noise: ReconstructRequest::noise_model(noise, background).map_err(value_error)?,
+            ..ReconstructOptions::default()
+        },
+        clipped: clipped
+            .map(str::parse::<Clipping>)
+            .transpose()
+            .map_err(value_error)?,
         fill_unobserved,
-        clipped,
     };
+    job.validate().map_err(value_error)?;
     match &operator.op {
         Op::F32(_) => run_reconstruct::<f32>(py, &operator.acq, meas, &job, callback),
         Op::F64(_) => run_reconstruct::<f64>(py, &operator.acq, meas, &job, callback),
     }
 }
 
-/// A reconstruction request.
-struct Job {
-    method: Method,
-    options: ReconstructOptions,
-    fill_unobserved: bool,
-    /// The samples to censor, if any.
-    clipped: Option<Clipping>,
-}
-
 fn run_reconstruct<'py, T: Real + numpy::Element>(
     py: Python<'py>,
     acq: &Acquisition,
     meas: &Bound<'py, PyAny>,
-    job: &Job,
+    job: &ReconstructRequest,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
     let y = measurements::<T>(meas, acq.measurements())?;
-    acq.solver_memory_plan::<T>(10)
-        .check("reconstruct", "use a smaller acquisition or free memory")
-        .map_err(value_error)?;
-    let censored = match job.clipped {
-        Some(c) => Some(acq.censor(&y, c).map_err(value_error)?),
-        None => None,
-    };
-    let (acq, y) = match &censored {
-        Some((acq, y, _)) => (acq, y.as_slice()),
-        None => (acq, y.as_slice()),
-    };
+    job.check_memory::<T>(acq).map_err(value_error)?;
+    let (acq, y, censoring) = job.censor(acq.clone(), y).map_err(value_error)?;
+    let acq = &acq;
     let observer = PyObserver::new(callback);
     let tiled = matches!(acq.architecture(), Architecture::Tiles(_));
     let result = observer.watch(py, || {
         let observe = |tile: usize, info: &IterationInfo<'_, T>| {
             observer.observe(tiled.then_some(tile), info)
         };
-        acq.reconstruct_cancellable(
-            y,
-            job.method,
-            &job.options,
+        job.run(
+            acq,
+            &y,
             &observe,
             &|_: &TileReconstruction<T>| {},
             &observer.cancel,
@@ -1008,17 +978,14 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
         return Err(e);
     }
     let mut r = result.map_err(value_error)?;
-    let filled = if job.fill_unobserved {
-        r.depth_mut().fill_unobserved()
-    } else {
-        0
-    };
+    let filled = job.finish(&mut r).unwrap_or(0);
     let report = PyDict::new(py);
     report.set_item("method", job.method.name())?;
     report.set_item("architecture", acq.architecture().kind())?;
     report.set_item("seconds", r.elapsed().as_secs_f64())?;
     report.set_item("filled", filled)?;
-    if let Some((_, _, c)) = &censored {
+    report.set_item("request", FrontEnd::Python.words(&job.summary()))?;
+    if let Some(c) = &censoring {
         report.set_item("censored", c.total())?;
         report.set_item("censored_levels", c.levels.clone())?;
     }
@@ -1116,24 +1083,6 @@ fn single_report<'py, T>(
     Ok(())
 }
 
-/// `noise=` and `background=`: the noise model of the data term.
-fn noise_model(noise: &str, background: Option<f64>) -> PyResult<NoiseModel> {
-    let model: NoiseModel = noise.parse().map_err(value_error)?;
-    match (model, background) {
-        (NoiseModel::Photon { .. }, b) => {
-            let model = NoiseModel::Photon {
-                background: b.unwrap_or(0.0),
-            };
-            model.validate().map_err(value_error)?;
-            Ok(model)
-        }
-        (NoiseModel::Gaussian, Some(_)) => Err(PyValueError::new_err(
-            "background: only with noise=\"photon\"",
-        )),
-        (NoiseModel::Gaussian, None) => Ok(model),
-    }
-}
-
 fn scene_of(a: &PyReadonlyArray3<'_, f64>, what: &str) -> PyResult<Scene<f64>> {
     let arr: Array3<f64> = a.as_array().to_owned();
     Scene::new(arr).map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
@@ -1176,11 +1125,10 @@ fn metrics<'py>(
     Ok(d)
 }
 
-/// Whether the folder `path` holds files (the temporary files that a killed writer left aside):
-/// an output folder that only `force` may write into.
+/// Checks, before any work, that a simulation can be written into the folder `out`.
 #[pyfunction]
-fn holds_files(path: std::path::PathBuf) -> PyResult<bool> {
-    rdlidar::io::holds_files(&path).map_err(value_error)
+fn check_simulation_dir(out: std::path::PathBuf, force: bool) -> PyResult<()> {
+    rdlidar::acquisition::check_simulation_dir(&out, force).map_err(value_error)
 }
 
 /// The names of the reconstruction methods, as `reconstruct` takes them.
@@ -1205,6 +1153,6 @@ fn _rdlidar(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fista, m)?)?;
     m.add_function(wrap_pyfunction!(metrics, m)?)?;
     m.add_function(wrap_pyfunction!(solvers, m)?)?;
-    m.add_function(wrap_pyfunction!(holds_files, m)?)?;
+    m.add_function(wrap_pyfunction!(check_simulation_dir, m)?)?;
     Ok(())
 }

@@ -262,7 +262,7 @@ def test_a_png_scene_is_the_command_lines_and_bad_maps_name_their_argument(tmp_p
                          reflectivity_png=tmp_path / "bad.png")
     with pytest.raises(ValueError, match="depth_png"):
         rdlidar.simulate("png", size=SIZE, pulse_len=KP)
-    with pytest.raises(ValueError, match="depth_png: applies only to the png scene"):
+    with pytest.raises(ValueError, match='depth_png: applies only to scene="png"'):
         rdlidar.simulate("paper", size=SIZE, pulse_len=KP, depth_png=maps["depth_png"])
     with pytest.raises(TypeError, match="depth_png: expected a path"):
         rdlidar.simulate("png", size=SIZE, pulse_len=KP, depth_png=3)

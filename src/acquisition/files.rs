@@ -2,6 +2,7 @@
 //! array, or a `meta.json` describing them by a seed) described from their header, checked
 //! and planned before any data are read, then loaded.
 
+use crate::settings::FrontEnd;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -41,41 +42,45 @@ pub struct AcquisitionFiles {
     share: Option<Share>,
 }
 
-/// What the messages call the inputs: the command line's flags, or the Python arguments.
+/// What the messages call the inputs: the command line's flags, or the Python arguments, as
+/// [`FrontEnd::word`] gives them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct InputNames {
-    /// The codes (`--codes`, `codes`).
-    pub codes: &'static str,
-    /// The tile size (`--tiles`, `tiles`).
-    pub tiles: &'static str,
-    /// How a tile size is given (`--tiles AxB`, `tiles=(A, B)`).
-    pub tile_hint: &'static str,
-    /// Streaming asked for (`--stream-codes`, `stream_codes=True`).
-    pub stream: &'static str,
-}
+pub struct InputNames(pub FrontEnd);
 
 impl InputNames {
     /// The names of `rdlidar`'s flags.
-    pub const COMMAND_LINE: InputNames = InputNames {
-        codes: "--codes",
-        tiles: "--tiles",
-        tile_hint: "--tiles AxB",
-        stream: "--stream-codes",
-    };
+    pub const COMMAND_LINE: InputNames = InputNames(FrontEnd::CommandLine);
     /// The names of the Python package's arguments.
-    pub const PYTHON: InputNames = InputNames {
-        codes: "codes",
-        tiles: "tiles",
-        tile_hint: "tiles=(A, B)",
-        stream: "stream_codes=True",
-    };
+    pub const PYTHON: InputNames = InputNames(FrontEnd::Python);
+
+    /// The codes.
+    pub fn codes(&self) -> String {
+        self.0.word("codes")
+    }
+
+    /// The tile size.
+    pub fn tiles(&self) -> String {
+        self.0.word("tiles")
+    }
+
+    /// Streaming asked for.
+    pub fn stream(&self) -> String {
+        self.0.word("stream_codes")
+    }
+
+    /// How a tile size is given: `--tiles AxB` or `tiles=(A, B)`.
+    pub fn tile_hint(&self) -> String {
+        match self.0 {
+            FrontEnd::CommandLine => format!("{} AxB", self.tiles()),
+            FrontEnd::Python => format!("{}=(A, B)", self.tiles()),
+        }
+    }
 
     /// A tile size as given: `--tiles 2x2` or `tiles=(2, 2)`.
     pub fn tile(&self, t: TileSize) -> String {
-        if self.tiles.starts_with("--") {
-            format!("{} {t}", self.tiles)
-        } else {
-            format!("{}=({}, {})", self.tiles, t.m, t.n)
+        match self.0 {
+            FrontEnd::CommandLine => format!("{} {t}", self.tiles()),
+            FrontEnd::Python => format!("{}=({}, {})", self.tiles(), t.m, t.n),
         }
     }
 }
@@ -179,7 +184,7 @@ impl AcquisitionFiles {
             (Some(Architecture::Tiles(d)), Some(t), _) if d != t => {
                 return Err(fail(format!(
                     "describes an acquisition in tiles of {d}, but {} says {t}",
-                    names.tiles
+                    names.tiles()
                 )))
             }
             (Some(Architecture::Tiles(d)), _, _) => Architecture::Tiles(d),
@@ -205,7 +210,7 @@ impl AcquisitionFiles {
             }
         }
         let streamed = streams(streaming, seeded.is_some(), architecture, geometry, k)
-            .map_err(|why| fail(why.describe(names.stream)))?;
+            .map_err(|why| fail(why.describe(&names.stream())))?;
         let shape = match architecture {
             Architecture::MultiAdc(g) => vec![g, m, n, k],
             _ => vec![m, n, k],
@@ -392,7 +397,7 @@ impl AcquisitionFiles {
                 "{command} on {} with K_p = {} ({} {})",
                 self.geometry,
                 self.pulse_len,
-                self.names.codes,
+                self.names.codes(),
                 self.codes.display()
             ),
             "use smaller inputs or free memory",
@@ -510,7 +515,7 @@ impl AcquisitionFiles {
                          size (meta.json \"architecture\" \"tile\")",
                         io::shape_text(&h.shape),
                         self.codes.display(),
-                        self.names.tile_hint
+                        self.names.tile_hint()
                     ),
                 ));
             }

@@ -42,6 +42,7 @@ mod censor;
 mod files;
 mod plan;
 mod reconstructed;
+mod request;
 mod rules;
 mod share;
 mod simulation;
@@ -71,11 +72,12 @@ pub use files::{AcquisitionFiles, InputNames};
 pub use plan::Use;
 pub(crate) use plan::{held, plan, streams};
 pub use reconstructed::{observe_nothing, Reconstructed};
+pub use request::{ReconstructRequest, RECONSTRUCT_SCENES};
 pub use rules::{check_finite, check_finite_result, check_pulse, count_of, pulse_in};
 pub use share::Share;
 pub use simulation::{
-    codes_shape, simulation_meta, write_simulation, write_simulation_cancellable, CodesFormat,
-    SimulationRequest, SCENES,
+    check_simulation_dir, codes_shape, simulation_meta, write_simulation,
+    write_simulation_cancellable, CodesFormat, SimulationRequest, SCENES,
 };
 
 /// Seeded codes of one ADC larger than this (as packed bits) are regenerated block by block

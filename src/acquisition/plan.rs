@@ -29,7 +29,7 @@ impl NoStream {
         match self {
             NoStream::NotSeeded => format!(
                 "{asked} regenerates codes described by a seed, but these are a codes array: \
-                 pass the meta.json of `simulate --codes-format seed`"
+                 pass the meta.json of a simulation whose `codes_format` is seed"
             ),
             NoStream::Architecture(a) => format!(
                 "{asked} streams the codes of one ADC, but this acquisition is {}: its {} are \

@@ -163,7 +163,7 @@ impl SimulationRequest {
             (name @ ("paper" | "transparent" | "png"), Some(_)) => {
                 return Err(Error::param(
                     "lit_fraction",
-                    format!("applies only to the random scene, not to the {name} scene"),
+                    format!("applies only to `scene=random`, not to `scene={name}`"),
                 ))
             }
             (other, _) => {
@@ -180,7 +180,7 @@ impl SimulationRequest {
             (SceneSpec::Supplied, None, _) => {
                 return Err(Error::param(
                     "depth_png",
-                    "the png scene reads its depths from a PNG depth map: give its file",
+                    "`scene=png` reads its depths from a PNG depth map: give its file",
                 ))
             }
             (SceneSpec::Supplied, Some(_), _) => {}
@@ -192,7 +192,7 @@ impl SimulationRequest {
                     return Err(Error::param(
                         name,
                         format!(
-                            "applies only to the png scene, not to the {} scene",
+                            "applies only to `scene=png`, not to `scene={}`",
                             other.name()
                         ),
                     ));
@@ -247,13 +247,13 @@ impl SimulationRequest {
         }
         let mut chosen: Vec<(&'static str, String)> = Vec::new();
         if self.adcs > 1 {
-            chosen.push(("adcs", format!("adcs {}", self.adcs)));
+            chosen.push(("adcs", format!("`adcs={}`", self.adcs)));
         }
         if let Some(t) = self.tiles {
-            chosen.push(("tiles", format!("tiles {t}")));
+            chosen.push(("tiles", format!("`tiles={t}`")));
         }
         if let Some(f) = self.aperture {
-            chosen.push(("aperture", format!("aperture {f}")));
+            chosen.push(("aperture", format!("`aperture={f}`")));
         }
         if let [(_, first), .., (name, last)] = &chosen[..] {
             return Err(Error::param(
@@ -263,15 +263,17 @@ impl SimulationRequest {
         }
         if self.codes_format != CodesFormat::Int8 {
             let what = match (self.ternary_zero_prob, self.aperture) {
-                (Some(p), _) => Some(format!("the zeros of ternary_zero_prob {p} codes")),
-                (None, Some(f)) => Some(format!("the zero codes of aperture {f}'s blocked pixels")),
+                (Some(p), _) => Some(format!("the zeros of `ternary_zero_prob` {p} codes")),
+                (None, Some(f)) => {
+                    Some(format!("the zero codes of `aperture` {f}'s blocked pixels"))
+                }
                 (None, None) => None,
             };
             if let Some(what) = what {
                 return Err(Error::param(
                     "codes_format",
                     format!(
-                        "codes_format {} holds ±1 codes only, not {what}: use int8",
+                        "`codes_format` {} holds ±1 codes only, not {what}: use int8",
                         self.codes_format.name()
                     ),
                 ));
@@ -304,7 +306,7 @@ impl SimulationRequest {
             (None, Some(_)) => {
                 return Err(Error::param(
                     "background",
-                    "is the photon noise's background: it needs photons too",
+                    "is the photon noise's background: it needs `photons` too",
                 ))
             }
             (Some(photons), background) => {
@@ -324,7 +326,7 @@ impl SimulationRequest {
             (None, Some(_)) => {
                 return Err(Error::param(
                     "full_scale",
-                    "is the ADC's full scale: it needs adc_bits too",
+                    "is the ADC's full scale: it needs `adc_bits` too",
                 ))
             }
             (Some(bits), full_scale) => {
@@ -372,7 +374,7 @@ impl SimulationRequest {
                         "reading the scene {g} from the depth map {}",
                         depth.display()
                     ),
-                    "lower --size",
+                    "lower `size`",
                 )?;
             // Each map's size from its header, against the grid, before a pixel is decoded.
             let named = |name: &'static str| {
@@ -489,6 +491,16 @@ pub fn write_simulation<T: Real + WritableElement>(
     write_simulation_cancellable(dir, sim, format, force, &AtomicBool::new(false))
 }
 
+/// Checks, before any work, that a simulation can be written into the folder `dir`
+/// ([`io::check_output_dir`]: an existing folder must be empty unless `force`, a new one needs
+/// an existing parent).
+///
+/// # Errors
+/// [`Error::File`] naming `dir`.
+pub fn check_simulation_dir(dir: &Path, force: bool) -> Result<()> {
+    io::check_output_dir(dir, force, &format!("its {}", SIMULATION_FILES.join(", ")))
+}
+
 /// [`write_simulation`], cancelled by `cancel`: once it is raised (from another thread, e.g. on
 /// Ctrl-C), the writing stops before its next file and leaves nothing new behind.
 ///
@@ -501,7 +513,7 @@ pub fn write_simulation_cancellable<T: Real + WritableElement>(
     force: bool,
     cancel: &AtomicBool,
 ) -> Result<SimulationMeta> {
-    io::check_output_dir(dir, force, &format!("its {}", SIMULATION_FILES.join(", ")))?;
+    check_simulation_dir(dir, force)?;
     let go_on = || {
         if cancel.load(Ordering::Relaxed) {
             Err(Error::Cancelled {

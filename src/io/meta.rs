@@ -415,7 +415,7 @@ pub fn read_seeded_codes(path: &Path) -> Result<SeededCodesFile> {
     if meta.codes_format != "seed" {
         return Err(fail(format!(
             "describes codes stored as {} in {} (codes_format), not codes described by a \
-             seed: pass that file as the codes (--codes)",
+             seed: pass that file as the codes (`codes`)",
             shortened(&meta.codes_format),
             shortened(&meta.files.codes)
         )));

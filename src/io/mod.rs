@@ -119,14 +119,14 @@ pub fn same_destination(a: &Path, b: &Path) -> bool {
 pub fn check_output_dir(dir: &Path, force: bool, replaced: &str) -> Result<()> {
     if dir.exists() {
         if !dir.is_dir() {
-            return Err(file_error(dir, "exists and is not a folder (--out)"));
+            return Err(file_error(dir, "exists and is not a folder (`out`)"));
         }
         if holds_files(dir)? && !force {
             return Err(file_error(
                 dir,
                 format!(
-                    "the output folder exists and is not empty; pass --force to replace \
-                     {replaced}, or --out DIR to write elsewhere"
+                    "the output folder exists and is not empty: `force` replaces \
+                     {replaced}, or another `out` writes elsewhere"
                 ),
             ));
         }
@@ -137,7 +137,7 @@ pub fn check_output_dir(dir: &Path, force: bool, replaced: &str) -> Result<()> {
         return Err(file_error(
             dir,
             format!(
-                "the parent folder {} does not exist (--out)",
+                "the parent folder {} does not exist (`out`)",
                 parent.display()
             ),
         ));

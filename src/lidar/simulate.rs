@@ -435,7 +435,7 @@ fn simulate_inner<T: Real>(
         }
     };
     spec.memory_plan::<T>()?
-        .check(&request, "lower --size, --pulse-len or --adcs")?;
+        .check(&request, "lower `size`, `pulse_len` or `adcs`")?;
     spec.check_quantization::<T>()?;
     let groups = match arch {
         Architecture::Tiles(t) => Some(tiles(g, t.m, t.n)?),
@@ -654,7 +654,7 @@ fn simulate_split_inner<T: Real>(
             "simulating the rows {}..{} of {g} with K_p = {}",
             rows.start, rows.end, spec.pulse_len
         ),
-        "lower --size or --pulse-len, or use more processes",
+        "lower `size` or `pulse_len`, or use more processes",
     )?;
     spec.check_quantization::<T>()?;
     let seeds = spec.seeds();

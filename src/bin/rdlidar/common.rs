@@ -7,6 +7,7 @@ use clap::ValueEnum;
 use rdlidar::acquisition::{count_of, Acquisition, Streaming};
 use rdlidar::io::{self, NpyDtype};
 use rdlidar::lidar::{Architecture, Geometry, TileSize};
+use rdlidar::settings::FrontEnd;
 use rdlidar::{limits, Real};
 
 /// A command-line failure.
@@ -19,9 +20,10 @@ pub enum Failure {
     BrokenPipe,
 }
 
+/// A library error in the command line's words: its settings as flags.
 impl From<rdlidar::Error> for Failure {
     fn from(e: rdlidar::Error) -> Self {
-        Failure::Message(e.to_string())
+        Failure::Message(FrontEnd::CommandLine.render(&e))
     }
 }
 
@@ -227,10 +229,8 @@ pub fn parse_depth_bins(text: &str) -> Result<usize, String> {
 /// A grid `MxNxKS` within [`Geometry::check_bounds`].
 pub fn parse_size(text: &str) -> Result<Geometry, String> {
     let g = Geometry::parse(text).map_err(|e| e.to_string())?;
-    g.check_bounds().map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { reason, .. } => reason,
-        other => other.to_string(),
-    })?;
+    g.check_bounds()
+        .map_err(|e| FrontEnd::CommandLine.reason(&e))?;
     Ok(g)
 }
 

@@ -9,6 +9,7 @@ use rdlidar::report::experiment::{
     self, ConfigFile, Console, ExperimentConfig, ExperimentObserver, ExperimentPatch,
     IterationBudgets, NoiseLevel, SceneKind as ExpSceneKind, Shard, SweepShare,
 };
+use rdlidar::settings::FrontEnd;
 
 use crate::common::{
     check_not_input, errln, outln, parse_positive, parse_size, set_threads, CliResult, Failure,
@@ -97,10 +98,7 @@ pub struct CompareArgs {
 }
 
 fn parse_shard(text: &str) -> Result<Shard, String> {
-    Shard::parse(text).map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { reason, .. } => reason,
-        other => other.to_string(),
-    })
+    Shard::parse(text).map_err(|e| FrontEnd::CommandLine.reason(&e))
 }
 
 /// Which preset an experiment starts from.
@@ -176,11 +174,6 @@ impl Experiment {
 /// Set by the first Ctrl-C: the experiment stops after the run under way.
 static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
-/// The flag an experiment setting (a configuration key) is given with on the command line.
-fn flag_of(key: &str) -> String {
-    format!("--{}", key.replace('_', "-"))
-}
-
 /// Resolves an experiment's configuration: the preset (--tiny, --quick or the default), the
 /// config file's section and top-level keys over it, the flags over both.
 fn experiment_config(
@@ -239,7 +232,11 @@ fn experiment_config(
                     Some(path) => format!(" (or `{name}` in {})", path.display()),
                     None => String::new(),
                 };
-                format!("{}{place}: {reason}", flag_of(name))
+                format!(
+                    "{}{place}: {}",
+                    FrontEnd::CommandLine.word(name),
+                    FrontEnd::CommandLine.words(&reason)
+                )
             }
             other => other.to_string(),
         };
@@ -308,7 +305,11 @@ pub fn merge(a: &CompareArgs, globals: &Globals) -> CliResult<ExitCode> {
             rdlidar::Error::InvalidParameter {
                 name: name @ ("merge" | "out"),
                 reason,
-            } => Failure::Message(format!("{}: {reason}", flag_of(name))),
+            } => Failure::Message(format!(
+                "{}: {}",
+                FrontEnd::CommandLine.word(name),
+                FrontEnd::CommandLine.words(&reason)
+            )),
             other => other.into(),
         })?;
     outln!(

@@ -189,10 +189,7 @@ impl Command {
 fn run(cli: Cli) -> CliResult<ExitCode> {
     // A memory budget that was asked for is never ignored: a value that is not a byte count is
     // refused before anything runs.
-    rdlidar::limits::memory_limit().map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { name, reason } => format!("{name}: {reason}"),
-        other => other.to_string(),
-    })?;
+    rdlidar::limits::memory_limit()?;
     let globals = Globals {
         threads: cli.threads,
         seed: cli.seed,

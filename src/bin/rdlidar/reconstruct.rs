@@ -4,7 +4,8 @@ use std::path::PathBuf;
 
 use ndarray_npy::WritableElement;
 use rdlidar::acquisition::{
-    at_top, observe_nothing, pulse_in, Acquisition, Censoring, Clipping, Reconstructed, Use,
+    at_top, observe_nothing, pulse_in, Acquisition, Censoring, Clipping, ReconstructRequest,
+    Reconstructed, Use, RECONSTRUCT_SCENES,
 };
 use rdlidar::io::{self, StagedFile};
 use rdlidar::lidar::{
@@ -14,6 +15,7 @@ use rdlidar::recon::{
     compare, compare_observed, Method, NoiseModel, PeakThreshold, ReconstructOptions,
     Reconstruction, TileReconstruction, MAX_RETURNS_ESTIMATE,
 };
+use rdlidar::settings::FrontEnd;
 use rdlidar::Real;
 
 use crate::common::{
@@ -141,19 +143,14 @@ fn parse_background(text: &str) -> Result<f64, String> {
         .map_err(|_| format!("expected a number >= 0, got {text:?}"))?;
     NoiseModel::Photon { background: b }
         .validate()
-        .map_err(|e| match e {
-            rdlidar::Error::InvalidParameter { reason, .. } => reason,
-            e => e.to_string(),
-        })?;
+        .map_err(|e| FrontEnd::CommandLine.reason(&e))?;
     Ok(b)
 }
 
 /// A `--noise` model name.
 fn parse_noise(text: &str) -> Result<NoiseModel, String> {
-    text.parse::<NoiseModel>().map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { reason, .. } => reason,
-        e => e.to_string(),
-    })
+    text.parse::<NoiseModel>()
+        .map_err(|e| FrontEnd::CommandLine.reason(&e))
 }
 
 /// A `--false-rate` value: a number strictly between 0 and 1.
@@ -161,19 +158,14 @@ fn parse_false_rate(text: &str) -> Result<f64, String> {
     let alpha: f64 = text
         .parse()
         .map_err(|_| format!("expected a number between 0 and 1, got {text:?}"))?;
-    rdlidar::recon::check_false_rate(alpha).map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { reason, .. } => reason,
-        e => e.to_string(),
-    })?;
+    rdlidar::recon::check_false_rate(alpha).map_err(|e| FrontEnd::CommandLine.reason(&e))?;
     Ok(alpha)
 }
 
 /// A `--clipped` value: top or a level > 0.
 fn parse_clipping(text: &str) -> Result<Clipping, String> {
-    text.parse::<Clipping>().map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { reason, .. } => reason,
-        e => e.to_string(),
-    })
+    text.parse::<Clipping>()
+        .map_err(|e| FrontEnd::CommandLine.reason(&e))
 }
 
 /// A `--returns` value: a count, or `None` for auto.
@@ -213,22 +205,35 @@ fn parse_method(text: &str) -> Result<Method, String> {
     })
 }
 
-/// The noise model of `--noise` and `--background`.
-fn noise_model(a: &ReconstructArgs) -> CliResult<NoiseModel> {
-    match (a.noise, a.background) {
-        (NoiseModel::Photon { .. }, b) => Ok(NoiseModel::Photon {
-            background: b.unwrap_or(0.0),
-        }),
-        (NoiseModel::Gaussian, Some(_)) => {
-            Err("--background: only with --noise photon".to_string().into())
-        }
-        (NoiseModel::Gaussian, None) => Ok(NoiseModel::Gaussian),
-    }
+/// The request the flags make, checked (a progress bar where `progress`).
+fn request_of(
+    a: &ReconstructArgs,
+    globals: &Globals,
+    progress: bool,
+) -> CliResult<ReconstructRequest> {
+    let request = ReconstructRequest {
+        method: a.solver,
+        options: ReconstructOptions {
+            max_iter: a.max_iter,
+            progress,
+            seed: globals.seed(),
+            power_iterations: None,
+            threshold: a.threshold,
+            debias: !a.no_debias,
+            max_returns: a.returns.0,
+            false_rate: a.false_rate,
+            noise: ReconstructRequest::noise_model(a.noise, a.background)?,
+        },
+        clipped: a.clipped,
+        fill_unobserved: a.fill_unobserved,
+    };
+    request.validate()?;
+    Ok(request)
 }
 
 /// Runs `reconstruct`.
 pub fn run(a: &ReconstructArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
-    noise_model(a)?;
+    request_of(a, globals, false)?;
     let mut inputs = a.files.inputs().to_vec();
     if let Some(t) = &a.truth {
         inputs.push((t, "--truth"));
@@ -261,7 +266,7 @@ fn read_inputs<T: Real>(a: &ReconstructArgs, ranks: &Ranks) -> CliResult<Inputs<
     let (acq, y) = ranks.load::<T>(
         &a.files,
         (a.tiles, a.stream_codes),
-        ("reconstruct", 10, Use::Reconstruct),
+        ("reconstruct", RECONSTRUCT_SCENES, Use::Reconstruct),
     )?;
     pulse_in::<T>(acq.pulse()).map_err(at_pulse(&a.files.pulse))?;
     let g = acq.whole_geometry();
@@ -289,21 +294,10 @@ fn reconstruct_files<T: Real + WritableElement>(
     ranks: &Ranks,
 ) -> CliResult {
     // Every process reads its inputs; they agree on any failure before solving together.
+    let request = request_of(a, globals, !globals.quiet && ranks.is_first())?;
     let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
-    let (acq, y, censoring) = censor_inputs(a.clipped, ranks, acq, y)?;
+    let (acq, y, censoring) = censor_inputs(&request, ranks, acq, y)?;
     let g = acq.whole_geometry();
-    let noise = noise_model(a)?;
-    let options = ReconstructOptions {
-        max_iter: a.max_iter,
-        progress: !globals.quiet && ranks.is_first(),
-        seed: globals.seed(),
-        power_iterations: None,
-        threshold: a.threshold,
-        debias: !a.no_debias,
-        max_returns: a.returns.0,
-        false_rate: a.false_rate,
-        noise,
-    };
     let kp = acq.pulse_len();
     let count = acq.rows().unwrap_or(1);
     let done = std::sync::atomic::AtomicUsize::new(0);
@@ -313,9 +307,17 @@ fn reconstruct_files<T: Real + WritableElement>(
             errln!("{}", tile_line(tile, n, count));
         }
     };
-    let r = acq
-        .reconstruct(&y, a.solver, &options, &observe_nothing, &on_tile)
-        .map_err(|e| format!("--solver {}: {e}", a.solver).into());
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let r = request
+        .run(&acq, &y, &observe_nothing, &on_tile, &never)
+        .map_err(|e| {
+            format!(
+                "--solver {}: {}",
+                a.solver,
+                FrontEnd::CommandLine.render(&e)
+            )
+            .into()
+        });
     let r = match (ranks.agree(r)?, acq.share()) {
         (Reconstructed::Single(r), Some(share)) => {
             Reconstructed::Single(share.gather_reconstruction(r)?)
@@ -404,6 +406,10 @@ fn reconstruct_files<T: Real + WritableElement>(
         files.join(", "),
         npy_dtype::<T>()
     );
+    outln!(
+        "  asked: {}",
+        FrontEnd::CommandLine.words(&request.summary())
+    );
     if let Some(line) = clipping_line(censoring.as_ref(), &acq, &y) {
         outln!("  {line}");
     }
@@ -420,22 +426,24 @@ fn reconstruct_files<T: Real + WritableElement>(
 }
 
 /// The acquisition and measurements with the samples `--clipped` names censored (the
-/// censored copies replace the originals), and what was censored.
+/// censored copies replace the originals), and what was censored; every process agrees.
 fn censor_inputs<T: Real>(
-    clipped: Option<Clipping>,
+    request: &ReconstructRequest,
     ranks: &Ranks,
     acq: Acquisition,
     y: Vec<T>,
 ) -> CliResult<(Acquisition, Vec<T>, Option<Censoring>)> {
-    let Some(clipping) = clipped else {
+    let Some(clipping) = request.clipped else {
         return Ok((acq, y, None));
     };
-    let censored = acq
-        .censor(&y, clipping)
-        .map_err(|e| format!("--clipped ({clipping}): {e}").into());
-    drop((acq, y));
-    let (acq, y, c) = ranks.agree(censored)?;
-    Ok((acq, y, Some(c)))
+    let censored = request.censor(acq, y).map_err(|e| {
+        format!(
+            "--clipped ({clipping}): {}",
+            FrontEnd::CommandLine.render(&e)
+        )
+        .into()
+    });
+    ranks.agree(censored)
 }
 
 /// The line on clipping: what was censored, or, without `--clipped`, a hint where many

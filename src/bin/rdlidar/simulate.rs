@@ -5,14 +5,16 @@ use std::path::PathBuf;
 use clap::ValueEnum;
 use ndarray_npy::WritableElement;
 use rdlidar::acquisition::{
-    codes_shape, write_simulation, CodesFormat as LibCodesFormat, SimulationRequest,
+    check_simulation_dir, codes_shape, write_simulation, CodesFormat as LibCodesFormat,
+    SimulationRequest,
 };
 use rdlidar::io;
-use rdlidar::io::meta::{SimulationMeta, SIMULATION_FILES};
+use rdlidar::io::meta::SimulationMeta;
 use rdlidar::lidar::{
     simulate, simulate_split, simulate_split_supplied, simulate_supplied, Geometry, SimulationSpec,
     TileSize, SEEDED_CODES_GENERATOR,
 };
+use rdlidar::settings::FrontEnd;
 use rdlidar::units::number;
 use rdlidar::Real;
 
@@ -170,11 +172,6 @@ pub struct SimulateArgs {
     pub codes_format: CodesFormat,
 }
 
-/// The library's name of a setting as the flag that gives it: `lit_fraction` → `--lit-fraction`.
-fn flag(name: &str) -> String {
-    format!("--{}", name.replace('_', "-"))
-}
-
 /// The request the flags make.
 fn request_of(a: &SimulateArgs, seed: u64) -> SimulationRequest {
     SimulationRequest {
@@ -210,35 +207,8 @@ pub fn splits(a: &SimulateArgs) -> Result<(), &'static str> {
 /// Runs `simulate` (in f64 unless --precision says otherwise).
 pub fn run(a: &SimulateArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     let request = request_of(a, globals.seed());
-    let spec = request.spec().map_err(|e| match e {
-        rdlidar::Error::InvalidParameter { name, reason } => {
-            let reason = [
-                "lit_fraction",
-                "adcs",
-                "tiles",
-                "aperture",
-                "codes_format",
-                "ternary_zero_prob",
-                "photons",
-                "adc_bits",
-                "random scene",
-                "png scene",
-            ]
-            .iter()
-            .fold(reason, |r, n| match *n {
-                "random scene" => r.replace("the random scene", "--scene random"),
-                "png scene" => r.replace("the png scene", "--scene png"),
-                n => r.replace(&format!("{n} "), &format!("{} ", flag(n))),
-            });
-            format!("{}: {reason}", flag(name))
-        }
-        other => other.to_string(),
-    })?;
-    io::check_output_dir(
-        &a.out,
-        a.force,
-        &format!("its {}", SIMULATION_FILES.join(", ")),
-    )?;
+    let spec = request.spec()?;
+    check_simulation_dir(&a.out, a.force)?;
     let precision = globals.precision.unwrap_or(Precision::F64);
     with_precision!(precision, simulate_into(a, &request, &spec, ranks))
 }
@@ -271,19 +241,23 @@ fn simulate_into<T: Real + WritableElement>(
             } => {
                 format!("mpirun -n {}: {reason}", ranks.processes())
             }
-            rdlidar::Error::InvalidParameter { name, reason } => {
+            e @ rdlidar::Error::InvalidParameter { .. } => {
                 // A full scale beyond the range of f32: the flag that computes in f64.
-                let hint = if reason.ends_with("compute in f64") {
+                let hint = if e.to_string().ends_with("compute in f64") {
                     " (--precision f64)"
                 } else {
                     ""
                 };
-                format!("{}: {reason}{hint}", flag(name))
+                format!("{}{hint}", FrontEnd::CommandLine.render(&e))
             }
             e @ (rdlidar::Error::TooLarge { .. } | rdlidar::Error::ShapeMismatch { .. }) => {
-                e.to_string()
+                FrontEnd::CommandLine.render(&e)
             }
-            other => format!("--scene {}: {other}", a.scene.name()),
+            other => format!(
+                "--scene {}: {}",
+                a.scene.name(),
+                FrontEnd::CommandLine.render(&other)
+            ),
         });
     let sim = ranks.agree(sim.map_err(Into::into))?;
     if !ranks.is_first() {

@@ -519,8 +519,8 @@ fn to_real<T: Real, S: Copy + Into<f64>>(
         return Err(file_error(
             path,
             format!(
-                "{role} value {v:e} at index {} underflows {} (it would read as 0); use \
-                 --precision f64",
+                "{role} value {v:e} at index {} underflows {} (it would read as 0); compute \
+                 in f64 (`precision`)",
                 in_file(&i),
                 T::NAME
             ),

@@ -312,7 +312,7 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(
-            e.contains("`shard`") && e.contains(&format!("at most {problems} shards")),
+            e.contains("shard:") && e.contains(&format!("at most {problems} shards")),
             "{e}"
         );
     }

@@ -44,6 +44,7 @@ mod config;
 mod console;
 mod deal;
 mod figures;
+mod file;
 mod merge;
 mod presets;
 mod run;
