@@ -989,7 +989,11 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
         report.set_item("censored", c.total())?;
         report.set_item("censored_levels", c.levels.clone())?;
     }
-    let (f, a, s) = r.applies();
+    let rdlidar::operator::Applies {
+        forward: f,
+        adjoint: a,
+        support: s,
+    } = r.applies();
     match &r {
         Reconstructed::Single(r) => {
             single_report(py, r, &report)?;

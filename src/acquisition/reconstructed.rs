@@ -1,6 +1,8 @@
 //! A reconstruction of any architecture.
 
 use super::*;
+use crate::operator::Applies;
+use crate::solver::Report;
 
 /// A reconstruction of any architecture: one operator's, or a tiled array's.
 #[derive(Debug, Clone)]
@@ -45,15 +47,16 @@ impl<T: Real> Reconstructed<T> {
     }
 
     /// Forward, adjoint and support applications (summed over the tiles).
-    pub fn applies(&self) -> (usize, usize, usize) {
+    pub fn applies(&self) -> Applies {
         match self {
-            Reconstructed::Single(r) => r.report.as_ref().map_or((0, 1, 0), |rep| {
-                (
-                    rep.forward_applies,
-                    rep.adjoint_applies,
-                    rep.support_applies,
-                )
-            }),
+            // A backprojection: one adjoint application.
+            Reconstructed::Single(r) => r.report.as_ref().map_or(
+                Applies {
+                    adjoint: 1,
+                    ..Applies::default()
+                },
+                Report::applies,
+            ),
             Reconstructed::Tiled(r) => r.applies(),
         }
     }

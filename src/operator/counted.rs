@@ -11,6 +11,40 @@ use super::pixel::{
 };
 use super::{LinearOperator, VoxelOperator};
 
+/// Applications of an operator, by kind ([`Counted`]): the one value in which every count of
+/// applications is kept, added up and reported.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Applies {
+    /// Forward applications of the whole operator.
+    pub forward: usize,
+    /// Adjoint applications of the whole operator (and correlations).
+    pub adjoint: usize,
+    /// Support applications: of a restriction to a few columns, or column queries.
+    pub support: usize,
+}
+
+impl std::ops::AddAssign for Applies {
+    fn add_assign(&mut self, other: Applies) {
+        self.forward += other.forward;
+        self.adjoint += other.adjoint;
+        self.support += other.support;
+    }
+}
+
+impl std::ops::Add for Applies {
+    type Output = Applies;
+    fn add(mut self, other: Applies) -> Applies {
+        self += other;
+        self
+    }
+}
+
+impl std::iter::Sum for Applies {
+    fn sum<I: Iterator<Item = Applies>>(iter: I) -> Applies {
+        iter.fold(Applies::default(), |a, b| a + b)
+    }
+}
+
 /// Wraps an operator and counts its applications (thread-safe), in three kinds:
 ///
 /// * forward applications of the whole operator (its correlations of
@@ -56,6 +90,15 @@ impl<A> Counted<A> {
     /// Number of support applications so far.
     pub fn support_count(&self) -> usize {
         self.support.load(Ordering::Relaxed)
+    }
+
+    /// Every count so far.
+    pub fn applies(&self) -> Applies {
+        Applies {
+            forward: self.forward_count(),
+            adjoint: self.adjoint_count(),
+            support: self.support_count(),
+        }
     }
 
     /// Counts one support application that the wrapped operator performs outside this wrapper

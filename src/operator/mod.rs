@@ -58,7 +58,7 @@ use ndarray::Array2;
 pub use algebra::{Adjoint, Compose, Normal, Scaled, Sum};
 pub use basic::{Diagonal, Identity, Restriction, Zero};
 pub use convolve::{ConvMethod, ConvMode, Convolve1D};
-pub use counted::Counted;
+pub use counted::{Applies, Counted};
 pub use gradient::Gradient2D;
 pub use matrix::{DenseMatrix, NalgebraMatrix, SparseMatrix};
 pub use norm::{operator_norm, NormEstimate, NormStop, PowerIteration};

@@ -601,7 +601,7 @@ fn hidden_returns<T: Real>(
     op.correlate(&r, &mut u);
     let unexplained = unexplained_returns(&op, x, &r);
     if let Some(rep) = report {
-        rep.add_counts(&op);
+        rep.add_applies(op.applies());
     }
     let space = crate::LinearOperator::space(&op);
     let mut all: Vec<f64> = u.iter().map(|v| v.as_f64()).collect();

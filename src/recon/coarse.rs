@@ -3,7 +3,7 @@
 
 use crate::error::Result;
 use crate::lidar::{BlockOperator, Geometry, LidarOperator, MultiAdcOperator, RdOperator};
-use crate::operator::{Counted, LinearOperator};
+use crate::operator::{Applies, Counted, LinearOperator};
 use crate::real::Real;
 use crate::solver::{refine_surfaces, tv_depth, Observer, RefineParams, Report, TvDepthParams};
 
@@ -11,9 +11,6 @@ use super::options::{model_params, ReconstructOptions};
 
 /// The block of the coarse grid (rows, columns of pixels).
 pub const COARSE_BLOCK: (usize, usize) = (2, 2);
-
-/// Applications that the operator's own counter does not see: (forward, adjoint, support).
-pub(super) type Uncounted = [usize; 3];
 
 /// Runs the coarse solve and the refinement on `op` into `x`; returns the report of both and the
 /// applications `op`'s counter does not see: the coarse grid's own (block-code) support
@@ -29,7 +26,7 @@ pub(super) fn coarse_to_fine<T: Real>(
     x: &mut [T],
     options: &ReconstructOptions,
     observer: &mut dyn Observer<T>,
-) -> Result<(Report, Uncounted)> {
+) -> Result<(Report, Applies)> {
     if op.whole_code_sets().is_none() {
         if let Some(sets) = op.gathered_code_sets() {
             let sets = sets?;
@@ -45,16 +42,19 @@ pub(super) fn coarse_to_fine<T: Real>(
             let (report, support) = solve(&whole, y, &mut all, options, observer)?;
             let at = op.space().offset(x.len());
             x.copy_from_slice(&all[at..at + x.len()]);
-            let counted = [
-                whole.forward_count(),
-                whole.adjoint_count(),
-                whole.support_count() + support,
-            ];
-            return Ok((report, counted));
+            let support = Applies {
+                support,
+                ..Applies::default()
+            };
+            return Ok((report, whole.applies() + support));
         }
     }
     let (report, support) = solve(op, y, x, options, observer)?;
-    Ok((report, [0, 0, support]))
+    let uncounted = Applies {
+        support,
+        ..Applies::default()
+    };
+    Ok((report, uncounted))
 }
 
 /// [`coarse_to_fine`] on an operator over the whole scene: the report, and the support

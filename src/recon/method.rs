@@ -307,20 +307,17 @@ pub(super) fn run<T: Real>(
         }
         Method::CoarseToFine => {
             let params = model_params(options);
-            let (mut report, [forward, adjoint, support]) =
+            let (mut report, uncounted) =
                 with_progress(params.stopping.max_iter, options, observer, |obs| {
                     super::coarse::coarse_to_fine(op, y, &mut x, options, obs)
                 })?;
-            report.count_from(&counted);
-            report.forward_applies += forward;
-            report.adjoint_applies += adjoint;
-            report.support_applies += support;
+            report.set_applies(counted.applies() + uncounted);
             report.elapsed = started.elapsed();
             return Ok((x, Some(report)));
         }
         Method::Auto => unreachable!("Auto is resolved before run"),
     };
-    report.count_from(&counted);
+    report.set_applies(counted.applies());
     report.elapsed = started.elapsed();
     Ok((x, Some(report)))
 }

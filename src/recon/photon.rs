@@ -211,7 +211,7 @@ pub(super) fn photon_weights<T: Real>(
         counted.apply(x, &mut ax);
     }
     if let Some(r) = report.as_mut() {
-        r.add_counts(&counted);
+        r.add_applies(counted.applies());
     }
     let light = light(op, x);
     // The rows that are measurements: a censored row is zero in the operator and the data.

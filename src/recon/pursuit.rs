@@ -113,7 +113,7 @@ pub(super) fn relative_residual<T: Real>(
     } else {
         op.apply(x, &mut ax);
     }
-    report.add_counts(&op);
+    report.add_applies(op.applies());
     crate::linalg::dist2_sq(y, &ax).sqrt() / ynorm
 }
 

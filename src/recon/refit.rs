@@ -107,7 +107,7 @@ pub(super) fn refit_support_to<T: Real>(
         }
     }
     if let Some(t) = &mut total {
-        t.count_from(&counted);
+        t.set_applies(counted.applies());
     }
     Ok(total)
 }

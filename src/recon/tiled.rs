@@ -15,6 +15,7 @@ use crate::error::{Error, Result};
 use crate::lidar::{
     Cancellable, Codes, DepthMap, Geometry, RdOperator, Regime, Scene, SeededCodes, TileSize,
 };
+use crate::operator::Applies;
 use crate::real::Real;
 
 use super::method::Method;
@@ -126,17 +127,12 @@ impl<T> TiledReconstruction<T> {
     }
 
     /// The sum over the tiles of the forward, adjoint and support applications.
-    pub fn applies(&self) -> (usize, usize, usize) {
+    pub fn applies(&self) -> Applies {
         self.tiles
             .iter()
             .filter_map(|t| t.reconstruction.report.as_ref())
-            .fold((0, 0, 0), |(f, a, s), r| {
-                (
-                    f + r.forward_applies,
-                    a + r.adjoint_applies,
-                    s + r.support_applies,
-                )
-            })
+            .map(Report::applies)
+            .sum()
     }
 }
 

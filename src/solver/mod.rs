@@ -54,8 +54,8 @@ use stopping::StopRules;
 
 use crate::error::{Error, Result};
 use crate::linalg::dist2_sq;
-use crate::operator::Counted;
 use crate::operator::{operator_norm, PowerIteration};
+use crate::operator::{Applies, Counted};
 use crate::real::Real;
 
 /// Why a solver stopped.
@@ -183,26 +183,31 @@ impl Report {
     /// Adds the apply counts and the time of a subsidiary run (a refinement step) to this one,
     /// leaving the iterations, histories and termination as they are.
     pub fn absorb_applies(&mut self, other: &Report) {
-        self.forward_applies += other.forward_applies;
-        self.adjoint_applies += other.adjoint_applies;
-        self.support_applies += other.support_applies;
+        self.add_applies(other.applies());
         self.elapsed += other.elapsed;
     }
 
-    /// The apply counts become those that `op` has counted: for a composite solver that counts
-    /// every application of its parts through one wrapper.
-    pub fn count_from<A>(&mut self, op: &Counted<A>) {
-        self.forward_applies = op.forward_count();
-        self.adjoint_applies = op.adjoint_count();
-        self.support_applies = op.support_count();
+    /// Its applications.
+    pub fn applies(&self) -> Applies {
+        Applies {
+            forward: self.forward_applies,
+            adjoint: self.adjoint_applies,
+            support: self.support_applies,
+        }
     }
 
-    /// Adds the applications that `op` has counted (work done for this run outside its solver,
-    /// e.g. a residual measured afterwards).
-    pub fn add_counts<A>(&mut self, op: &Counted<A>) {
-        self.forward_applies += op.forward_count();
-        self.adjoint_applies += op.adjoint_count();
-        self.support_applies += op.support_count();
+    /// The apply counts become `applies`: those a counter ([`Counted::applies`]) saw of every
+    /// application of a composite solver's parts.
+    pub fn set_applies(&mut self, applies: Applies) {
+        self.forward_applies = applies.forward;
+        self.adjoint_applies = applies.adjoint;
+        self.support_applies = applies.support;
+    }
+
+    /// Adds `applies`: work done for this run outside its solver (a residual measured
+    /// afterwards, counted by a [`Counted`] wrapper), or by a run whose report is not at hand.
+    pub fn add_applies(&mut self, applies: Applies) {
+        self.set_applies(self.applies() + applies);
     }
 
     /// Every application counted, full and support ones alike.

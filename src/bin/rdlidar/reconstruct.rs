@@ -556,7 +556,11 @@ impl<T: Real> Outcome<T> {
                 g.critical_pulse_len()
             ))
         );
-        let (f, adj, s) = r.applies();
+        let rdlidar::operator::Applies {
+            forward: f,
+            adjoint: adj,
+            support: s,
+        } = r.applies();
         let iterations = format!("{f} forward, {adj} adjoint and {s} support applications in all");
         // The false-detection test ran in each tile: its sums over the tiles that report it.
         let tests: Vec<_> = r

@@ -12,7 +12,7 @@
 
 use crate::error::{Error, Result};
 use crate::linalg::dot;
-use crate::operator::{LinearOperator, VoxelOperator};
+use crate::operator::{Applies, LinearOperator, VoxelOperator};
 use crate::real::Real;
 use crate::solver::{cgls, CglsParams, Report, Stopping, Termination};
 
@@ -483,7 +483,11 @@ where
         // (round-off in f32 on an ill-conditioned support) keeps the amplitudes it started from.
         let start = a.clone();
         match cgls(&tied, &target, &mut a, &inner, &mut ()) {
-            Ok(rep) => report.support_applies += rep.forward_applies + rep.adjoint_applies,
+            // Applications of the operator restricted to the surfaces' voxels.
+            Ok(rep) => report.add_applies(Applies {
+                support: rep.forward_applies + rep.adjoint_applies,
+                ..Applies::default()
+            }),
             Err(Error::Breakdown { .. }) => a.clone_from(&start),
             Err(e) => return Err(e),
         }
@@ -504,7 +508,10 @@ where
     }
     let mut ax = vec![T::zero(); y.len()];
     tied.restricted.apply(&a, &mut ax);
-    report.support_applies += 1;
+    report.add_applies(Applies {
+        support: 1,
+        ..Applies::default()
+    });
     for (ri, v) in r.iter_mut().zip(&ax) {
         *ri -= v.as_f64();
     }

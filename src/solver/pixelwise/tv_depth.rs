@@ -362,7 +362,7 @@ where
         tv_rounds(&counted, grid, y, x, params, &mut report, observer)?;
     }
     report.solver = "tv-depth";
-    report.count_from(&counted);
+    report.set_applies(counted.applies());
     Ok(report)
 }
 
