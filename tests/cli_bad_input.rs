@@ -189,6 +189,23 @@ fn a_full_scale_beyond_float32_is_blamed_on_the_full_scale() {
     assert!(tmp.listing().is_empty(), "{:?}", tmp.listing());
     let res = run(&simulate_args("8x8x6", "100", &out, &flags));
     assert!(res.status.success(), "{}", stderr(&res));
+    // The small end: levels that would all read as 0 in f32 (the measurements vanishing
+    // without a word), and in f64.
+    let other = tmp.path("small");
+    let tiny = [
+        "--adc-bits",
+        "8",
+        "--full-scale",
+        "1e-300",
+        "--precision",
+        "f32",
+    ];
+    let res = run(&simulate_args("8x8x6", "100", &other, &tiny));
+    assert_one_line_error(&res, &["--full-scale", "1e-300", "f32", "read as 0"]);
+    let tiniest = ["--adc-bits", "8", "--full-scale", "1e-322"];
+    let res = run(&simulate_args("8x8x6", "100", &other, &tiniest));
+    assert_one_line_error(&res, &["--full-scale", "f64", "read as 0"]);
+    assert!(!other.exists());
 }
 
 // B05: a Unix socket given as an output was "a FIFO that nobody reads". It is refused as a

@@ -74,6 +74,8 @@ pub trait LidarOperator<T: Real>: VoxelOperator<T> {
     /// are not held in memory.
     ///
     /// # Errors
+    /// [`Error::TooLarge`] when a process has no memory for the whole scene's codes and
+    /// operator (checked before anything is gathered, the same answer in every process);
     /// [`Error::InvalidParameter`] for parts whose codes do not join into one grid.
     fn gathered_code_sets(&self) -> Option<Result<Vec<Arc<Codes>>>> {
         None
@@ -183,11 +185,42 @@ impl<T: Real, A: LidarOperator<T>> LidarOperator<T> for Part<A> {
     }
     fn gathered_code_sets(&self) -> Option<Result<Vec<Arc<Codes>>>> {
         let sets = self.inner().whole_code_sets()?;
-        Some(
+        let gathered = || -> Result<Vec<Arc<Codes>>> {
+            // Every process will hold the whole scene's codes and operator: checked first.
+            let band = self.geometry();
+            let pixels = crate::space::count(self.space(), band.pixels());
+            let whole = Geometry::new(pixels / band.n.max(1), band.n, band.ks)?;
+            let alphabet = sets.first().map_or(CodeAlphabet::Binary, |c| c.alphabet());
+            let bytes = RdOperator::<T>::estimated_memory_bytes(
+                whole,
+                self.pulse().len(),
+                alphabet,
+                rayon::current_num_threads(),
+            )?;
+            let fits = crate::limits::MemoryPlan::new()
+                .add(
+                    "the whole scene's codes and operator",
+                    bytes as u128,
+                    sets.len(),
+                )
+                .check(
+                    &format!("gathering the codes of {whole} into every process"),
+                    "more memory per process",
+                );
+            // Every process gathers, or none does.
+            if !crate::space::all(self.space(), fits.is_ok()) {
+                return Err(fits.err().unwrap_or_else(|| {
+                    Error::param(
+                        "operator",
+                        "another process has no memory for the whole scene's codes",
+                    )
+                }));
+            }
             sets.iter()
                 .map(|c| gather_codes(self.space(), c).map(Arc::new))
-                .collect(),
-        )
+                .collect()
+        };
+        Some(gathered())
     }
 }
 

@@ -429,12 +429,19 @@ impl<T: Real> RdOperator<T> {
                 if w.part.len() != k {
                     resize(&mut w.part, k, [T::zero(); 8]);
                 }
+                // Every block builds its tables whole before reading them (the blocks of a task
+                // share the buffer as they are), so a pooled buffer of the right length is
+                // ready as it is.
                 if self.quads {
                     let lines = quad_lines::<T>(self.block_groups, max_nch);
-                    resize(&mut w.lines, lines, CacheLine::default());
+                    if w.lines.len() != lines {
+                        resize(&mut w.lines, lines, CacheLine::default());
+                    }
                 } else {
                     let lanes = self.block_groups * 256 * max_nch;
-                    resize(&mut w.lanes, lanes, [T::zero(); 8]);
+                    if w.lanes.len() != lanes {
+                        resize(&mut w.lanes, lanes, [T::zero(); 8]);
+                    }
                 }
                 let (b0, b1) = (t * nb / tasks, (t + 1) * nb / tasks);
                 for b in b0..b1 {

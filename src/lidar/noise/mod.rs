@@ -440,7 +440,25 @@ fn check_levels<T: Real>(bits: u32, full_scale: FullScale) -> Result<()> {
     let FullScale::Fixed(f) = full_scale else {
         return Ok(());
     };
-    let outer = f - f / 2f64.powi(bits as i32);
+    let inner = f / 2f64.powi(bits as i32);
+    let outer = f - inner;
+    if T::of_f64(inner) == T::zero() {
+        // Every level but the outermost would read as 0: the measurements vanish.
+        return Err(Error::param(
+            "full_scale",
+            format!(
+                "the full scale {} puts the ADC's innermost levels (±full scale / 2^{bits}) \
+                 below the smallest {} (they would read as 0): raise the full scale{}",
+                crate::units::number(f),
+                T::NAME,
+                if T::NAME == "f32" {
+                    " or compute in f64"
+                } else {
+                    ""
+                }
+            ),
+        ));
+    }
     if T::of_f64(outer).is_finite() {
         return Ok(());
     }
