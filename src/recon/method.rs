@@ -68,7 +68,7 @@ pub enum Method {
     /// scene, without the least-squares refinement of [`Method::ModelBased`].
     Amp,
     /// Model-based recovery, at most k reflectors per pixel ([`ReconstructOptions::max_returns`],
-    /// one by default; otherwise [`ModelBasedParams::default`]):
+    /// one by default; otherwise [`ModelBasedParams::default`](crate::solver::ModelBasedParams::default)):
     /// started by message passing, refined by least squares on the support.
     ModelBased,
     /// Total variation on the depth map ([`TvDepthParams::default`]).

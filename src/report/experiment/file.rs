@@ -23,7 +23,8 @@ pub(super) fn seed_value(seed: u64) -> toml::Value {
 }
 
 /// A seed from TOML: an integer from 0, or any `u64` as a string of digits (how
-/// [`ExperimentConfig::to_toml`] writes a seed above `i64::MAX`).
+/// [`ExperimentConfig::to_toml`](super::ExperimentConfig::to_toml) writes a seed above
+/// `i64::MAX`).
 fn de_seed<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<Option<u64>, D::Error> {
     struct Seed;
     impl serde::de::Visitor<'_> for Seed {
@@ -54,9 +55,9 @@ fn de_seed<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<Option<u64>, 
     d.deserialize_any(Seed).map(Some)
 }
 
-/// Some fields of an [`ExperimentConfig`], to be layered over it with
-/// [`ExperimentConfig::patched`]: a `[demo]` or `[compare]` section of a config file, or the
-/// flags given on the command line.
+/// Some fields of an [`ExperimentConfig`](super::ExperimentConfig), to be layered over it with
+/// [`ExperimentConfig::patched`](super::ExperimentConfig::patched): a `[demo]` or `[compare]`
+/// section of a config file, or the flags given on the command line.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExperimentPatch {
