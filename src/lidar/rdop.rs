@@ -36,12 +36,10 @@ pub(super) const ADJ_BLOCK_BYTES: usize = 1024 * 1024;
 const ADJ_FLUSH_CHUNKS: usize = 16;
 /// Blocks whose lane partial sums are accumulated in `T` before a flush to `f64`.
 const FLUSH_BLOCKS: usize = 8;
-/// The dense forward's tasks at most: each holds K sums in `f64` until they are added.
+/// The dense forward's tasks at most (each holds K sums in `f64`).
 const MAX_FORWARD_TASKS: usize = 64;
-
-/// The tasks of the dense forward over `blocks` blocks: one per [`FLUSH_BLOCKS`] blocks, at
-/// most [`MAX_FORWARD_TASKS`]; a function of the blocks alone, so that the sums' order does not
-/// depend on the number of threads.
+/// The dense forward's tasks over `blocks` blocks: one per [`FLUSH_BLOCKS`] blocks, at most
+/// [`MAX_FORWARD_TASKS`], whatever the number of threads.
 fn forward_tasks(blocks: usize) -> usize {
     blocks.div_ceil(FLUSH_BLOCKS).clamp(1, MAX_FORWARD_TASKS)
 }
@@ -409,11 +407,8 @@ impl<T: Real> RdOperator<T> {
         self.codes.groups().div_ceil(self.block_groups)
     }
 
-    /// The dense forward: every pixel through the tables.
-    ///
-    /// The blocks go to [`forward_tasks`] tasks of consecutive blocks whatever the number of
-    /// threads, each summing its own blocks in `f64`, and the tasks' sums are added in their
-    /// order: the same values for any thread count.
+    /// The dense forward: every pixel through the tables, in [`forward_tasks`] tasks of
+    /// consecutive blocks whose `f64` sums are added in task order (the same for any threads).
     fn forward_dense(&self, x: &[T], y: &mut [T]) {
         let k = self.codes.len();
         let nb = self.nblocks();
@@ -429,9 +424,8 @@ impl<T: Real> RdOperator<T> {
                 if w.part.len() != k {
                     resize(&mut w.part, k, [T::zero(); 8]);
                 }
-                // Every block builds its tables whole before reading them (the blocks of a task
-                // share the buffer as they are), so a pooled buffer of the right length is
-                // ready as it is.
+                // Every block builds its tables whole before reading them: a pooled buffer of
+                // the right length is ready as it is.
                 if self.quads {
                     let lines = quad_lines::<T>(self.block_groups, max_nch);
                     if w.lines.len() != lines {

@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::real::Real;
 use crate::report::timing::time_operator;
 use crate::report::units::{bytes, frames_per_second, metres, seconds, si};
+use crate::units::number;
 
 use crate::lidar::sampling::check_tau;
 use crate::lidar::{
@@ -355,10 +356,7 @@ impl Cost {
         {
             return Err(Error::param(
                 "throughput",
-                format!(
-                    "every rate must be finite and > 0, got {}",
-                    crate::units::number(*bad)
-                ),
+                format!("every rate must be finite and > 0, got {}", number(*bad)),
             ));
         }
         let overflow = |what: &str| {
