@@ -52,6 +52,17 @@ pub fn bytes(b: impl Into<u128>) -> String {
     format!("{text} {prefix}B")
 }
 
+/// Serializes a duration as seconds (a float), as reports give times.
+///
+/// # Errors
+/// The serializer's.
+pub fn serialize_seconds<S: serde::Serializer>(
+    d: &std::time::Duration,
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    s.serialize_f64(d.as_secs_f64())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -669,9 +669,12 @@ def reconstruct(
 
     Returns ``(depth, scene, report)``: ``depth`` (M, N) int32 depth bins (-1 where no return,
     -2 for pixels no code reaches), ``scene`` (M, N, K_s) with every return found, and
-    ``report`` a dict (method, method_used, architecture, regime, iterations, termination,
-    residual_history, forward/adjoint/support applies, seconds, auto's stages, and a report
-    per tile for a tiled acquisition).
+    ``report`` a dict (method, method_used, architecture, regime, solver, iterations,
+    termination, residual_history, objective_history, forward/adjoint/support applies,
+    seconds, solver_seconds, auto's stages, the request in these arguments' words, and a
+    report per tile for a tiled acquisition), with the lines the command line prints:
+    ``headline`` (the method and its regime, the work, the time, the pixels with a return)
+    and ``details`` (auto's stages, the tests, the filled pixels).
     """
     callback = _callback(callback)
     max_iter = _optional_int(max_iter, "max_iter", 1)

@@ -8,6 +8,7 @@ The command line is found through the environment variable RDLIDAR_BIN (the path
 import json
 import math
 import os
+import re
 import subprocess
 
 import numpy as np
@@ -491,14 +492,14 @@ def test_reconstruct_is_the_command_line(tmp_path, rdlidar_bin, case, kwargs, so
     args = ["reconstruct", "--pulse", folder / "pulse.npy", "--codes", codes_file,
             "--meas", folder / "meas.npy", "--depth-bins", ks, "--solver", solver,
             "--out-depth", tmp_path / "d.npy", "--out-scene", tmp_path / "x.npy",
-            "--precision", "f64" if dtype == np.float64 else "f32", "--quiet"]
+            "--precision", "f64" if dtype == np.float64 else "f32"]
     if max_iter is not None:
         args += ["--max-iter", max_iter]
     if tiles is not None:
         args += ["--tiles", f"{tiles[0]}x{tiles[1]}"]
     if fill:
         args += ["--fill-unobserved"]
-    run_cli(rdlidar_bin, *args)
+    printed = run_cli(rdlidar_bin, *args).stdout
     cli_depth, cli_scene = np.load(tmp_path / "d.npy"), np.load(tmp_path / "x.npy")
 
     codes = sim.codes
@@ -515,6 +516,11 @@ def test_reconstruct_is_the_command_line(tmp_path, rdlidar_bin, case, kwargs, so
     assert np.array_equal(scene, cli_scene), np.max(np.abs(scene - cli_scene))
     assert report["method"] == solver
     assert report["architecture"] == expected_architecture(kwargs)
+    # The lines the command line prints, times aside.
+    untimed = lambda line: re.sub(r"\d+\.\d+ s\b", "_ s", line)
+    assert report["headline"].startswith(f"solver {report['method_used']}")
+    for line in [report["headline"], *report["details"]]:
+        assert untimed(line) in untimed(printed), (line, printed)
 
     # And from an operator: the same.
     d2, x2, _ = rdlidar.reconstruct(sim.operator(), None, sim.meas, None, solver=solver,

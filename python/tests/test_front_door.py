@@ -537,7 +537,7 @@ def test_one_code_set_with_a_set_axis_reads_as_the_command_line_reads_it(problem
     assert np.array_equal(op.matvec(x), plain.matvec(x))
     with pytest.raises(ValueError) as e:
         rdlidar.RdOperator(pulse, one, 5, tiles=(2, 2))
-    one_line(e, "codes", "tiles=(2, 2)")
+    one_line(e, "codes", "(tiles)", "2x2")
     with pytest.raises(TypeError) as e:
         rdlidar.RdOperator(pulse, codes > 0, 5)
     one_line(e, "codes", "bool")

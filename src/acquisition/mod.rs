@@ -38,8 +38,10 @@
 //! # }
 //! ```
 
+mod arrays;
 mod censor;
 mod files;
+mod outcome;
 mod plan;
 mod reconstructed;
 mod request;
@@ -67,8 +69,10 @@ use crate::recon::{
 };
 use crate::solver::{Control, IterationInfo};
 
+pub use arrays::{code_array, CodeArray, CodeArrayView};
 pub use censor::{at_top, Censoring, Clipping};
 pub use files::{AcquisitionFiles, InputNames};
+pub use outcome::{Outcome, Run, Summary, TileRun};
 pub use plan::Use;
 pub(crate) use plan::{held, plan, streams};
 pub use reconstructed::{observe_nothing, Reconstructed};

@@ -2,7 +2,6 @@
 
 use super::*;
 use crate::operator::Applies;
-use crate::solver::Report;
 
 /// A reconstruction of any architecture: one operator's, or a tiled array's.
 #[derive(Debug, Clone)]
@@ -50,13 +49,7 @@ impl<T: Real> Reconstructed<T> {
     pub fn applies(&self) -> Applies {
         match self {
             // A backprojection: one adjoint application.
-            Reconstructed::Single(r) => r.report.as_ref().map_or(
-                Applies {
-                    adjoint: 1,
-                    ..Applies::default()
-                },
-                Report::applies,
-            ),
+            Reconstructed::Single(r) => super::outcome::single_applies(r),
             Reconstructed::Tiled(r) => r.applies(),
         }
     }

@@ -205,12 +205,4 @@ impl ReconstructRequest {
         self.validate()?;
         acq.reconstruct_cancellable(y, self.method, &self.options, observe, on_tile, cancel)
     }
-
-    /// Completes a whole reconstruction as the request asks: fills its unobserved pixels from
-    /// their neighbours under [`fill_unobserved`](Self::fill_unobserved). Returns how many
-    /// were filled with a return (`None` when nothing was asked or nothing is unobserved).
-    pub fn finish<T: Real>(&self, r: &mut Reconstructed<T>) -> Option<usize> {
-        let unobserved = r.depth().unobserved();
-        (self.fill_unobserved && unobserved > 0).then(|| r.depth_mut().fill_unobserved())
-    }
 }

@@ -137,3 +137,99 @@ fn measurements_are_checked_for_count_and_finiteness() {
     let e = a.check_measurements(&y, "meas").unwrap_err();
     assert!(e.to_string().contains("entry 5"), "{e}");
 }
+
+/// A small scene with one return per pixel, measured by `acq`.
+fn measured(acq: &Acquisition) -> Vec<f64> {
+    let g = acq.geometry();
+    let mut x = vec![0.0; g.m * g.n * g.ks];
+    for p in 0..g.pixels() {
+        x[p * g.ks + (p * 3) % g.ks] = 1.0 + (p % 4) as f64;
+    }
+    let op = acq.operator::<f64>().unwrap();
+    let mut y = vec![0.0; op.nrows()];
+    op.apply(&x, &mut y);
+    y
+}
+
+#[test]
+fn the_outcome_tells_what_ran_in_lines_and_fields() {
+    let g = Geometry::new(4, 6, 5).unwrap();
+    let p = vec![
+        1.0, 0.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 1.0,
+    ];
+    let k = g.samples(p.len());
+    let one = Acquisition::new(
+        g,
+        p.clone(),
+        CodeStore::Held(codes(g, k, 1)),
+        None,
+        Streaming::Never,
+    )
+    .unwrap();
+    let never = AtomicBool::new(false);
+    let request = ReconstructRequest::new(Method::Auto);
+    let y = measured(&one);
+    let r = request
+        .run(
+            &one,
+            &y,
+            &observe_nothing,
+            &|_: &TileReconstruction<f64>| {},
+            &never,
+        )
+        .unwrap();
+    let out = request.finish(r, &one, None);
+    let s = &out.summary;
+    assert_eq!(s.architecture, "single");
+    assert!(
+        s.headline
+            .starts_with(&format!("solver {} (auto: ", s.run.method_used)),
+        "{}",
+        s.headline
+    );
+    assert!(s
+        .headline
+        .ends_with(&format!("{} of 24 pixels with a return", out.depth.lit())));
+    assert!(!s.run.stages.is_empty());
+    assert_eq!(s.details.len(), s.run.stages.len());
+    assert!(s.details.iter().all(|l| l.starts_with("auto stage ")));
+    let json = serde_json::to_value(s).unwrap();
+    assert_eq!(json["method"], "auto");
+    assert_eq!(json["stages"][0]["method"], s.run.stages[0].method.name());
+    assert!(json.get("tiles").is_none() && json.get("censored").is_none());
+    assert!(json["iterations"].as_u64().unwrap() > 0);
+
+    // Tiles: the tiles' runs, their applications summed, the tiles' count in the headline.
+    let t = TileSize { m: 2, n: 3 };
+    let tiled = Acquisition::new(
+        g,
+        p,
+        CodeStore::Held(codes(g, k, 1)),
+        Some(t),
+        Streaming::Never,
+    )
+    .unwrap();
+    let y = measured(&tiled);
+    let request = ReconstructRequest::new(Method::Cgls);
+    let r = request
+        .run(
+            &tiled,
+            &y,
+            &observe_nothing,
+            &|_: &TileReconstruction<f64>| {},
+            &never,
+        )
+        .unwrap();
+    let out = request.finish(r, &tiled, None);
+    let s = &out.summary;
+    let tiles = s.tiles.as_ref().unwrap();
+    assert_eq!(tiles.len(), 4);
+    assert_eq!(
+        s.run.forward_applies,
+        tiles.iter().map(|t| t.run.forward_applies).sum::<usize>()
+    );
+    assert!(s.headline.contains("of 4 tiles of 2x3"), "{}", s.headline);
+    assert!(s.headline.contains("applications in all"), "{}", s.headline);
+    let json = serde_json::to_value(s).unwrap();
+    assert_eq!(json["tiles"][3]["shape"], serde_json::json!([2, 3]));
+}

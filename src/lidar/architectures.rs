@@ -171,6 +171,20 @@ impl TileSize {
         }
     }
 
+    /// A tile of `m` rows and `n` columns.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] (`tiles`) when either is zero.
+    pub fn new(m: usize, n: usize) -> Result<Self> {
+        if m == 0 || n == 0 {
+            return Err(Error::param(
+                "tiles",
+                format!("tile rows and columns must be at least 1, got ({m}, {n})"),
+            ));
+        }
+        Ok(TileSize { m, n })
+    }
+
     /// The number of tiles (edge tiles clipped) of an `m`×`n` array.
     pub fn count(&self, m: usize, n: usize) -> usize {
         m.div_ceil(self.m) * n.div_ceil(self.n)

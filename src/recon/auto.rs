@@ -47,8 +47,9 @@ fn keep_lowest_bic<T>(mut tried: Vec<Tried<T>>, k: usize, stages: &mut Vec<Stage
     kept
 }
 
-/// What one stage of [`Method::Auto`] did.
-#[derive(Debug, Clone, PartialEq)]
+/// What one stage of [`Method::Auto`] did. Serialized with its fields' names, the method by
+/// its name and the report's fields beside the others.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Stage {
     /// The method the stage ran.
     pub method: Method,
@@ -58,6 +59,7 @@ pub struct Stage {
     /// Nonzero voxels (returns) of its estimate.
     pub returns: usize,
     /// Its solver's report.
+    #[serde(flatten)]
     pub report: Option<Report>,
     /// Whether its estimate is the one [`reconstruct`](super::reconstruct) returns.
     pub kept: bool,

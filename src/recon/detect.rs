@@ -38,7 +38,7 @@ const ONE_FORWARD: Applies = Applies {
 const TEST_ROUNDS: usize = 8;
 
 /// What the false-detection test did.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DetectionTest {
     /// α: the chance of a false return in an empty pixel the test allows.
     pub false_rate: f64,

@@ -24,7 +24,7 @@ use crate::lidar::{depth_bin_m, DepthMap, Scene, NO_RETURN};
 /// Fractions whose denominator is zero take the value a perfect reconstruction would have, so that
 /// every field is finite: `exact_fraction` is 1 when no pixel is lit, the other fractions are 0,
 /// and the RMSE over no detected pixel is 0 ([`Metrics::detected`] tells these cases apart).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Metrics {
     /// Number of pixels, M·N.
     pub pixels: usize,

@@ -98,7 +98,7 @@ const FLOOR_FRACTION: f64 = 0.05;
 const SLOPE_Z: f64 = 3.0;
 
 /// What the photon-noise weighting found.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PhotonWeighting {
     /// The background of the model (as given).
     pub background: f64,

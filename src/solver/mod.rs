@@ -141,8 +141,8 @@ impl<T, F: FnMut(&IterationInfo<'_, T>) -> Control> Observer<T> for F {
     }
 }
 
-/// What a solver did.
-#[derive(Debug, Clone, PartialEq)]
+/// What a solver did. Serialized with its fields' names, the time as `solver_seconds`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Report {
     /// The solver's name.
     pub solver: &'static str,
@@ -165,6 +165,10 @@ pub struct Report {
     /// count them apart include them in the forward and adjoint counts.
     pub support_applies: usize,
     /// Wall-clock time.
+    #[serde(
+        rename = "solver_seconds",
+        serialize_with = "crate::units::serialize_seconds"
+    )]
     pub elapsed: Duration,
 }
 

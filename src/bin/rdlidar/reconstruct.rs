@@ -8,12 +8,10 @@ use rdlidar::acquisition::{
     Reconstructed, Use, RECONSTRUCT_SCENES,
 };
 use rdlidar::io::{self, StagedFile};
-use rdlidar::lidar::{
-    depth_bin_m, Architecture, DepthMap, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED,
-};
+use rdlidar::lidar::{depth_bin_m, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED};
 use rdlidar::recon::{
     compare, compare_observed, Method, NoiseModel, PeakThreshold, ReconstructOptions,
-    Reconstruction, TileReconstruction, MAX_RETURNS_ESTIMATE,
+    TileReconstruction, MAX_RETURNS_ESTIMATE,
 };
 use rdlidar::settings::FrontEnd;
 use rdlidar::Real;
@@ -298,13 +296,12 @@ fn reconstruct_files<T: Real + WritableElement>(
     let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
     let (acq, y, censoring) = censor_inputs(&request, ranks, acq, y)?;
     let g = acq.whole_geometry();
-    let kp = acq.pulse_len();
     let count = acq.rows().unwrap_or(1);
     let done = std::sync::atomic::AtomicUsize::new(0);
     let on_tile = |tile: &TileReconstruction<T>| {
         let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         if !globals.quiet {
-            errln!("{}", tile_line(tile, n, count));
+            errln!("{}", tile.describe(n, count));
         }
     };
     let never = std::sync::atomic::AtomicBool::new(false);
@@ -327,16 +324,11 @@ fn reconstruct_files<T: Real + WritableElement>(
     if !ranks.is_first() {
         return Ok(());
     }
-    let mut r = Outcome::new(r, acq.architecture(), kp);
     // A coded aperture's blocked pixels reach no ADC: they are unobserved (−2 in the depth
     // map), judged apart from the observed ones, and filled from their neighbours on request.
-    let observed: Vec<bool> = r.depth.depth.iter().map(|&d| d != UNOBSERVED).collect();
+    let observed: Vec<bool> = r.depth().depth.iter().map(|&d| d != UNOBSERVED).collect();
     let unobserved = observed.iter().filter(|&&o| !o).count();
-    let filled = if a.fill_unobserved && unobserved > 0 {
-        Some(r.depth.fill_unobserved())
-    } else {
-        None
-    };
+    let r = request.finish(r, &acq, censoring.as_ref());
     let mut metrics = Vec::new();
     if let (Some(t), Some(path)) = (&truth, &a.truth) {
         let at_truth = |e: rdlidar::Error| format!("{} (--truth): {e}", path.display());
@@ -354,7 +346,7 @@ fn reconstruct_files<T: Real + WritableElement>(
                 "{unobserved} pixels unobserved (all-zero codes), {} of them lit in the truth",
                 c.unobserved_lit
             );
-            if filled.is_some() {
+            if a.fill_unobserved {
                 line.push_str(&format!(
                     "; filled from their neighbours: {} of the {} lit at the exact depth, {} \
                      within a bin, {} filled where the truth is empty",
@@ -373,7 +365,7 @@ fn reconstruct_files<T: Real + WritableElement>(
     if let Some(png) = &a.png {
         let bin_m = depth_bin_m(DEFAULT_TAU_S)?;
         let options = rdlidar::report::plot::DepthOptions::new(bin_m, "m")
-            .title(format!("{} ({})", r.method, g));
+            .title(format!("{} ({})", r.summary.run.method_used, g));
         let truth_depth = truth.as_ref().map(|t| t.depth_map().depth);
         let panels: Vec<(&str, &ndarray::Array2<i32>)> = match &truth_depth {
             Some(d) => vec![("truth", d), ("estimate", &r.depth.depth)],
@@ -387,8 +379,7 @@ fn reconstruct_files<T: Real + WritableElement>(
 
     let files: Vec<String> = written.iter().map(|f| f.display().to_string()).collect();
     outln!(
-        "reconstruct {g} from {}: solver {}; {}; {:.3} s; {} of {} pixels with a return; wrote \
-         {} (depth int32, scene {}).",
+        "reconstruct {g} from {}: {}; wrote {} (depth int32, scene {}).",
         match acq.rows() {
             None => format!("K = {}{}", y.len(), architecture_note(&acq)),
             Some(rows) => format!(
@@ -398,11 +389,7 @@ fn reconstruct_files<T: Real + WritableElement>(
                 architecture_note(&acq)
             ),
         },
-        r.chosen,
-        r.iterations,
-        r.seconds,
-        r.depth.lit(),
-        g.pixels(),
+        r.summary.headline,
         files.join(", "),
         npy_dtype::<T>()
     );
@@ -413,11 +400,8 @@ fn reconstruct_files<T: Real + WritableElement>(
     if let Some(line) = clipping_line(censoring.as_ref(), &acq, &y) {
         outln!("  {line}");
     }
-    for line in &r.details {
+    for line in &r.summary.details {
         outln!("  {line}");
-    }
-    if let Some(n) = filled {
-        outln!("  filled {n} of the {unobserved} unobserved pixels with a return from their neighbours");
     }
     for line in &metrics {
         outln!("{line}");
@@ -466,161 +450,4 @@ fn clipping_line<T: Real>(
             y.len()
         )
     })
-}
-
-/// What `reconstruct` reports of a reconstruction, whatever the architecture.
-struct Outcome<T> {
-    scene: Scene<T>,
-    depth: DepthMap<T>,
-    /// The method (for a tiled array, the tiles' methods).
-    method: String,
-    /// The method with the regime, as the summary line gives it.
-    chosen: String,
-    /// Iterations and applications.
-    iterations: String,
-    seconds: f64,
-    /// auto's stages, or the tiles' methods.
-    details: Vec<String>,
-}
-
-impl<T: Real> Outcome<T> {
-    fn new(r: Reconstructed<T>, architecture: Architecture, kp: usize) -> Self {
-        match (r, architecture) {
-            (Reconstructed::Tiled(r), Architecture::Tiles(t)) => Outcome::tiled(r, t, kp),
-            (Reconstructed::Tiled(r), _) => Outcome::tiled(r, TileSize { m: 1, n: 1 }, kp),
-            (Reconstructed::Single(r), _) => Outcome::single(r, kp),
-        }
-    }
-
-    fn single(r: Reconstruction<T>, kp: usize) -> Self {
-        let g = r.scene.geometry();
-        let chosen = if r.stages.is_empty() {
-            format!("{} ({} regime)", r.method_used, r.regime)
-        } else {
-            format!(
-                "{} (auto: {} regime, K_p {kp}, critical K_p {})",
-                r.method_used,
-                r.regime,
-                g.critical_pulse_len()
-            )
-        };
-        let iterations = match &r.report {
-            Some(rep) => format!(
-                "{} iterations, termination {:?}, {} forward, {} adjoint and {} support \
-                 applications",
-                rep.iterations,
-                rep.termination,
-                rep.forward_applies,
-                rep.adjoint_applies,
-                rep.support_applies
-            ),
-            None => "one adjoint application".to_string(),
-        };
-        let details = r
-            .stages
-            .iter()
-            .enumerate()
-            .map(|(i, stage)| format!("auto stage {}: {stage}", i + 1))
-            .chain(r.photon.as_ref().map(|p| p.describe()))
-            .chain(r.detection.as_ref().map(|t| t.describe()))
-            .collect();
-        Outcome {
-            method: r.method_used.to_string(),
-            chosen,
-            iterations,
-            seconds: r.elapsed.as_secs_f64(),
-            details,
-            scene: r.scene,
-            depth: r.depth,
-        }
-    }
-
-    fn tiled(r: rdlidar::recon::TiledReconstruction<T>, tile: TileSize, kp: usize) -> Self {
-        let used: Vec<String> = r
-            .methods_used()
-            .iter()
-            .map(|(m, n)| format!("{m} on {n}"))
-            .collect();
-        let method = used.join(", ");
-        let largest = r
-            .tiles
-            .iter()
-            .map(|t| t.place.geometry)
-            .max_by_key(|g| g.pixels());
-        let chosen = format!(
-            "{method} of {} tiles of {tile} ({} regime per tile, K_p {kp}{})",
-            r.tiles.len(),
-            r.regime(),
-            largest.map_or(String::new(), |g| format!(
-                ", critical K_p {} for the largest tile",
-                g.critical_pulse_len()
-            ))
-        );
-        let rdlidar::operator::Applies {
-            forward: f,
-            adjoint: adj,
-            support: s,
-        } = r.applies();
-        let iterations = format!("{f} forward, {adj} adjoint and {s} support applications in all");
-        // The false-detection test ran in each tile: its sums over the tiles that report it.
-        let tests: Vec<_> = r
-            .tiles
-            .iter()
-            .filter_map(|t| t.reconstruction.detection.as_ref())
-            .collect();
-        let weighted: Vec<_> = r
-            .tiles
-            .iter()
-            .filter_map(|t| t.reconstruction.photon.as_ref())
-            .collect();
-        let photon = (!weighted.is_empty()).then(|| {
-            format!(
-                "photon-noise weighting in {} of {} tiles: reweighted {}",
-                weighted.len(),
-                r.tiles.len(),
-                weighted.iter().filter(|p| p.skipped.is_none()).count()
-            )
-        });
-        let mut details = match tests.first() {
-            None => Vec::new(),
-            Some(first) => vec![format!(
-                "false-detection test at α = {} in {} of {} tiles: dropped {} of {} returns \
-                 ({} tiles not tested)",
-                first.false_rate,
-                tests.len(),
-                r.tiles.len(),
-                tests.iter().map(|t| t.dropped).sum::<usize>(),
-                tests.iter().map(|t| t.tested).sum::<usize>(),
-                tests.iter().filter(|t| t.skipped.is_some()).count()
-            )],
-        };
-        details.extend(photon);
-        Outcome {
-            method,
-            chosen,
-            iterations,
-            seconds: r.elapsed.as_secs_f64(),
-            details,
-            scene: r.scene,
-            depth: r.depth,
-        }
-    }
-}
-
-/// The line printed as a tile finishes: where it is, what ran and how long it took.
-fn tile_line<T: Real>(t: &TileReconstruction<T>, done: usize, count: usize) -> String {
-    let (p, r) = (&t.place, &t.reconstruction);
-    format!(
-        "tile {done}/{count} (#{}, rows {}..{}, columns {}..{}): {}, {} of {} pixels with a \
-         return, {:.2} s",
-        p.index,
-        p.row,
-        p.row + p.geometry.m,
-        p.col,
-        p.col + p.geometry.n,
-        r.method_used,
-        r.depth.lit(),
-        p.geometry.pixels(),
-        r.elapsed.as_secs_f64()
-    )
 }
