@@ -30,6 +30,7 @@ mod cli_simulate;
 mod cli_support;
 mod cli_usage;
 mod codes;
+mod continuous;
 mod convolution;
 mod degenerate;
 mod detection;

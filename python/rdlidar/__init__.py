@@ -444,7 +444,10 @@ class Simulation:
     ``codes`` is int8 ((M, N, K), or (G, M, N, K) for G ADCs; a coded aperture's blocked
     pixels have zero codes), packed uint8, or None for codes described by a seed; ``meas`` is
     (K,) for one ADC and (R, K) for R ADCs; ``meta`` is the description ``meta.json`` holds
-    (a dict); ``files`` the folder the files were written to, if any.
+    (a dict); ``files`` the folder the files were written to, if any; ``range`` the true
+    depths in bins of a scene at continuous depths or rendered by a kernel other than delta
+    (float64 (M, N), or (R, M, N) with several returns per pixel, NaN where there is none;
+    None otherwise), as ``range.npy`` holds them.
     """
 
     scene: np.ndarray
@@ -453,6 +456,7 @@ class Simulation:
     meas: np.ndarray
     meta: dict = field(default_factory=dict)
     files: Optional[str] = None
+    range: Optional[np.ndarray] = None
 
     @property
     def tiles(self) -> Optional[Tuple[int, int]]:
@@ -504,6 +508,8 @@ def simulate(
     background: Optional[float] = None,
     adc_bits: Optional[int] = None,
     full_scale: Optional[float] = None,
+    depth: str = "grid",
+    kernel: Optional[str] = None,
 ) -> Simulation:
     """Simulates an acquisition of any architecture, as ``rdlidar simulate`` does.
 
@@ -542,6 +548,13 @@ def simulate(
         noise (None: full precision).
     full_scale : the ADC's full scale F: samples beyond +-F are clipped (default: each ADC's
         largest sample; only with ``adc_bits``).
+    depth : "grid" (each reflector in one depth bin) or "continuous" (the paper's reflectors,
+        random and semi-transparent scenes and PNG depth maps unrounded), as ``--depth``.
+    kernel : the system's response g that puts a reflector of amplitude a at depth d into its
+        voxel column as a * g(k - d), as ``--kernel``: "delta" (the default on the grid),
+        "triangle" (the default at continuous depths), "gaussian:S" or "measured:O:PATH" (a
+        float64 .npy of samples of g, O per bin). With continuous depths or a kernel other
+        than delta, the ``Simulation``'s ``range`` holds the true depths.
 
     Returns a ``Simulation``.
     """
@@ -576,10 +589,28 @@ def simulate(
         _optional_float(background, "background"),
         _optional_int(adc_bits, "adc_bits", 1, 32),
         _optional_float(full_scale, "full_scale"),
+        _choice(depth, "depth", ("grid", "continuous")),
+        _optional_str(kernel, "kernel"),
     )
     meta = json.loads(d["meta"])
     files = None if out is None else os.fspath(out)
-    return Simulation(d["scene"], d["pulse"], d["codes"], d["meas"], meta, files)
+    return Simulation(d["scene"], d["pulse"], d["codes"], d["meas"], meta, files, d["range"])
+
+
+def _choice(value, name, choices) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"{name}: expected one of {', '.join(map(repr, choices))}")
+    if value not in choices:
+        raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r:.40}")
+    return value
+
+
+def _optional_str(value, name) -> Optional[str]:
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise TypeError(f"{name}: expected a string, got {type(value).__name__}")
+    return value
 
 
 def _optional_path(value, name):

@@ -8,6 +8,7 @@ use pyo3::types::PyDict;
 use rdlidar::acquisition::{
     code_array, simulation_meta, write_simulation_cancellable, CodeArray, SimulationRequest,
 };
+use rdlidar::io::read_response;
 use rdlidar::lidar::{simulate_cancellable, Geometry, SimulationSpec};
 use rdlidar::Real;
 
@@ -18,7 +19,7 @@ use crate::{tile_size, value_error};
 /// arrays (codes as the format says: int8, packed uint8, or None for seeded codes) and the
 /// meta.json text; with `out`, also writes the same files as the command line.
 #[pyfunction]
-#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double, adcs=1, tiles=None, aperture=None, codes_format="int8", out=None, force=false, depth_png=None, reflectivity_png=None, photons=None, background=None, adc_bits=None, full_scale=None))]
+#[pyo3(signature = (scene, size, pulse_len, seed, snr_db, ternary_zero_prob, lit_fraction, double, adcs=1, tiles=None, aperture=None, codes_format="int8", out=None, force=false, depth_png=None, reflectivity_png=None, photons=None, background=None, adc_bits=None, full_scale=None, depth="grid", kernel=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn simulate<'py>(
     py: Python<'py>,
@@ -42,6 +43,8 @@ pub(crate) fn simulate<'py>(
     background: Option<f64>,
     adc_bits: Option<u32>,
     full_scale: Option<f64>,
+    depth: &str,
+    kernel: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let geometry = Geometry::new(size.0, size.1, size.2).map_err(value_error)?;
     let tiles = tile_size(tiles)?;
@@ -60,6 +63,8 @@ pub(crate) fn simulate<'py>(
         tiles,
         aperture,
         codes_format: codes_format.parse().map_err(value_error)?,
+        continuous: depth == "continuous",
+        kernel: kernel.map(read_response).transpose().map_err(value_error)?,
         ..SimulationRequest::new(geometry, pulse_len, seed)
     };
     let spec = request.spec().map_err(value_error)?;
@@ -97,7 +102,7 @@ fn fill_simulation<'py, T: Real + numpy::Element + ndarray_npy::WritableElement>
     let result = observer.watch(py, || {
         let supplied = request.supplied_scene::<T>()?;
         let mut sim = simulate_cancellable::<T>(spec, supplied, cancel)?;
-        sim.scene_source = request.scene_source();
+        request.describe(&mut sim)?;
         let codes = code_array(&sim, format, cancel)?;
         // The files last: once they are in place, there is nothing left to cancel.
         let meta = match out {
@@ -128,5 +133,6 @@ fn fill_simulation<'py, T: Real + numpy::Element + ndarray_npy::WritableElement>
     d.set_item("codes", codes)?;
     d.set_item("meas", meas.into_pyarray(py))?;
     d.set_item("meta", json)?;
+    d.set_item("range", sim.returns.map(|r| r.range_map().into_pyarray(py)))?;
     Ok(())
 }

@@ -45,6 +45,7 @@ mod outcome;
 mod plan;
 mod reconstructed;
 mod request;
+mod returns;
 mod rules;
 mod share;
 mod simulation;

@@ -9,11 +9,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use ndarray_npy::WritableElement;
 
 use crate::error::{Error, Result};
-use crate::io::meta::{SimulationMeta, SIMULATION_FILES};
+use crate::io::meta::{SimulationMeta, RANGE_FILE, SIMULATION_FILES};
 use crate::io::{self, StagedFile};
 use crate::lidar::{
     packed_len, AdcQuantization, Architecture, FullScale, Geometry, NoiseStage, PhotonNoise,
-    SceneSpec, Simulation, SimulationSpec, TileSize, SEEDED_CODES_GENERATOR,
+    Response, SceneSpec, Simulation, SimulationSpec, TileSize, SEEDED_CODES_GENERATOR,
 };
 use crate::limits;
 use crate::real::Real;
@@ -112,6 +112,11 @@ pub struct SimulationRequest {
     pub aperture: Option<f64>,
     /// How the codes are written.
     pub codes_format: CodesFormat,
+    /// Reflectors at continuous depths (`true`) or on the grid.
+    pub continuous: bool,
+    /// The system's response that puts the reflectors on the voxel grid (default: triangle at
+    /// continuous depths, delta on the grid).
+    pub kernel: Option<Response>,
 }
 
 impl SimulationRequest {
@@ -136,6 +141,8 @@ impl SimulationRequest {
             tiles: None,
             aperture: None,
             codes_format: CodesFormat::Int8,
+            continuous: false,
+            kernel: None,
         }
     }
 
@@ -285,6 +292,12 @@ impl SimulationRequest {
             (1, _, _) => Architecture::Single,
             (n, _, _) => Architecture::MultiAdc(n),
         };
+        // A scene rendered from returns is supplied to the simulation.
+        let scene = if self.renders_returns()? {
+            SceneSpec::Supplied
+        } else {
+            scene
+        };
         Ok(SimulationSpec {
             scene,
             ternary_zero_prob: self.ternary_zero_prob,
@@ -359,6 +372,32 @@ impl SimulationRequest {
     /// without the `images` feature;
     /// [`Error::TooLarge`] when the scene would not fit in memory (checked before reading).
     pub fn supplied_scene<T: Real>(&self) -> Result<Option<crate::lidar::Scene<T>>> {
+        if let Some(returns) = self.returns()? {
+            return returns.render(self.geometry.ks, &self.response()).map(Some);
+        }
+        #[cfg(feature = "images")]
+        return self.read_pngs(std::mem::size_of::<T>(), |depth, reflectivity, ks| {
+            io::scene_from_pngs::<T>(depth, reflectivity, ks)
+        });
+        // Without the feature, read_pngs refuses a png scene before reading.
+        #[cfg(not(feature = "images"))]
+        self.read_pngs(std::mem::size_of::<T>(), |depth, _, _| {
+            Err(Error::param(
+                "depth_png",
+                format!("{}: needs the `images` feature", depth.display()),
+            ))
+        })
+    }
+
+    /// What `read` makes of the png scene's maps (`None` without a depth map), once the scene of
+    /// `bytes` per voxel is known to fit in memory and each map's header to give the grid's
+    /// size; errors name `depth_png` or `reflectivity_png`.
+    #[cfg_attr(not(feature = "images"), allow(unused_variables))]
+    pub(super) fn read_pngs<R>(
+        &self,
+        bytes: usize,
+        read: impl FnOnce(&Path, Option<&Path>, usize) -> Result<R>,
+    ) -> Result<Option<R>> {
         let Some(depth) = self.depth_png.as_deref() else {
             return Ok(None);
         };
@@ -368,7 +407,7 @@ impl SimulationRequest {
             // The scene read must fit; the simulation checks the rest (one band of rows per
             // process under MPI).
             limits::MemoryPlan::new()
-                .add("scene", g.voxels() as u128, std::mem::size_of::<T>())
+                .add("scene", g.voxels() as u128, bytes)
                 .check(
                     &format!(
                         "reading the scene {g} from the depth map {}",
@@ -405,25 +444,24 @@ impl SimulationRequest {
                     ));
                 }
             }
-            let scene =
-                io::scene_from_pngs::<T>(depth, reflectivity, g.ks).map_err(|e| match e {
-                    Error::InvalidParameter {
-                        name: "png",
-                        reason,
-                    } => {
-                        let of_reflectivity = reflectivity.is_some_and(|r| {
-                            r != depth && reason.starts_with(&format!("{}:", r.display()))
-                        });
-                        let name = if of_reflectivity {
-                            "reflectivity_png"
-                        } else {
-                            "depth_png"
-                        };
-                        Error::InvalidParameter { name, reason }
-                    }
-                    other => other,
-                })?;
-            Ok(Some(scene))
+            let read = read(depth, reflectivity, g.ks).map_err(|e| match e {
+                Error::InvalidParameter {
+                    name: "png",
+                    reason,
+                } => {
+                    let of_reflectivity = reflectivity.is_some_and(|r| {
+                        r != depth && reason.starts_with(&format!("{}:", r.display()))
+                    });
+                    let name = if of_reflectivity {
+                        "reflectivity_png"
+                    } else {
+                        "depth_png"
+                    };
+                    Error::InvalidParameter { name, reason }
+                }
+                other => other,
+            })?;
+            Ok(Some(read))
         }
         #[cfg(not(feature = "images"))]
         Err(Error::param(
@@ -435,8 +473,28 @@ impl SimulationRequest {
         ))
     }
 
-    /// How `meta.json` names the supplied scene's source: its maps' file names.
+    /// How `meta.json` names the supplied scene's source: its maps' file names, and for a
+    /// scene rendered from returns, the scene, the depths and the response.
     pub fn scene_source(&self) -> Option<String> {
+        if self.renders_returns().unwrap_or(false) {
+            let maps = self.map_names();
+            return Some(format!(
+                "{}{} at {} depths, kernel {}",
+                self.scene,
+                maps.map_or(String::new(), |m| format!(" ({m})")),
+                if self.continuous {
+                    "continuous"
+                } else {
+                    "grid"
+                },
+                self.response()
+            ));
+        }
+        self.map_names()
+    }
+
+    /// The maps' file names of a png scene.
+    fn map_names(&self) -> Option<String> {
         let name = |p: &Path| {
             p.file_name()
                 .map_or_else(|| p.display().to_string(), |f| f.to_string_lossy().into())
@@ -578,18 +636,26 @@ pub fn write_simulation_cancellable<T: Real + WritableElement>(
         }
         go_on()?;
         staged.push(io::stage_array(f_meas, &meas)?);
+        if let Some(returns) = &sim.returns {
+            staged.push(io::stage_array(dir.join(RANGE_FILE), &returns.range_map())?);
+        }
         staged.push(io::stage_bytes(f_meta, json.as_bytes())?);
         go_on()?;
         io::commit_all(staged)
     })();
     match written {
         Ok(_) => {
-            if format == CodesFormat::Seed {
-                // A codes.npy left by an earlier run (--force) would contradict meta.json.
-                let stale = dir.join(SIMULATION_FILES[2]);
+            // A codes.npy or range.npy left by an earlier run (`force`) would contradict
+            // meta.json.
+            let stale = [
+                (format == CodesFormat::Seed, SIMULATION_FILES[2], "codes"),
+                (sim.returns.is_none(), RANGE_FILE, "depths"),
+            ];
+            for (_, file, what) in stale.iter().filter(|s| s.0) {
+                let stale = dir.join(file);
                 if stale.exists() {
                     std::fs::remove_file(&stale).map_err(|e| {
-                        io::file_error(&stale, format!("cannot remove the old codes: {e}"))
+                        io::file_error(&stale, format!("cannot remove the old {what}: {e}"))
                     })?;
                 }
             }
@@ -597,7 +663,7 @@ pub fn write_simulation_cancellable<T: Real + WritableElement>(
         }
         Err(e) => {
             if created {
-                for f in SIMULATION_FILES {
+                for f in SIMULATION_FILES.iter().chain([&RANGE_FILE]) {
                     let _ = std::fs::remove_file(dir.join(f));
                 }
                 let _ = std::fs::remove_dir(dir);

@@ -23,6 +23,9 @@ pub const SIMULATION_FILES: [&str; 5] = [
     "meta.json",
 ];
 
+/// The true depths of a simulation rendered from returns ([`FilesMeta::range`]).
+pub const RANGE_FILE: &str = "range.npy";
+
 /// M, N and K_s.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GeometryMeta {
@@ -83,6 +86,10 @@ pub struct SceneMeta {
     pub nonzeros: usize,
     /// Pixels with at least one return.
     pub lit_pixels: usize,
+    /// The response that put a scene rendered from returns on the voxel grid (`triangle`,
+    /// `gaussian:S`, …); absent for depths on the grid with no response.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<String>,
 }
 
 /// The noise added to the measurements.
@@ -136,6 +143,11 @@ pub struct FilesMeta {
     pub codes: String,
     /// The measurements.
     pub meas: String,
+    /// The true depths of a scene rendered from returns (continuous depths, or a response
+    /// other than delta): float64 (M, N) bins, or (R, M, N) with several returns per pixel;
+    /// NaN where there is no return.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<String>,
 }
 
 /// The contents of `meta.json`.
@@ -225,10 +237,10 @@ impl SimulationMeta {
                 codes: seeds.code_set(0),
                 code_sets: (0..arch.code_sets()).map(|i| seeds.code_set(i)).collect(),
                 noise: seeds.noise(),
-                scene: matches!(
+                scene: (matches!(
                     spec.scene,
                     crate::lidar::SceneSpec::Random { .. } | crate::lidar::SceneSpec::Transparent
-                )
+                ) || sim.returns.is_some())
                 .then(|| seeds.scene()),
                 aperture: matches!(arch, Architecture::Aperture(_)).then(|| seeds.aperture()),
             },
@@ -242,6 +254,7 @@ impl SimulationMeta {
                 returns_per_pixel: spec.scene.returns_per_pixel(g.ks),
                 nonzeros: sim.scene.nnz(),
                 lit_pixels,
+                kernel: sim.response.as_ref().map(|r| r.spec()),
             },
             code_alphabet: alphabet.into(),
             codes_format: int8_format(),
@@ -268,6 +281,7 @@ impl SimulationMeta {
                 pulse: pulse.into(),
                 codes: codes.into(),
                 meas: meas.into(),
+                range: sim.returns.as_ref().map(|_| RANGE_FILE.into()),
             },
         }
     }

@@ -7,7 +7,7 @@ use std::path::Path;
 use ndarray::Array2;
 
 use crate::error::{Error, Result};
-use crate::lidar::{bin_of_fraction, checked, DepthMap, Geometry, Scene, NO_RETURN};
+use crate::lidar::{checked, DepthMap, Geometry, Returns, Scene, NO_RETURN};
 use crate::real::Real;
 
 /// The error for an unusable PNG file, naming it.
@@ -127,6 +127,42 @@ pub fn scene_from_pngs<T: Real>(
     reflectivity_png: Option<&Path>,
     ks: usize,
 ) -> Result<Scene<T>> {
+    let (g, depth, reflectivity) = read_maps(depth_png, reflectivity_png, ks)?;
+    let depth_bins = depth.mapv(|d| {
+        if d.is_nan() {
+            NO_RETURN
+        } else {
+            d.round().clamp(0.0, (g.ks - 1) as f64) as i32
+        }
+    });
+    DepthMap {
+        depth: depth_bins,
+        amplitude: reflectivity.mapv(T::of_f64),
+    }
+    .to_scene(g.ks)
+}
+
+/// The returns of [`scene_from_pngs`] at continuous depths: a value v > 0 is depth
+/// v / max · (ks − 1) bins, unrounded.
+///
+/// # Errors
+/// As [`scene_from_pngs`].
+pub fn returns_from_pngs(
+    depth_png: &Path,
+    reflectivity_png: Option<&Path>,
+    ks: usize,
+) -> Result<Returns> {
+    let (_, depth, reflectivity) = read_maps(depth_png, reflectivity_png, ks)?;
+    Returns::single(depth, reflectivity)
+}
+
+/// The grid of the maps, the depth in continuous bins (NaN for no return) and the amplitude
+/// (0 where there is no return).
+fn read_maps(
+    depth_png: &Path,
+    reflectivity_png: Option<&Path>,
+    ks: usize,
+) -> Result<(Geometry, Array2<f64>, Array2<f64>)> {
     let depth = read_png(depth_png)?;
     let g = checked(Geometry {
         m: depth.height,
@@ -157,23 +193,20 @@ pub fn scene_from_pngs<T: Real>(
         }
     };
     let dmax = depth.max as f64;
+    let top = (g.ks - 1) as f64;
     let depth_bins = Array2::from_shape_fn((g.m, g.n), |(i, j)| match depth.values[i * g.n + j] {
-        0 => NO_RETURN,
-        v => bin_of_fraction(v as f64 / dmax, g.ks),
+        0 => f64::NAN,
+        v => v as f64 / dmax * top,
     });
     let amplitude = Array2::from_shape_fn((g.m, g.n), |(i, j)| {
-        if depth_bins[[i, j]] == NO_RETURN {
-            T::zero()
+        if depth_bins[[i, j]].is_nan() {
+            0.0
         } else {
             match &reflectivity {
-                None => T::one(),
-                Some(r) => T::of_f64(r.values[i * g.n + j] as f64 / r.max as f64),
+                None => 1.0,
+                Some(r) => r.values[i * g.n + j] as f64 / r.max as f64,
             }
         }
     });
-    DepthMap {
-        depth: depth_bins,
-        amplitude,
-    }
-    .to_scene(g.ks)
+    Ok((g, depth_bins, amplitude))
 }

@@ -9,6 +9,7 @@ mod blocks;
 mod cancel;
 mod codes;
 mod composed;
+mod continuous;
 mod footprint;
 mod geometry;
 pub(crate) mod kernels;
@@ -16,6 +17,8 @@ mod measurement;
 mod noise;
 mod pulse;
 mod rdop;
+mod response;
+mod returns;
 pub(crate) mod sampling;
 mod scene;
 mod scenes;
@@ -31,6 +34,7 @@ pub use architectures::{
 pub use blocks::BlockOperator;
 pub use cancel::Cancellable;
 pub use codes::{packed_len, CodeAlphabet, Codes};
+pub use continuous::{paper_returns, random_returns, transparent_returns, TRANSPARENT_SPACING};
 pub use geometry::{Geometry, Regime};
 pub use measurement::{LidarOperator, MultiAdcOperator};
 pub use noise::{
@@ -39,6 +43,8 @@ pub use noise::{
     QuantizationReport, StageReport,
 };
 pub use pulse::{zero_mean, Pulse};
+pub use response::{Measured, Response, GAUSSIAN_REACH};
+pub use returns::Returns;
 
 /// The instruction set the fused operator's kernels run with on this machine (`"avx512"`,
 /// `"avx2+fma"` or `"generic"`), as [`RdOperator::isa`] reports it: the best the CPU has, capped
@@ -52,12 +58,12 @@ pub use kernels::ISA_VAR;
 pub use rdop::{ForwardPath, RdOperator};
 pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};
 pub use scene::{DepthMap, Scene, NO_RETURN, UNOBSERVED};
+#[cfg(feature = "images")]
+pub(crate) use scenes::checked;
 pub use scenes::{
     attenuate, composite_nearest, paper_scene, paper_surfaces, random_opaque_scene,
     semi_transparent_scene,
 };
-#[cfg(feature = "images")]
-pub(crate) use scenes::{bin_of_fraction, checked};
 pub use seeded::{SeededCodes, SEEDED_CODES_GENERATOR};
 pub use simulate::{
     simulate, simulate_cancellable, simulate_split, simulate_split_supplied, simulate_supplied,

@@ -96,6 +96,15 @@ impl<T: Real> Scene<T> {
         self.data.as_slice().expect("scenes are C-contiguous")
     }
 
+    /// Pixel `p`'s depth column (row-major pixels).
+    ///
+    /// # Panics
+    /// If `p` is not a pixel of the scene.
+    pub fn column(&self, p: usize) -> &[T] {
+        let ks = self.data.dim().2;
+        &self.as_slice()[p * ks..(p + 1) * ks]
+    }
+
     /// The scene with the columns of the pixels whose entry of `keep` (row-major, one per
     /// pixel) is false set to zero: what an instrument that observes only the kept pixels can
     /// be judged against.

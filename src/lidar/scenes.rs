@@ -33,12 +33,6 @@ pub(crate) fn checked(g: Geometry) -> Result<Geometry> {
     Ok(g)
 }
 
-/// The depth bin of a fraction `f` of the depth range: `round(f·(K_s − 1))`, clamped to `[0, K_s)`.
-pub(crate) fn bin_of_fraction(f: f64, ks: usize) -> i32 {
-    let top = (ks - 1) as f64;
-    (f * top).round().clamp(0.0, top) as i32
-}
-
 // Placement of the paper's reflectors, in fractions of the rows (u), columns (v) and depth range.
 // A pixel (i, j) belongs to a region when its centre ((i + ½)/M, (j + ½)/N) does.
 
@@ -85,38 +79,59 @@ fn within(x: f64, (lo, hi): (f64, f64)) -> bool {
 /// exceeds `i32::MAX`.
 pub fn paper_surfaces<T: Real>(g: Geometry) -> Result<[DepthMap<T>; 3]> {
     let g = checked(g)?;
-    let empty = || DepthMap {
-        depth: Array2::from_elem((g.m, g.n), NO_RETURN),
-        amplitude: Array2::<T>::zeros((g.m, g.n)),
-    };
+    let top = (g.ks - 1) as f64;
+    Ok(paper_layers(g)?.map(|(depth, reflectivity)| DepthMap {
+        depth: depth.mapv(|d| {
+            if d.is_nan() {
+                NO_RETURN
+            } else {
+                d.round().clamp(0.0, top) as i32
+            }
+        }),
+        amplitude: depth.mapv(|d| {
+            if d.is_nan() {
+                T::zero()
+            } else {
+                T::of_f64(reflectivity)
+            }
+        }),
+    }))
+}
+
+/// The three reflectors of [`paper_surfaces`] at their continuous depths, in bins (a depth
+/// fraction f is depth f·(K_s − 1), NaN where the reflector is absent), each with its
+/// reflectivity.
+pub(crate) fn paper_layers(g: Geometry) -> Result<[(Array2<f64>, f64); 3]> {
+    let g = checked(g)?;
+    let top = (g.ks - 1) as f64;
+    let empty = || Array2::from_elem((g.m, g.n), f64::NAN);
     let (mut square, mut disk, mut plane) = (empty(), empty(), empty());
     let (mf, nf) = (g.m as f64, g.n as f64);
     let radius = DISK_RADIUS * mf.min(nf);
     let (cu, cv) = (DISK_CENTRE.0 * mf, DISK_CENTRE.1 * nf);
-    let square_bin = bin_of_fraction(SQUARE_DEPTH, g.ks);
-    let disk_bin = bin_of_fraction(DISK_DEPTH, g.ks);
     for i in 0..g.m {
         let u = (i as f64 + 0.5) / mf;
         for j in 0..g.n {
             let v = (j as f64 + 0.5) / nf;
             if within(u, SQUARE_ROWS) && within(v, SQUARE_COLS) {
-                square.depth[[i, j]] = square_bin;
-                square.amplitude[[i, j]] = T::of_f64(SQUARE_REFLECTIVITY);
+                square[[i, j]] = SQUARE_DEPTH * top;
             }
             let (du, dv) = (i as f64 + 0.5 - cu, j as f64 + 0.5 - cv);
             if du * du + dv * dv <= radius * radius {
-                disk.depth[[i, j]] = disk_bin;
-                disk.amplitude[[i, j]] = T::of_f64(DISK_REFLECTIVITY);
+                disk[[i, j]] = DISK_DEPTH * top;
             }
             if within(u, PLANE_ROWS) && within(v, PLANE_COLS) {
                 let t = (v - PLANE_COLS.0) / (PLANE_COLS.1 - PLANE_COLS.0);
                 let f = PLANE_DEPTH.0 + t * (PLANE_DEPTH.1 - PLANE_DEPTH.0);
-                plane.depth[[i, j]] = bin_of_fraction(f, g.ks);
-                plane.amplitude[[i, j]] = T::of_f64(PLANE_REFLECTIVITY);
+                plane[[i, j]] = f * top;
             }
         }
     }
-    Ok([square, disk, plane])
+    Ok([
+        (square, SQUARE_REFLECTIVITY),
+        (disk, DISK_REFLECTIVITY),
+        (plane, PLANE_REFLECTIVITY),
+    ])
 }
 
 /// Composites opaque layers: each pixel takes the return of the nearest layer that has one

@@ -303,6 +303,12 @@ pub struct Simulation<T> {
     /// Where a supplied scene came from (for example its depth map's file name), as the caller
     /// describes it; `meta.json` records it. `None` for generated scenes.
     pub scene_source: Option<String>,
+    /// The returns at continuous depths the scene was rendered from, when the caller rendered
+    /// it from returns ([`Returns::render`](super::Returns::render)); `range.npy` holds their
+    /// depths.
+    pub returns: Option<super::Returns>,
+    /// The response that rendered [`returns`](Self::returns).
+    pub response: Option<super::Response>,
 }
 
 impl<T: Real> Simulation<T> {
@@ -477,6 +483,8 @@ fn simulate_inner<T: Real>(
         meas: Vec::new(),
         noise: None,
         scene_source: None,
+        returns: None,
+        response: None,
     };
     let y = match &sim.groups {
         // One tile at a time: only one tile's operator (and copy of its codes) is alive.
@@ -683,6 +691,8 @@ fn simulate_split_inner<T: Real>(
         meas: Vec::new(),
         noise: None,
         scene_source: None,
+        returns: None,
+        response: None,
     };
     sim.measured(y)
 }

@@ -11,8 +11,8 @@ use rdlidar::acquisition::{
 use rdlidar::io;
 use rdlidar::io::meta::SimulationMeta;
 use rdlidar::lidar::{
-    simulate, simulate_split, simulate_split_supplied, simulate_supplied, Geometry, SimulationSpec,
-    TileSize, SEEDED_CODES_GENERATOR,
+    simulate, simulate_split, simulate_split_supplied, simulate_supplied, Geometry, Response,
+    SimulationSpec, TileSize, SEEDED_CODES_GENERATOR,
 };
 use rdlidar::settings::FrontEnd;
 use rdlidar::units::number;
@@ -170,6 +170,38 @@ pub struct SimulateArgs {
     /// codes takes all three.
     #[arg(long, value_enum, value_name = "FORMAT", default_value_t = CodesFormat::Int8)]
     pub codes_format: CodesFormat,
+    /// Where the reflectors lie: on the grid (each in one depth bin), or at continuous depths
+    /// (the paper's reflectors, random and semi-transparent scenes and PNG depth maps
+    /// unrounded), put on the voxel grid by --kernel (default triangle). With continuous
+    /// depths or a kernel other than delta, range.npy holds the true depths: float64 (M, N)
+    /// bins, (R, M, N) with several returns per pixel, NaN where there is none.
+    #[arg(long, value_enum, value_name = "WHERE", default_value_t = DepthMode::Grid)]
+    pub depth: DepthMode,
+    /// The system's response g (g(0) = 1) that puts a reflector of amplitude a at depth d
+    /// into its voxel column as a·g(k − d): delta (depths on the grid, the default on the
+    /// grid), triangle (max(0, 1 − |t|): rectangular chips and an integrating ADC, the
+    /// default at continuous depths), gaussian:S (exp(−t²/(2S²)), S in bins), or
+    /// measured:O:FILE (a float64 .npy of samples of g, O per bin; its largest sample is
+    /// t = 0, scaled to 1).
+    #[arg(long, value_name = "SPEC", value_parser = parse_kernel)]
+    pub kernel: Option<Response>,
+}
+
+/// Where a simulation's reflectors lie.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DepthMode {
+    /// Each reflector in one depth bin.
+    Grid,
+    /// At continuous depths.
+    Continuous,
+}
+
+/// A response specification, read (a measured response's file too).
+pub fn parse_kernel(text: &str) -> Result<Response, String> {
+    rdlidar::io::read_response(text).map_err(|e| match e {
+        rdlidar::Error::InvalidParameter { reason, .. } => FrontEnd::CommandLine.words(&reason),
+        e => FrontEnd::CommandLine.render(&e),
+    })
 }
 
 /// The request the flags make.
@@ -189,6 +221,8 @@ fn request_of(a: &SimulateArgs, seed: u64) -> SimulationRequest {
         tiles: a.tiles,
         aperture: a.aperture,
         codes_format: a.codes_format.into(),
+        continuous: a.depth == DepthMode::Continuous,
+        kernel: a.kernel.clone(),
         ..SimulationRequest::new(a.size, a.pulse_len, seed)
     }
 }
@@ -230,9 +264,9 @@ fn simulate_into<T: Real + WritableElement>(
             (None, Some(scene)) => simulate_supplied::<T>(spec, scene),
             (None, None) => simulate::<T>(spec),
         })
-        .map(|mut sim| {
-            sim.scene_source = request.scene_source();
-            sim
+        .and_then(|mut sim| {
+            request.describe(&mut sim)?;
+            Ok(sim)
         })
         .map_err(|e| match e {
             rdlidar::Error::InvalidParameter {
@@ -300,6 +334,17 @@ fn simulate_into<T: Real + WritableElement>(
     );
     if let Some(note) = architecture_note(&meta, g) {
         outln!("architecture: {note}");
+    }
+    if let (Some(returns), Some(file)) = (&sim.returns, &meta.files.range) {
+        outln!(
+            "{}; range.npy {} float64: the true depths in bins ({} returns)",
+            sim.scene_source
+                .as_deref()
+                .unwrap_or("rendered from returns"),
+            io::shape_text(returns.range_map().shape()),
+            returns.depth.iter().filter(|d| !d.is_nan()).count()
+        );
+        debug_assert_eq!(file, "range.npy");
     }
     if ranks.processes() > 1 {
         outln!(

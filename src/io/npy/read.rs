@@ -6,7 +6,7 @@ use std::path::Path;
 use ndarray::{Array2, ArrayD, Ix1, Ix2, Ix3};
 
 use crate::error::{Error, Result};
-use crate::lidar::{packed_len, Codes, Pulse, Scene};
+use crate::lidar::{packed_len, Codes, Pulse, Response, Scene};
 use crate::real::Real;
 
 use super::super::file_error;
@@ -521,4 +521,17 @@ pub fn read_depth(path: impl AsRef<Path>, depth_bins: Option<usize>) -> Result<A
         ));
     }
     Ok(a)
+}
+
+/// The system's response a specification names ([`Response::parse_with`]), a measured one's
+/// samples read from its `.npy` file (a float32 or float64 vector).
+///
+/// # Errors
+/// [`Error::InvalidParameter`] (`kernel`) for a bad specification or samples;
+/// [`Error::File`] naming the file that cannot be read or is not a vector of floats.
+pub fn read_response(spec: &str) -> Result<Response> {
+    Response::parse_with(spec, &|path| {
+        let a = into_dim::<f64, Ix1>(path, read_real(path, "a measured response", 1, "(S,)")?)?;
+        Ok(a.to_vec())
+    })
 }

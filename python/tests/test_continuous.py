@@ -1,0 +1,80 @@
+"""Reflectors at continuous depths and the system's response, from Python as from the command
+line: the same files byte for byte, range.npy among them, and the same errors."""
+
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import rdlidar
+
+SIZE = (9, 11, 10)
+KP = 80
+
+
+def cli(binary, *args):
+    return subprocess.run([binary, *map(str, args)], capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("scene,kwargs", [
+    ("paper", {"depth": "continuous"}),
+    ("transparent", {"depth": "continuous", "kernel": "gaussian:0.8"}),
+    ("random", {"kernel": "gaussian:1.5", "lit_fraction": 0.7}),
+])
+def test_continuous_simulations_are_the_command_lines_byte_for_byte(tmp_path, rdlidar_bin,
+                                                                     scene, kwargs):
+    flags = []
+    for key, value in kwargs.items():
+        flags += ["--" + key.replace("_", "-"), value]
+    out = cli(rdlidar_bin, "simulate", "--scene", scene, "--size", "x".join(map(str, SIZE)),
+              "--pulse-len", KP, "--seed", 3, "--out", tmp_path / "cli", *flags)
+    assert out.returncode == 0, out.stderr
+    sim = rdlidar.simulate(scene, size=SIZE, pulse_len=KP, seed=3, out=tmp_path / "py", **kwargs)
+    names = sorted(os.listdir(tmp_path / "cli"))
+    assert "range.npy" in names and names == sorted(os.listdir(tmp_path / "py"))
+    for name in names:
+        assert (tmp_path / "py" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes()
+    written = np.load(tmp_path / "py" / "range.npy")
+    assert sim.range.dtype == np.float64
+    assert np.array_equal(sim.range, written, equal_nan=True)
+    lit = ~np.isnan(sim.range)
+    assert lit.any() and np.all(sim.range[lit] >= 0) and np.all(sim.range[lit] <= SIZE[2] - 1)
+    if kwargs.get("depth") == "continuous":
+        assert np.any(np.abs(sim.range[lit] - np.round(sim.range[lit])) > 0.05)
+    else:
+        assert np.array_equal(sim.range[lit], np.round(sim.range[lit]))
+    if scene == "transparent":
+        assert sim.range.ndim == 3 and sim.range.shape[1:] == SIZE[:2]
+
+
+def test_the_triangle_splits_a_reflector_between_two_bins():
+    sim = rdlidar.simulate("paper", size=SIZE, pulse_len=KP, depth="continuous")
+    assert sim.meta["scene"]["kernel"] == "triangle"
+    for (i, j), d in np.ndenumerate(sim.range):
+        col = sim.scene[i, j]
+        if np.isnan(d):
+            assert not col.any()
+            continue
+        lo, f = int(np.floor(d)), d - np.floor(d)
+        amp = col.sum()
+        assert col[lo] == pytest.approx(amp * (1 - f), abs=1e-12)
+        if f > 0:
+            assert col[lo + 1] == pytest.approx(amp * f, abs=1e-12)
+    # On the grid without a kernel, nothing changes: no range.
+    assert rdlidar.simulate("paper", size=SIZE, pulse_len=KP).range is None
+
+
+@pytest.mark.parametrize("kwargs,needle", [
+    ({"depth": "continuous", "kernel": "delta"}, "depth"),
+    ({"kernel": "gaussian:-1"}, "kernel"),
+    ({"kernel": "measured:4:/no/such.npy"}, "/no/such.npy"),
+    ({"depth": "sideways"}, "depth"),
+])
+def test_bad_depths_and_kernels_name_their_argument(kwargs, needle):
+    with pytest.raises(ValueError) as e:
+        rdlidar.simulate("paper", size=SIZE, pulse_len=KP, **kwargs)
+    msg = str(e.value)
+    assert needle in msg and "\n" not in msg, msg
+    with pytest.raises(TypeError):
+        rdlidar.simulate("paper", size=SIZE, pulse_len=KP, kernel=0.8)

@@ -1,0 +1,266 @@
+//! Reflectors at continuous depths and the system's response: the scenes rendered from them,
+//! `simulate --depth continuous --kernel SPEC` and its `range.npy`.
+
+use ndarray::{Array2, Array3};
+use ndarray_npy::{read_npy, write_npy};
+
+use rdlidar::acquisition::SimulationRequest;
+use rdlidar::lidar::{paper_returns, Geometry, Response, Returns};
+
+use crate::cli_support::{listing, rdlidar, s, stderr, stdout, TempDir};
+
+/// Each pixel's column is a·g(k − d) for the truth's (a, d): the rendered scene is the response
+/// of the returns, whatever the kernel.
+fn check_rendered(scene: &Array3<f64>, range: &Array2<f64>, amplitude: f64, response: &Response) {
+    let (m, n, ks) = scene.dim();
+    for i in 0..m {
+        for j in 0..n {
+            let d = range[[i, j]];
+            for k in 0..ks {
+                let want = if d.is_nan() {
+                    0.0
+                } else {
+                    amplitude * response.value(k as f64 - d)
+                };
+                assert!(
+                    (scene[[i, j, k]] - want).abs() < 1e-12,
+                    "pixel ({i}, {j}) voxel {k}: {} vs {want}",
+                    scene[[i, j, k]]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn simulate_at_continuous_depths_writes_the_true_depths_beside_the_rendered_scene() {
+    let tmp = TempDir::new("continuous");
+    let dir = tmp.path("run");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "12x14x9",
+        "--pulse-len",
+        "60",
+        "--depth",
+        "continuous",
+        "--out",
+        s(&dir),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stdout(&out).contains("range.npy (12, 14) float64"),
+        "{}",
+        stdout(&out)
+    );
+    assert_eq!(
+        listing(&dir),
+        [
+            "codes.npy",
+            "meas.npy",
+            "meta.json",
+            "pulse.npy",
+            "range.npy",
+            "scene.npy"
+        ]
+    );
+    let range: Array2<f64> = read_npy(dir.join("range.npy")).unwrap();
+    let scene: Array3<f64> = read_npy(dir.join("scene.npy")).unwrap();
+    let truth = paper_returns(Geometry::new(12, 14, 9).unwrap()).unwrap();
+    let want = truth.range_map();
+    for (a, b) in range.iter().zip(want.iter()) {
+        assert!(a == b || (a.is_nan() && b.is_nan()));
+    }
+    // Some depths lie between bins, and the triangle splits them over two voxels.
+    assert!(range.iter().any(|d| d.fract() > 0.05 && d.fract() < 0.95));
+    let lit = range.iter().filter(|d| !d.is_nan()).count();
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
+    assert_eq!(meta["files"]["range"], "range.npy");
+    assert_eq!(meta["scene"]["kernel"], "triangle");
+    assert_eq!(meta["scene"]["lit_pixels"], lit);
+    let (m, n, ks) = scene.dim();
+    for i in 0..m {
+        for j in 0..n {
+            let col: f64 = (0..ks).map(|k| scene[[i, j, k]]).sum();
+            let amp = truth.amplitude[[0, i, j]];
+            assert!(
+                (col - amp).abs() < 1e-12,
+                "the triangle's weights sum to one"
+            );
+        }
+    }
+
+    // gaussian:0.7 on the grid: the same scene smeared, depths whole.
+    let dir = tmp.path("gauss");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "random",
+        "--size",
+        "6x5x10",
+        "--pulse-len",
+        "40",
+        "--kernel",
+        "gaussian:0.7",
+        "--lit-fraction",
+        "1",
+        "--out",
+        s(&dir),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let range: Array2<f64> = read_npy(dir.join("range.npy")).unwrap();
+    let scene: Array3<f64> = read_npy(dir.join("scene.npy")).unwrap();
+    assert!(range.iter().all(|d| d.fract() == 0.0));
+    let g = Response::gaussian(0.7).unwrap();
+    let peaks: Array2<f64> =
+        Array2::from_shape_fn((6, 5), |(i, j)| scene[[i, j, range[[i, j]] as usize]]);
+    for (i, p) in peaks.indexed_iter() {
+        check_rendered(
+            &scene
+                .slice(ndarray::s![i.0..i.0 + 1, i.1..i.1 + 1, ..])
+                .to_owned(),
+            &range
+                .slice(ndarray::s![i.0..i.0 + 1, i.1..i.1 + 1])
+                .to_owned(),
+            *p,
+            &g,
+        );
+    }
+
+    // Back on the grid with --force: no range.npy is left to contradict meta.json.
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "random",
+        "--size",
+        "6x5x10",
+        "--pulse-len",
+        "40",
+        "--out",
+        s(&dir),
+        "--force",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!dir.join("range.npy").exists());
+}
+
+#[test]
+fn a_measured_response_is_read_from_its_samples_and_bad_kernels_name_the_flag() {
+    let tmp = TempDir::new("measured");
+    let file = tmp.path("irf.npy");
+    // A skewed response, 4 samples per bin, peak 3 (scaled to 1).
+    let samples = ndarray::Array1::from_iter((0..24).map(|i| {
+        let t = (i as f64 - 6.0) / 4.0;
+        3.0 * if t < 0.0 {
+            (-t * t / 0.5).exp()
+        } else {
+            (-t * t / 2.0).exp()
+        }
+    }));
+    write_npy(&file, &samples).unwrap();
+    let spec = format!("measured:4:{}", s(&file));
+    let r = rdlidar::io::read_response(&spec).unwrap();
+    assert!((r.value(0.0) - 1.0).abs() < 1e-12);
+    assert!((r.value(1.0) - (-0.5f64).exp()).abs() < 1e-9);
+    assert_eq!(r.spec(), spec);
+    let dir = tmp.path("run");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "8x8x12",
+        "--pulse-len",
+        "40",
+        "--depth",
+        "continuous",
+        "--kernel",
+        &spec,
+        "--out",
+        s(&dir),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for (kernel, needle) in [
+        ("gaussian:0", "gaussian:S needs a width"),
+        ("cubic", "is not one of"),
+        ("measured:0:x.npy", "O is the samples per bin"),
+        ("measured:4:/no/such/file.npy", "/no/such/file.npy"),
+    ] {
+        let out = rdlidar(&[
+            "simulate",
+            "--scene",
+            "paper",
+            "--size",
+            "8x8x12",
+            "--pulse-len",
+            "40",
+            "--kernel",
+            kernel,
+            "--out",
+            s(&tmp.path("bad")),
+        ]);
+        let e = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{kernel}: {e}");
+        assert!(
+            e.contains("--kernel") && e.contains(needle),
+            "{kernel}: {e}"
+        );
+        assert!(!tmp.path("bad").exists());
+    }
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "8x8x12",
+        "--pulse-len",
+        "40",
+        "--depth",
+        "continuous",
+        "--kernel",
+        "delta",
+        "--out",
+        s(&tmp.path("bad")),
+    ]);
+    let e = stderr(&out);
+    assert!(
+        !out.status.success() && e.contains("--depth") && e.contains("--kernel delta"),
+        "{e}"
+    );
+}
+
+#[test]
+fn every_scene_renders_at_continuous_depths_through_the_request() {
+    let g = Geometry::new(10, 9, 16).unwrap();
+    for scene in ["paper", "random", "transparent"] {
+        let request = SimulationRequest {
+            scene: scene.into(),
+            continuous: true,
+            kernel: Some(Response::gaussian(0.8).unwrap()),
+            ..SimulationRequest::new(g, 100, 7)
+        };
+        let returns: Returns = request.returns().unwrap().unwrap();
+        assert!(returns.lit_pixels() > 0, "{scene}");
+        let scene_cube = request.supplied_scene::<f64>().unwrap().unwrap();
+        assert_eq!(
+            scene_cube,
+            returns
+                .render::<f64>(16, &Response::gaussian(0.8).unwrap())
+                .unwrap()
+        );
+        let spec = request.spec().unwrap();
+        let mut sim = rdlidar::lidar::simulate_supplied(&spec, scene_cube).unwrap();
+        request.describe(&mut sim).unwrap();
+        assert_eq!(sim.returns.as_ref(), Some(&returns));
+        assert!(sim
+            .scene_source
+            .unwrap()
+            .contains("continuous depths, kernel gaussian:0.8"));
+    }
+    // On the grid with no kernel: nothing is rendered, as before.
+    let request = SimulationRequest::new(g, 100, 7);
+    assert!(request.returns().unwrap().is_none());
+}
