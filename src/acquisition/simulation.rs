@@ -183,29 +183,7 @@ impl SimulationRequest {
                 ))
             }
         };
-        match (&scene, &self.depth_png, &self.reflectivity_png) {
-            (SceneSpec::Supplied, None, _) => {
-                return Err(Error::param(
-                    "depth_png",
-                    "`scene=png` reads its depths from a PNG depth map: give its file",
-                ))
-            }
-            (SceneSpec::Supplied, Some(_), _) => {}
-            (other, depth, reflectivity) => {
-                if let Some(name) = [("depth_png", depth), ("reflectivity_png", reflectivity)]
-                    .into_iter()
-                    .find_map(|(name, v)| v.is_some().then_some(name))
-                {
-                    return Err(Error::param(
-                        name,
-                        format!(
-                            "applies only to `scene=png`, not to `scene={}`",
-                            other.name()
-                        ),
-                    ));
-                }
-            }
-        }
+        self.check_maps(&scene)?;
         if let Some(f) = self.lit_fraction {
             if !(0.0..=1.0).contains(&f) {
                 return Err(Error::param(
@@ -360,6 +338,34 @@ impl SimulationRequest {
             }
         };
         Ok((photon_noise, quantization))
+    }
+
+    /// Checks that the png maps are given for, and only for, the png scene.
+    fn check_maps(&self, scene: &SceneSpec) -> Result<()> {
+        match (scene, &self.depth_png, &self.reflectivity_png) {
+            (SceneSpec::Supplied, None, _) => {
+                return Err(Error::param(
+                    "depth_png",
+                    "`scene=png` reads its depths from a PNG depth map: give its file",
+                ))
+            }
+            (SceneSpec::Supplied, Some(_), _) => {}
+            (other, depth, reflectivity) => {
+                if let Some(name) = [("depth_png", depth), ("reflectivity_png", reflectivity)]
+                    .into_iter()
+                    .find_map(|(name, v)| v.is_some().then_some(name))
+                {
+                    return Err(Error::param(
+                        name,
+                        format!(
+                            "applies only to `scene=png`, not to `scene={}`",
+                            other.name()
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The scene the request reads (the png scene's, in `T`), or `None` when the simulation
