@@ -264,3 +264,151 @@ fn every_scene_renders_at_continuous_depths_through_the_request() {
     let request = SimulationRequest::new(g, 100, 7);
     assert!(request.returns().unwrap().is_none());
 }
+
+/// A simulation of `request` and its operator, in f64.
+fn simulated(
+    request: &SimulationRequest,
+) -> (
+    rdlidar::lidar::Simulation<f64>,
+    rdlidar::acquisition::Acquisition,
+) {
+    let spec = request.spec().unwrap();
+    let scene = request.supplied_scene::<f64>().unwrap().unwrap();
+    let mut sim = rdlidar::lidar::simulate_supplied(&spec, scene).unwrap();
+    request.describe(&mut sim).unwrap();
+    let acq = rdlidar::acquisition::Acquisition::new(
+        spec.geometry,
+        sim.pulse.as_slice().to_vec(),
+        rdlidar::acquisition::CodeStore::Held(sim.code_sets.clone()),
+        None,
+        rdlidar::acquisition::Streaming::Never,
+    )
+    .unwrap();
+    (sim, acq)
+}
+
+/// Depth RMSE over the pixels lit in both, and the lit pixels missed and false.
+fn depth_errors(truth: &Returns, estimate: &Returns) -> (f64, usize, usize) {
+    let t = truth.range_map();
+    let e = estimate.range_map();
+    let (mut se, mut n, mut missed, mut false_) = (0.0, 0usize, 0, 0);
+    for (a, b) in t.iter().zip(e.iter()) {
+        match (a.is_nan(), b.is_nan()) {
+            (false, false) => {
+                se += (a - b) * (a - b);
+                n += 1;
+            }
+            (false, true) => missed += 1,
+            (true, false) => false_ += 1,
+            (true, true) => {}
+        }
+    }
+    ((se / n.max(1) as f64).sqrt(), missed, false_)
+}
+
+#[test]
+fn with_enough_measurements_continuous_depths_come_back_exact_under_each_kernel() {
+    // Redundant pulses, noise-free: the grid method's returns, fitted under the response,
+    // are the truth to round-off; so are the model-based pursuit's on the response's atoms.
+    let g = Geometry::new(10, 10, 10).unwrap();
+    let kernels = [Response::Triangle, Response::gaussian(0.8).unwrap()];
+    for kernel in kernels {
+        let request = SimulationRequest {
+            continuous: true,
+            kernel: Some(kernel.clone()),
+            ..SimulationRequest::new(g, 1500, 11)
+        };
+        let (sim, acq) = simulated(&request);
+        let truth = sim.returns.as_ref().unwrap();
+        for method in [
+            rdlidar::recon::Method::Auto,
+            rdlidar::recon::Method::ModelBased,
+        ] {
+            let job = rdlidar::acquisition::ReconstructRequest {
+                options: rdlidar::recon::ReconstructOptions {
+                    response: kernel.clone(),
+                    ..Default::default()
+                },
+                ..rdlidar::acquisition::ReconstructRequest::new(method)
+            };
+            let never = std::sync::atomic::AtomicBool::new(false);
+            let r = job
+                .run(
+                    &acq,
+                    &sim.meas,
+                    &rdlidar::acquisition::observe_nothing,
+                    &|_: &rdlidar::recon::TileReconstruction<f64>| {},
+                    &never,
+                )
+                .unwrap();
+            let out = job.finish(r, &acq, None);
+            let estimate = out.returns.as_ref().expect("continuous depths");
+            let (rmse, missed, false_) = depth_errors(truth, estimate);
+            assert_eq!((missed, false_), (0, 0), "{kernel} {method}");
+            assert!(rmse < 1e-6, "{kernel} {method}: depth RMSE {rmse}");
+            // The scene is the returns rendered, the depth map their nearest bins.
+            assert_eq!(out.scene, estimate.render::<f64>(g.ks, &kernel).unwrap());
+            assert_eq!(out.depth.depth, estimate.nearest(g.ks).depth);
+        }
+    }
+}
+
+#[test]
+fn reconstruct_writes_continuous_depths_with_a_kernel_and_refuses_them_without() {
+    let tmp = TempDir::new("out-range");
+    let dir = tmp.path("run");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "8x8x8",
+        "--pulse-len",
+        "900",
+        "--depth",
+        "continuous",
+        "--out",
+        s(&dir),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let files = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let base = [
+        "reconstruct".to_string(),
+        "--pulse".into(),
+        files("pulse.npy"),
+        "--codes".into(),
+        files("codes.npy"),
+        "--meas".into(),
+        files("meas.npy"),
+        "--depth-bins".into(),
+        "8".into(),
+        "--out-depth".into(),
+        files("d.npy"),
+        "--out-scene".into(),
+        files("x.npy"),
+        "--solver".into(),
+        "auto".into(),
+        "--out-range".into(),
+        files("r.npy"),
+    ];
+    let args: Vec<&str> = base.iter().map(String::as_str).collect();
+    let out = rdlidar(&args);
+    let e = stderr(&out);
+    assert!(
+        !out.status.success() && e.contains("--out-range") && e.contains("--kernel"),
+        "{e}"
+    );
+    assert!(!dir.join("d.npy").exists());
+    let mut args = args.clone();
+    args.extend(["--kernel", "triangle"]);
+    let out = rdlidar(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let truth: Array2<f64> = read_npy(dir.join("range.npy")).unwrap();
+    let estimate: Array2<f64> = read_npy(dir.join("r.npy")).unwrap();
+    for (a, b) in truth.iter().zip(estimate.iter()) {
+        assert!(
+            (a.is_nan() && b.is_nan()) || (a - b).abs() < 1e-6,
+            "{a} vs {b}"
+        );
+    }
+}

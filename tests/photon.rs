@@ -163,7 +163,7 @@ fn estimates_the_weighted_pass_does_not_model_are_kept_as_they_are() {
     };
     let weighted = ReconstructOptions {
         noise: NoiseModel::Photon { background: 0.0 },
-        ..several
+        ..several.clone()
     };
     let a = reconstruct(&op, &y, Method::ModelBased, &several).unwrap();
     let b = reconstruct(&op, &y, Method::ModelBased, &weighted).unwrap();

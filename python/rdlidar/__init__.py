@@ -658,6 +658,7 @@ def reconstruct(
     false_rate: Optional[float] = None,
     noise: str = "gaussian",
     background: Optional[float] = None,
+    kernel: Optional[str] = None,
 ):
     """Reconstructs a scene from the measurements of any architecture, as
     ``rdlidar reconstruct`` does.
@@ -697,6 +698,12 @@ def reconstruct(
         slope_z, light_share, gain, skipped).
     background : with ``noise="photon"``, the ambient light and dark counts per sample in the
         units of the scene's light (as ``simulate(background=)``; default 0).
+    kernel : the system's response the scene was made with, as ``--kernel``: "delta" (depths
+        on the grid, the default), "triangle", "gaussian:S" or "measured:O:PATH". With another
+        kernel than delta every return's amplitude and continuous depth are estimated under
+        it: the report's ``range`` holds the depths in bins (float64 (M, N), or (R, M, N) with
+        several returns per pixel; NaN where there is none), the scene is the returns
+        rendered by the kernel and ``depth`` their nearest bins.
 
     Returns ``(depth, scene, report)``: ``depth`` (M, N) int32 depth bins (-1 where no return,
     -2 for pixels no code reaches), ``scene`` (M, N, K_s) with every return found, and
@@ -730,6 +737,7 @@ def reconstruct(
         op._core, y.reshape(-1), solver, max_iter, callback, _int(seed, "seed"),
         bool(fill_unobserved), _clipped(clipped), _optional_float(false_rate, "false_rate"),
         _noise(noise), _optional_float(background, "background"),
+        _optional_str(kernel, "kernel"),
     )
     return depth, scene.reshape(op.scene_shape), report
 

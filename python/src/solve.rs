@@ -7,7 +7,8 @@ use pyo3::types::{PyDict, PyTuple};
 use pythonize::pythonize;
 
 use rdlidar::acquisition::{Acquisition, Clipping, ReconstructRequest};
-use rdlidar::lidar::{Architecture, Cancellable};
+use rdlidar::io::read_response;
+use rdlidar::lidar::{Architecture, Cancellable, Response};
 use rdlidar::operator::{BoxedOperator, LinearOperator};
 use rdlidar::recon::{NoiseModel, ReconstructOptions, TileReconstruction};
 use rdlidar::settings::FrontEnd;
@@ -100,7 +101,7 @@ fn run_fista<'py, T: Real + numpy::Element>(
 
 /// Runs a reconstruction method on any architecture; returns (depth, scene, report).
 #[pyfunction]
-#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false, clipped=None, false_rate=None, noise="gaussian", background=None))]
+#[pyo3(signature = (operator, meas, solver, max_iter, callback, seed, fill_unobserved=false, clipped=None, false_rate=None, noise="gaussian", background=None, kernel=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn reconstruct<'py>(
     py: Python<'py>,
@@ -115,6 +116,7 @@ pub(crate) fn reconstruct<'py>(
     false_rate: Option<f64>,
     noise: &str,
     background: Option<f64>,
+    kernel: Option<&str>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     if operator.debiased {
         return Err(PyValueError::new_err(
@@ -129,6 +131,11 @@ pub(crate) fn reconstruct<'py>(
             seed,
             false_rate,
             noise: ReconstructRequest::noise_model(noise, background).map_err(value_error)?,
+            response: kernel
+                .map(read_response)
+                .transpose()
+                .map_err(value_error)?
+                .unwrap_or(Response::Delta),
             ..ReconstructOptions::default()
         },
         clipped: clipped
@@ -176,6 +183,9 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
     let outcome = job.finish(r, acq, censoring.as_ref());
     let report = pythonize(py, &outcome.summary)?.cast_into::<PyDict>()?;
     report.set_item("request", FrontEnd::Python.words(&job.summary()))?;
+    if let Some(returns) = outcome.returns {
+        report.set_item("range", returns.range_map().into_pyarray(py))?;
+    }
     let depth = outcome.depth.depth.into_pyarray(py);
     let scene = outcome.scene.into_inner().into_pyarray(py);
     PyTuple::new(py, [depth.into_any(), scene.into_any(), report.into_any()])

@@ -78,3 +78,30 @@ def test_bad_depths_and_kernels_name_their_argument(kwargs, needle):
     assert needle in msg and "\n" not in msg, msg
     with pytest.raises(TypeError):
         rdlidar.simulate("paper", size=SIZE, pulse_len=KP, kernel=0.8)
+
+
+@pytest.mark.parametrize("kernel", ["triangle", "gaussian:0.8"])
+def test_reconstruct_under_a_kernel_returns_the_continuous_depths(tmp_path, rdlidar_bin, kernel):
+    sim = rdlidar.simulate("paper", size=(8, 8, 8), pulse_len=900, seed=2, depth="continuous",
+                           kernel=kernel, out=tmp_path / "s")
+    depth, scene, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 8, kernel=kernel)
+    est = report["range"]
+    assert est.shape == sim.range.shape and est.dtype == np.float64
+    assert np.array_equal(np.isnan(est), np.isnan(sim.range))
+    lit = ~np.isnan(sim.range)
+    assert np.max(np.abs(est[lit] - sim.range[lit])) < 1e-6
+    assert np.array_equal(depth[lit], np.clip(np.round(est[lit]), 0, 7).astype(np.int32))
+    # The command line writes the same depths.
+    s = tmp_path / "s"
+    out = cli(rdlidar_bin, "reconstruct", "--pulse", s / "pulse.npy", "--codes", s / "codes.npy",
+              "--meas", s / "meas.npy", "--depth-bins", 8, "--solver", "auto", "--kernel", kernel,
+              "--out-depth", tmp_path / "d.npy", "--out-scene", tmp_path / "x.npy",
+              "--out-range", tmp_path / "r.npy")
+    assert out.returncode == 0, out.stderr
+    assert np.array_equal(np.load(tmp_path / "r.npy"), est, equal_nan=True)
+    assert np.array_equal(np.load(tmp_path / "x.npy"), scene)
+    # Without a kernel, no range.
+    assert "range" not in rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 8)[2]
+    with pytest.raises(ValueError) as e:
+        rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 8, kernel=kernel, false_rate=0.01)
+    assert "false_rate" in str(e.value)

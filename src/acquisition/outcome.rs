@@ -5,8 +5,9 @@
 use serde::Serialize;
 
 use super::*;
+use crate::lidar::Returns;
 use crate::operator::Applies;
-use crate::recon::{DetectionTest, PhotonWeighting, Stage};
+use crate::recon::{DetectionTest, PhotonWeighting, Stage, TilePlace};
 use crate::solver::{Report, Termination};
 
 /// A finished reconstruction: the estimate and what ran.
@@ -16,6 +17,9 @@ pub struct Outcome<T> {
     pub scene: Scene<T>,
     /// The depth map (unobserved pixels filled when the request asked for it).
     pub depth: DepthMap<T>,
+    /// Every return's amplitude and continuous depth, under a response other than delta (a
+    /// tiled array's tiles stitched).
+    pub returns: Option<Returns>,
     /// What ran, and its lines.
     pub summary: Summary,
 }
@@ -187,6 +191,10 @@ impl ReconstructRequest {
         censoring: Option<&Censoring>,
     ) -> Outcome<T> {
         let kp = acq.pulse_len();
+        let returns = match &r {
+            Reconstructed::Single(r) => r.returns.as_deref().cloned(),
+            Reconstructed::Tiled(t) => stitched_returns(t),
+        };
         let (scene, mut depth, run, tiles, chosen, mut details) = match r {
             Reconstructed::Single(r) => {
                 let run = Run::of(&r);
@@ -244,9 +252,35 @@ impl ReconstructRequest {
         Outcome {
             scene,
             depth,
+            returns,
             summary,
         }
     }
+}
+
+/// The tiles' returns in the whole array (`None` when a tile has none).
+fn stitched_returns<T>(t: &TiledReconstruction<T>) -> Option<Returns> {
+    let (m, n) = t.depth.depth.dim();
+    let parts: Vec<(&TilePlace, &Returns)> = t
+        .tiles
+        .iter()
+        .map(|tile| Some((&tile.place, tile.reconstruction.returns.as_deref()?)))
+        .collect::<Option<_>>()?;
+    let layers = parts.iter().map(|p| p.1.layers()).max().unwrap_or(1);
+    let mut depth = ndarray::Array3::from_elem((layers, m, n), f64::NAN);
+    let mut amplitude = ndarray::Array3::zeros((layers, m, n));
+    for (place, r) in parts {
+        let (q, tm, tn) = r.depth.dim();
+        for l in 0..q {
+            for i in 0..tm {
+                for j in 0..tn {
+                    depth[[l, place.row + i, place.col + j]] = r.depth[[l, i, j]];
+                    amplitude[[l, place.row + i, place.col + j]] = r.amplitude[[l, i, j]];
+                }
+            }
+        }
+    }
+    Some(Returns { depth, amplitude })
 }
 
 /// The lines after the headline of one reconstruction: auto's stages, the photon-noise

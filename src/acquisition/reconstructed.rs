@@ -4,6 +4,8 @@ use super::*;
 use crate::operator::Applies;
 
 /// A reconstruction of any architecture: one operator's, or a tiled array's.
+// One value per reconstruction, moved a few times: its size does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum Reconstructed<T> {
     /// One ADC or G ADCs: one reconstruction.

@@ -294,8 +294,8 @@ impl Response {
         }
     }
 
-    /// The voxels k of a column of `ks` that a reflector at depth `d` may fill: those with
-    /// −before < k − d < after, clipped to the column (empty when none).
+    /// The voxels k of a column of `ks` that a reflector at depth `d` may fill or, moving, start
+    /// to fill: those with −before ≤ k − d ≤ after, clipped to the column (empty when none).
     pub fn voxels(&self, d: f64, ks: usize) -> std::ops::Range<usize> {
         if self.is_delta() {
             let k = d.round();
@@ -306,8 +306,8 @@ impl Response {
             };
         }
         let (before, after) = self.reach();
-        let lo = (d - before).floor() + 1.0;
-        let hi = (d + after).ceil();
+        let lo = (d - before).ceil();
+        let hi = (d + after).floor() + 1.0;
         let clip = |v: f64| v.clamp(0.0, ks as f64) as usize;
         let (lo, hi) = (clip(lo), clip(hi));
         lo..hi.max(lo)
@@ -368,8 +368,9 @@ mod tests {
         assert_eq!(col[5], 2.0);
         assert_eq!(Response::Delta.voxels(5.5, 8), 0..0);
         let g = Response::gaussian(0.8).unwrap();
-        let r = g.voxels(3.5, 8);
-        assert_eq!(r, 0..8);
+        assert_eq!(g.voxels(3.5, 8), 0..8);
+        assert_eq!(Response::Triangle.voxels(3.0, 8), 2..5);
+        assert_eq!(Response::Triangle.voxels(3.25, 8), 3..5);
         let mut col = vec![0.0; 8];
         g.add_to(1.0, 3.5, &mut col);
         assert!(

@@ -47,7 +47,7 @@ mod gradient;
 mod matrix;
 mod norm;
 mod part;
-mod pixel;
+pub(crate) mod pixel;
 mod stack;
 mod testing;
 

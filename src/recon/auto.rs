@@ -484,7 +484,7 @@ fn several_returns<T: Real>(
     let k = estimate_returns_in(op.space(), &pursuit.x, op.geometry().ks).max(2);
     let several = ReconstructOptions {
         max_returns: Some(k),
-        ..*options
+        ..options.clone()
     };
     let mut mbk = attempt(op, y, Method::ModelBased, &several, observer)?;
     if mbk.stage.relative_residual <= tol {

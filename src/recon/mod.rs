@@ -3,6 +3,7 @@
 //! least-squares refit on a support, the rule that extracts the returns of a voxel estimate, the
 //! backprojection thresholds, and the quality metrics against a truth.
 
+mod atoms;
 mod auto;
 mod coarse;
 mod detect;
@@ -15,6 +16,7 @@ mod photon;
 mod pursuit;
 mod reconstruct;
 mod refit;
+mod subbin;
 mod tiled;
 
 pub use auto::{Stage, COARSE_RESIDUAL, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};

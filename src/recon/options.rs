@@ -1,13 +1,14 @@
 //! The settings of a reconstruction that every method shares, and the solver parameters they
 //! set.
 
+use crate::lidar::Response;
 use crate::solver::{ModelBasedParams, Stopping};
 
 use super::peaks::PeakThreshold;
 use super::photon::NoiseModel;
 
 /// Settings of [`reconstruct`](super::reconstruct) shared by every method.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ReconstructOptions {
     /// Overrides the method's iteration limit (ignored by the backprojections).
     pub max_iter: Option<usize>,
@@ -43,6 +44,10 @@ pub struct ReconstructOptions {
     /// per-pixel solvers) or solved again (the generic ones) on the rows weighted by the inverse
     /// standard deviations that its light gives ([`PhotonWeighting`](super::PhotonWeighting)).
     pub noise: NoiseModel,
+    /// The system's response (default [`Response::Delta`]: depths on the grid, today's model).
+    /// With another response every method estimates each return's amplitude and continuous
+    /// depth under it ([`Reconstruction::returns`](super::Reconstruction::returns)).
+    pub response: Response,
 }
 
 impl Default for ReconstructOptions {
@@ -57,6 +62,7 @@ impl Default for ReconstructOptions {
             max_returns: Some(1),
             false_rate: None,
             noise: NoiseModel::Gaussian,
+            response: Response::Delta,
         }
     }
 }

@@ -11,7 +11,7 @@
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
-use crate::lidar::{DepthMap, LidarOperator, Regime, RowWeighted, Scene, NO_RETURN};
+use crate::lidar::{DepthMap, LidarOperator, Regime, Returns, RowWeighted, Scene, NO_RETURN};
 use crate::real::Real;
 use crate::solver::{refine_surfaces, Observer, RefineParams, Report};
 
@@ -21,6 +21,7 @@ use super::method::{run, Method};
 use super::options::ReconstructOptions;
 use super::peaks::returns;
 use super::photon::{photon_weights, NoiseModel, PhotonWeighting};
+use super::subbin;
 
 /// Fraction of the lit pixels of a depth map that must have a lit 4-neighbour within
 /// [`SMOOTH_BINS`] of their depth for the map to count as piecewise smooth
@@ -60,6 +61,11 @@ pub struct Reconstruction<T> {
     /// [`NoiseModel::Photon`] (`None` otherwise, and for the tiles
     /// of an array whose tiles were dealt to several processes). Boxed: it is rarely there.
     pub photon: Option<Box<PhotonWeighting>>,
+    /// Every return's amplitude and continuous depth, under a response other than delta
+    /// ([`ReconstructOptions::response`]); `None` on the grid (and for the tiles of an array
+    /// whose tiles were dealt to several processes). The scene is then the returns rendered by
+    /// the response, and the depth map their nearest bins. Boxed: it is rarely there.
+    pub returns: Option<Box<Returns>>,
 }
 
 /// Reconstructs a scene from the measurements `y = A x` of the lidar operator `op`.
@@ -160,6 +166,9 @@ pub fn reconstruct_observed<T: Real>(
             "the photon-noise model needs the codes in memory and the whole scene in one process",
         ));
     }
+    if !options.response.is_delta() {
+        return continuous(op, y, method, options, observer, start);
+    }
     let (mut x, method_used, mut report, stages) = solve(op, y, method, options, observer)?;
     let mut photon = None;
     let mut weighted = None;
@@ -196,6 +205,69 @@ pub fn reconstruct_observed<T: Real>(
         elapsed: start.elapsed(),
         detection,
         photon,
+        returns: None,
+    })
+}
+
+/// [`reconstruct_observed`] under a response other than delta: continuous depths.
+fn continuous<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    method: Method,
+    options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
+    start: Instant,
+) -> Result<Reconstruction<T>> {
+    let unsupported = [
+        ("false_rate", options.false_rate.is_some()),
+        ("noise", options.noise != NoiseModel::Gaussian),
+    ];
+    if let Some((name, _)) = unsupported.iter().find(|u| u.1) {
+        return Err(Error::param(
+            name,
+            format!(
+                "not available yet with `kernel={}`: continuous depths are fitted by least \
+                 squares under Gaussian noise",
+                options.response
+            ),
+        ));
+    }
+    let g = op.geometry();
+    let (estimate, method_used, stages) = if subbin::pursues(method) {
+        (
+            subbin::pursue(op, y, options, observer)?,
+            Method::ModelBased,
+            Vec::new(),
+        )
+    } else {
+        let grid = ReconstructOptions {
+            response: crate::lidar::Response::Delta,
+            ..options.clone()
+        };
+        let (x, used, report, stages) = solve(op, y, method, &grid, observer)?;
+        let report = report.unwrap_or_else(|| Report::empty(used.name()));
+        let c = subbin::from_voxels(op, y, &x, &options.response, report)?;
+        (c, used, stages)
+    };
+    let scene = Scene::from_vec(g, estimate.x)?;
+    let mut depth = estimate.returns.nearest(g.ks);
+    if let Some(observed) = op.observed_pixels() {
+        depth.mark_unobserved(&observed)?;
+    }
+    Ok(Reconstruction {
+        scene,
+        depth: DepthMap {
+            depth: depth.depth,
+            amplitude: depth.amplitude.mapv(T::of_f64),
+        },
+        method_used,
+        regime: op.regime(),
+        report: Some(estimate.report),
+        stages,
+        elapsed: start.elapsed(),
+        detection: None,
+        photon: None,
+        returns: Some(Box::new(estimate.returns)),
     })
 }
 

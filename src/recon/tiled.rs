@@ -324,7 +324,7 @@ impl<'a, T: Real> TiledArray<'a, T> {
         }
         let inner = ReconstructOptions {
             progress: false,
-            ..*options
+            ..options.clone()
         };
         let tiles = solved
             .par_iter()
@@ -497,6 +497,7 @@ pub(crate) fn decode_tiles<T: Real>(
             elapsed: seconds(head[8]),
             photon: None,
             detection: None,
+            returns: None,
         };
         out.push(TileReconstruction {
             place,

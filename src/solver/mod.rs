@@ -184,6 +184,22 @@ impl Report {
         self.objective_history.extend(later.objective_history);
     }
 
+    /// The report of `solver` before any iteration: what a method with no iterations (a
+    /// backprojection) starts from when later steps add their work.
+    pub fn empty(solver: &'static str) -> Report {
+        Report {
+            solver,
+            iterations: 0,
+            termination: Termination::Converged,
+            residual_history: Vec::new(),
+            objective_history: Vec::new(),
+            forward_applies: 0,
+            adjoint_applies: 0,
+            support_applies: 0,
+            elapsed: Duration::ZERO,
+        }
+    }
+
     /// Adds the apply counts and the time of a subsidiary run (a refinement step) to this one,
     /// leaving the iterations, histories and termination as they are.
     pub fn absorb_applies(&mut self, other: &Report) {

@@ -8,7 +8,7 @@ use rdlidar::acquisition::{
     Reconstructed, Use, RECONSTRUCT_SCENES,
 };
 use rdlidar::io::{self, StagedFile};
-use rdlidar::lidar::{depth_bin_m, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED};
+use rdlidar::lidar::{depth_bin_m, Response, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED};
 use rdlidar::recon::{
     compare, compare_observed, Method, NoiseModel, PeakThreshold, ReconstructOptions,
     TileReconstruction, MAX_RETURNS_ESTIMATE,
@@ -71,6 +71,17 @@ pub struct ReconstructArgs {
     /// Overrides the solver's iteration limit.
     #[arg(long, value_name = "N", value_parser = parse_positive)]
     pub max_iter: Option<usize>,
+    /// The system's response g the scene was made with (a reflector of amplitude a at depth d
+    /// fills its voxel column with a·g(k − d)): delta (depths on the grid, the default),
+    /// triangle, gaussian:S or measured:O:FILE, as `simulate --kernel` takes it. With a kernel
+    /// other than delta every return's amplitude and continuous depth are estimated under it
+    /// (--out-range).
+    #[arg(long, value_name = "SPEC", value_parser = crate::simulate::parse_kernel)]
+    pub kernel: Option<Response>,
+    /// With --kernel: write the estimated depths in bins, float64 (M, N), NaN where there is no
+    /// return (a leading axis of returns where a pixel has several).
+    #[arg(long, value_name = "R.npy")]
+    pub out_range: Option<PathBuf>,
     /// Also write the depth map as a PNG image (with the true one beside it under --truth).
     #[arg(long, value_name = "D.png")]
     pub png: Option<PathBuf>,
@@ -221,6 +232,7 @@ fn request_of(
             max_returns: a.returns.0,
             false_rate: a.false_rate,
             noise: ReconstructRequest::noise_model(a.noise, a.background)?,
+            response: a.kernel.clone().unwrap_or(Response::Delta),
         },
         clipped: a.clipped,
         fill_unobserved: a.fill_unobserved,
@@ -242,6 +254,16 @@ pub fn run(a: &ReconstructArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     ];
     if let Some(png) = &a.png {
         outputs.push(("--png", png.as_path()));
+    }
+    if let Some(range) = &a.out_range {
+        if a.kernel.as_ref().is_none_or(Response::is_delta) {
+            return Err(String::from(
+                "--out-range: continuous depths are estimated under a --kernel other than delta \
+                 (triangle, gaussian:S, measured:O:FILE)",
+            )
+            .into());
+        }
+        outputs.push(("--out-range", range.as_path()));
     }
     for (flag, out) in &outputs {
         check_out_file(out, flag, &inputs)?;
@@ -362,6 +384,9 @@ fn reconstruct_files<T: Real + WritableElement>(
         io::stage_array(&a.out_depth, &r.depth.depth)?,
         io::stage_array(&a.out_scene, r.scene.data())?,
     ];
+    if let (Some(path), Some(returns)) = (&a.out_range, &r.returns) {
+        staged.push(io::stage_array(path, &returns.range_map())?);
+    }
     if let Some(png) = &a.png {
         let bin_m = depth_bin_m(DEFAULT_TAU_S)?;
         let options = rdlidar::report::plot::DepthOptions::new(bin_m, "m")

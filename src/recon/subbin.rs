@@ -1,0 +1,527 @@
+//! Continuous depths under the system's response: every return's amplitude a and depth d
+//! (in bins, continuous) for voxels a·g(k − d).
+//!
+//! Two steps. A pursuit places each return within 1/(2Q) bin: the per-pixel model-based
+//! solver picks one column per pixel from the dictionary of the response shifted by 1/Q bin
+//! ([`Atoms`], Q = [`ATOMS_PER_BIN`]), or another method's voxel estimate is fitted pixel by
+//! pixel. Then Gauss–Newton on all (a, d) at once fits the data: each step solves the least
+//! squares of the Jacobian (columns A·g(· − d) and −a·A·g′(· − d) per return, restricted to the
+//! voxels the returns reach, at O(returns·K_p) per application) and is halved until the
+//! residual falls.
+
+use crate::error::Result;
+use crate::lidar::{LidarOperator, Response, Returns};
+use crate::linalg::dot;
+use crate::operator::{Applies, LinearOperator, OperatorExt, SparseMatrix};
+use crate::real::Real;
+use crate::solver::{cgls, model_based, CglsParams, Observer, Report, Stopping};
+
+use super::atoms::{Atoms, Dictionary};
+use super::method::Method;
+use super::options::{model_params, ReconstructOptions};
+
+/// Atoms per bin of the pursuit's dictionary: a return is placed within 1/16 bin before the
+/// continuous fit.
+pub const ATOMS_PER_BIN: usize = 8;
+
+/// Gauss–Newton steps at most.
+const GN_STEPS: usize = 30;
+
+/// Halvings of a step that does not lower the residual before the fit stops.
+const HALVINGS: usize = 6;
+
+/// One return: its pixel, amplitude and depth in bins.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Ret {
+    pub pixel: usize,
+    pub a: f64,
+    pub d: f64,
+}
+
+/// What the continuous estimate is: the returns, their voxels, and the work.
+pub(crate) struct Continuous<T> {
+    pub x: Vec<T>,
+    pub returns: Returns,
+    pub report: Report,
+}
+
+/// The pursuit on the response's atoms (model-based, one return per pixel unless `options`
+/// allow more), then the continuous fit.
+pub(crate) fn pursue<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    options: &ReconstructOptions,
+    observer: &mut dyn Observer<T>,
+) -> Result<Continuous<T>> {
+    let g = op.geometry();
+    let dict = Dictionary::new(&options.response, g.ks, ATOMS_PER_BIN);
+    let atoms = Atoms::new(op, &dict)?;
+    let mut params = model_params(options);
+    params.max_returns = options.max_returns.unwrap_or(1);
+    let mut z = vec![T::zero(); atoms.ncols()];
+    let mut report = model_based(&atoms, y, &mut z, &params, observer)?;
+    let l = dict.len();
+    let found: Vec<Ret> = z
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.as_f64() > 0.0)
+        .map(|(c, v)| Ret {
+            pixel: c / l,
+            a: dict.amplitude(c % l, v.as_f64()),
+            d: dict.depth(c % l),
+        })
+        .collect();
+    fit(op, y, found, &options.response, &mut report)
+}
+
+/// Each pixel's returns of the voxel estimate `x` (a method's on the grid) as continuous ones:
+/// per pixel, the response's atom that best explains its column (largest ⟨g_d, col⟩²/‖g_d‖²
+/// over depths 1/Q bin apart), then the continuous fit.
+pub(crate) fn from_voxels<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    x: &[T],
+    response: &Response,
+    mut report: Report,
+) -> Result<Continuous<T>> {
+    let g = op.geometry();
+    let dict = Dictionary::new(response, g.ks, ATOMS_PER_BIN);
+    let mut found = Vec::new();
+    let mut col = vec![0.0f64; g.ks];
+    for (p, xp) in x.chunks(g.ks).enumerate() {
+        if xp.iter().all(|v| *v == T::zero()) {
+            continue;
+        }
+        for (c, v) in col.iter_mut().zip(xp) {
+            *c = v.as_f64();
+        }
+        // Unit atoms: the best has the largest inner product.
+        let best = (0..dict.len())
+            .map(|c| {
+                let (start, v) = dict.atom(c);
+                (c, dot(v, &col[start..start + v.len()]))
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((c, ip)) = best.filter(|b| b.1 > 0.0) {
+            found.push(Ret {
+                pixel: p,
+                a: dict.amplitude(c, ip),
+                d: dict.depth(c),
+            });
+        }
+    }
+    fit(op, y, found, response, &mut report)
+}
+
+/// Gauss–Newton on the returns `found`, then their voxels and [`Returns`].
+fn fit<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    mut found: Vec<Ret>,
+    response: &Response,
+    report: &mut Report,
+) -> Result<Continuous<T>> {
+    let g = op.geometry();
+    let top = (g.ks - 1) as f64;
+    let yy: f64 = dot(y, y);
+    let mut applies = Applies::default();
+    if *response == Response::Triangle {
+        found = fit_pairs(op, y, found, g.ks, &mut applies)?;
+    }
+    let mut rr = residual(op, y, &found, response, g.ks, &mut applies)?;
+    for _ in 0..GN_STEPS {
+        if found.is_empty() || rr <= 1e-30 * yy {
+            break;
+        }
+        let step = gauss_newton_step(op, y, &found, response, g.ks, &mut applies)?;
+        let mut scale = 1.0;
+        let mut accepted = None;
+        for _ in 0..=HALVINGS {
+            let trial: Vec<Ret> = found
+                .iter()
+                .zip(&step)
+                .map(|(r, (da, dd))| Ret {
+                    pixel: r.pixel,
+                    a: (r.a + scale * da).max(0.0),
+                    d: (r.d + scale * dd).clamp(0.0, top),
+                })
+                .collect();
+            let t = residual(op, y, &trial, response, g.ks, &mut applies)?;
+            if t < rr {
+                accepted = Some((trial, t));
+                break;
+            }
+            scale *= 0.5;
+        }
+        let Some((trial, t)) = accepted else { break };
+        let moved = found
+            .iter()
+            .zip(&trial)
+            .map(|(a, b)| (a.d - b.d).abs())
+            .fold(0.0, f64::max);
+        let gain = rr - t;
+        found = trial;
+        rr = t;
+        if moved < 1e-9 || gain <= 1e-14 * yy {
+            break;
+        }
+    }
+    found.retain(|r| r.a > 0.0);
+    report.add_applies(applies);
+    let returns = returns_of(&found, g.m, g.n);
+    let x = returns.render::<T>(g.ks, response)?.as_slice().to_vec();
+    Ok(Continuous {
+        x,
+        returns,
+        report: report.clone(),
+    })
+}
+
+/// Rounds of [`fit_pairs`] at most.
+const PAIR_ROUNDS: usize = 40;
+
+/// The triangle's exact fit: a return at d = j + f is the pair of voxels (j, j + 1) with
+/// weights a·(1 − f) and a·f, linear in the pair. Given each return's bin j, least squares on
+/// the pairs gives (u, v). A return whose pair leans on a side (v < u: the lower voxel) moves one
+/// bin that way when the residual correlates positively with the voxel beyond (j − 1, or
+/// j + 2 for the upper side), as it does when the true depth lies across the bin: the least
+/// squares then runs again, for as long as the residual falls. Then a = u + v and
+/// d = j + v/(u + v) (u, v clamped at zero); a pair whose weights sum to at most zero is no
+/// return.
+fn fit_pairs<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    found: Vec<Ret>,
+    ks: usize,
+    applies: &mut Applies,
+) -> Result<Vec<Ret>> {
+    if ks < 3 || found.is_empty() {
+        return Ok(found);
+    }
+    let last = ks - 2;
+    let mut bins: Vec<usize> = found
+        .iter()
+        .map(|r| (r.d.floor().max(0.0) as usize).min(last))
+        .collect();
+    let pixels: Vec<usize> = found.iter().map(|r| r.pixel).collect();
+    let mut w: Vec<T> = found
+        .iter()
+        .zip(&bins)
+        .flat_map(|(r, &j)| {
+            let f = (r.d - j as f64).clamp(0.0, 1.0);
+            [T::of_f64(r.a * (1.0 - f)), T::of_f64(r.a * f)]
+        })
+        .collect();
+    let params = CglsParams {
+        damp: 0.0,
+        stopping: Stopping {
+            max_iter: 500,
+            rel_residual: Some(1e-12),
+            ..Stopping::default()
+        },
+    };
+    let mut best: Option<(f64, Vec<usize>, Vec<T>)> = None;
+    // The share of the largest gain a move needs; raised when a round's moves did not help.
+    let mut share = 0.05;
+    for _ in 0..PAIR_ROUNDS {
+        let columns: Vec<usize> = pixels
+            .iter()
+            .zip(&bins)
+            .flat_map(|(&p, &j)| [p * ks + j, p * ks + j + 1])
+            .collect();
+        let a = op.restrict_columns(columns)?;
+        let rep = cgls(&a, y, &mut w, &params, &mut ())?;
+        applies.support += rep.forward_applies + rep.adjoint_applies + 2;
+        let mut r = vec![T::zero(); y.len()];
+        a.apply(&w, &mut r);
+        for (ri, yi) in r.iter_mut().zip(y) {
+            *ri = *yi - *ri;
+        }
+        let rr = dot(&r, &r);
+        if let Some((b, bb, bw)) = best.as_ref().filter(|b| rr >= b.0) {
+            // The moves did not help: back to the best pairs, and only the clearest moves.
+            share *= 4.0;
+            if share > 1.0 {
+                break;
+            }
+            let _ = b;
+            bins = bb.clone();
+            w = bw.clone();
+            r = residual_of(op, y, &pixels, &bins, &w, ks)?;
+        } else {
+            best = Some((rr, bins.clone(), w.clone()));
+        }
+        // The residual's correlation with the voxel beyond each pair, on the side it leans to:
+        // the gain c²/‖A·e‖² of adding that voxel.
+        let beyond: Vec<Option<usize>> = bins
+            .iter()
+            .zip(w.chunks(2))
+            .map(|(&j, uv)| {
+                let (u, v) = (uv[0].as_f64(), uv[1].as_f64());
+                if v < u {
+                    j.checked_sub(1)
+                } else {
+                    (j + 2 < ks).then_some(j + 2)
+                }
+            })
+            .collect();
+        let probe: Vec<usize> = pixels
+            .iter()
+            .zip(&beyond)
+            .map(|(&p, b)| p * ks + b.unwrap_or(0))
+            .collect();
+        let norms = op.column_norms(&probe);
+        let c = op.restrict_columns(probe)?;
+        let mut corr = vec![T::zero(); pixels.len()];
+        c.apply_adjoint(&r, &mut corr);
+        applies.support += 2;
+        let gains: Vec<f64> = corr
+            .iter()
+            .zip(&norms)
+            .zip(&beyond)
+            .map(|((c, n), b)| {
+                let c = c.as_f64();
+                if b.is_some() && c > 0.0 && *n > 0.0 {
+                    c * c / (n * n)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let top = gains.iter().copied().fold(0.0, f64::max);
+        if top <= 1e-24 * rr.max(f64::MIN_POSITIVE) || top == 0.0 {
+            break;
+        }
+        for (((j, b), g), uv) in bins
+            .iter_mut()
+            .zip(&beyond)
+            .zip(&gains)
+            .zip(w.chunks_mut(2))
+        {
+            let Some(b) = *b else { continue };
+            if *g < share * top {
+                continue;
+            }
+            // The pair slides one bin: the leaning voxel keeps its weight on the new pair.
+            if b < *j {
+                *j -= 1;
+                uv[1] = uv[0];
+                uv[0] = T::zero();
+            } else {
+                *j = (*j + 1).min(last);
+                uv[0] = uv[1];
+                uv[1] = T::zero();
+            }
+        }
+    }
+    let (_, bins, w) = best.expect("one round ran");
+    Ok(pixels
+        .iter()
+        .zip(&bins)
+        .zip(w.chunks(2))
+        .filter_map(|((&pixel, &j), uv)| {
+            let (u, v) = (uv[0].as_f64().max(0.0), uv[1].as_f64().max(0.0));
+            let sum = u + v;
+            (sum > 0.0).then(|| Ret {
+                pixel,
+                a: sum,
+                d: j as f64 + v / sum,
+            })
+        })
+        .collect())
+}
+
+/// y − A·x of the pairs `w` on the bins `bins` of `pixels`.
+fn residual_of<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    pixels: &[usize],
+    bins: &[usize],
+    w: &[T],
+    ks: usize,
+) -> Result<Vec<T>> {
+    let columns: Vec<usize> = pixels
+        .iter()
+        .zip(bins)
+        .flat_map(|(&p, &j)| [p * ks + j, p * ks + j + 1])
+        .collect();
+    let a = op.restrict_columns(columns)?;
+    let mut r = vec![T::zero(); y.len()];
+    a.apply(w, &mut r);
+    for (ri, yi) in r.iter_mut().zip(y) {
+        *ri = *yi - *ri;
+    }
+    Ok(r)
+}
+
+/// The voxels the returns reach, sorted, and each return's (voxel index, g, g′) entries.
+type Spread = (Vec<usize>, Vec<Vec<(usize, f64, f64)>>);
+
+fn spread(found: &[Ret], response: &Response, ks: usize) -> Spread {
+    let mut voxels: Vec<usize> = found
+        .iter()
+        .flat_map(|r| response.voxels(r.d, ks).map(move |k| r.pixel * ks + k))
+        .collect();
+    voxels.sort_unstable();
+    voxels.dedup();
+    let entries = found
+        .iter()
+        .map(|r| {
+            response
+                .voxels(r.d, ks)
+                .map(|k| {
+                    let (v, s) = response.eval(k as f64 - r.d);
+                    let i = voxels
+                        .binary_search(&(r.pixel * ks + k))
+                        .expect("a listed voxel");
+                    (i, v, s)
+                })
+                .collect()
+        })
+        .collect();
+    (voxels, entries)
+}
+
+/// ‖y − A·x(returns)‖².
+fn residual<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    found: &[Ret],
+    response: &Response,
+    ks: usize,
+    applies: &mut Applies,
+) -> Result<f64> {
+    if found.is_empty() {
+        return Ok(dot(y, y));
+    }
+    let (voxels, entries) = spread(found, response, ks);
+    let mut xv = vec![0.0f64; voxels.len()];
+    for (r, e) in found.iter().zip(&entries) {
+        for &(i, v, _) in e {
+            xv[i] += r.a * v;
+        }
+    }
+    let xv: Vec<T> = xv.into_iter().map(T::of_f64).collect();
+    let a = op.restrict_columns(voxels)?;
+    let mut ax = vec![T::zero(); y.len()];
+    a.apply(&xv, &mut ax);
+    applies.support += 1;
+    Ok(y.iter()
+        .zip(&ax)
+        .map(|(a, b)| {
+            let d = a.as_f64() - b.as_f64();
+            d * d
+        })
+        .sum())
+}
+
+/// The Gauss–Newton step (Δa, Δd) of every return: the least squares of the Jacobian against
+/// the residual. The depth's column is taken as −A·g′ (the step in a·d) so that both columns
+/// of a return have the scale of its response.
+fn gauss_newton_step<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    found: &[Ret],
+    response: &Response,
+    ks: usize,
+    applies: &mut Applies,
+) -> Result<Vec<(f64, f64)>> {
+    let (voxels, entries) = spread(found, response, ks);
+    let n = found.len();
+    let mut xv = vec![0.0f64; voxels.len()];
+    let mut tri = sprs::TriMat::new((voxels.len(), 2 * n));
+    for (j, (r, e)) in found.iter().zip(&entries).enumerate() {
+        for &(i, v, s) in e {
+            xv[i] += r.a * v;
+            tri.add_triplet(i, 2 * j, T::of_f64(v));
+            // ∂(a·g(k − d))/∂d = −a·g′(k − d): the column −g′ for the step a·Δd.
+            tri.add_triplet(i, 2 * j + 1, T::of_f64(-s));
+        }
+    }
+    let a = op.restrict_columns(voxels)?;
+    let xv: Vec<T> = xv.into_iter().map(T::of_f64).collect();
+    let mut ax = vec![T::zero(); y.len()];
+    a.apply(&xv, &mut ax);
+    let r: Vec<T> = y
+        .iter()
+        .zip(&ax)
+        .map(|(a, b)| T::of_f64(a.as_f64() - b.as_f64()))
+        .collect();
+    let j = a.compose(SparseMatrix::new(tri.to_csr())?)?;
+    let mut delta = vec![T::zero(); 2 * n];
+    let params = CglsParams {
+        damp: 0.0,
+        stopping: Stopping {
+            max_iter: 200,
+            rel_residual: Some(1e-10),
+            ..Stopping::default()
+        },
+    };
+    let rep = cgls(&j, &r, &mut delta, &params, &mut ())?;
+    applies.support += 1 + rep.forward_applies + rep.adjoint_applies;
+    Ok(found
+        .iter()
+        .enumerate()
+        .map(|(i, ret)| {
+            let da = delta[2 * i].as_f64();
+            let ad = delta[2 * i + 1].as_f64();
+            (da, if ret.a > 0.0 { ad / ret.a } else { 0.0 })
+        })
+        .collect())
+}
+
+/// The returns as [`Returns`] on an `m`×`n` grid, each pixel's returns nearest first.
+pub(crate) fn returns_of(found: &[Ret], m: usize, n: usize) -> Returns {
+    let mut per: Vec<Vec<(f64, f64)>> = vec![Vec::new(); m * n];
+    for r in found {
+        per[r.pixel].push((r.d, r.a));
+    }
+    let layers = per.iter().map(Vec::len).max().unwrap_or(0).max(1);
+    let mut depth = ndarray::Array3::from_elem((layers, m, n), f64::NAN);
+    let mut amplitude = ndarray::Array3::zeros((layers, m, n));
+    for (p, rs) in per.iter_mut().enumerate() {
+        rs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (q, (d, a)) in rs.iter().enumerate() {
+            depth[[q, p / n, p % n]] = *d;
+            amplitude[[q, p / n, p % n]] = *a;
+        }
+    }
+    Returns { depth, amplitude }
+}
+
+/// Which methods pursue on the response's atoms; the others are fitted from their voxels.
+pub(crate) fn pursues(method: Method) -> bool {
+    matches!(method, Method::ModelBased)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn returns_group_by_pixel_nearest_first() {
+        let found = [
+            Ret {
+                pixel: 1,
+                a: 1.0,
+                d: 4.5,
+            },
+            Ret {
+                pixel: 1,
+                a: 0.5,
+                d: 1.25,
+            },
+            Ret {
+                pixel: 3,
+                a: 2.0,
+                d: 0.0,
+            },
+        ];
+        let r = returns_of(&found, 2, 2);
+        assert_eq!(r.layers(), 2);
+        assert_eq!(r.depth[[0, 0, 1]], 1.25);
+        assert_eq!(r.depth[[1, 0, 1]], 4.5);
+        assert_eq!(r.amplitude[[0, 1, 1]], 2.0);
+        assert!(r.depth[[0, 0, 0]].is_nan());
+    }
+}
