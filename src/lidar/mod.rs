@@ -43,7 +43,7 @@ pub use noise::{
     QuantizationReport, StageReport,
 };
 pub use pulse::{zero_mean, Pulse};
-pub use response::{Measured, Response, GAUSSIAN_REACH};
+pub use response::{Measured, Response, GAUSSIAN_REACH, MAX_MEASURED_SAMPLES, MAX_OVERSAMPLING};
 pub use returns::Returns;
 
 /// The instruction set the fused operator's kernels run with on this machine (`"avx512"`,

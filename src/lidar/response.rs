@@ -27,7 +27,7 @@ pub const MAX_OVERSAMPLING: usize = 10_000;
 /// The most samples a measured response may have.
 pub const MAX_MEASURED_SAMPLES: usize = 1 << 20;
 
-/// The response g of the system, g(0) = 1 (see the [module](self)).
+/// The response g of the system, g(0) = 1: `delta`, `triangle`, `gaussian:S` or a measured one.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Response {
     /// Depths on the grid: a reflector fills one voxel.

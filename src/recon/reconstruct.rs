@@ -233,13 +233,7 @@ fn continuous<T: Real>(
         ));
     }
     let g = op.geometry();
-    let (estimate, method_used, stages) = if subbin::pursues(method) {
-        (
-            subbin::pursue(op, y, options, observer)?,
-            Method::ModelBased,
-            Vec::new(),
-        )
-    } else {
+    let from_grid = |observer: &mut dyn Observer<T>| -> Result<_> {
         let grid = ReconstructOptions {
             response: crate::lidar::Response::Delta,
             ..options.clone()
@@ -247,7 +241,22 @@ fn continuous<T: Real>(
         let (x, used, report, stages) = solve(op, y, method, &grid, observer)?;
         let report = report.unwrap_or_else(|| Report::empty(used.name()));
         let c = subbin::from_voxels(op, y, &x, &options.response, report)?;
-        (c, used, stages)
+        Ok((c, used, stages))
+    };
+    let (estimate, method_used, stages) = match method {
+        Method::ModelBased => (
+            subbin::pursue(op, y, options, observer)?,
+            Method::ModelBased,
+            Vec::new(),
+        ),
+        // Both starts, the one that explains the data better kept.
+        Method::Auto => subbin::better_start(
+            op,
+            y,
+            subbin::pursue(op, y, options, observer)?,
+            from_grid(observer)?,
+        ),
+        _ => from_grid(observer)?,
     };
     let scene = Scene::from_vec(g, estimate.x)?;
     let mut depth = estimate.returns.nearest(g.ks);

@@ -17,6 +17,7 @@ use crate::real::Real;
 use crate::solver::{cgls, model_based, CglsParams, Observer, Report, Stopping};
 
 use super::atoms::{Atoms, Dictionary};
+use super::auto::Stage;
 use super::method::Method;
 use super::options::{model_params, ReconstructOptions};
 
@@ -113,27 +114,49 @@ pub(crate) fn from_voxels<T: Real>(
     fit(op, y, found, response, &mut report)
 }
 
-/// Gauss–Newton on the returns `found`, then their voxels and [`Returns`].
+/// The fit of the returns `found` ([`refine`]), then their voxels and [`Returns`].
 fn fit<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
-    mut found: Vec<Ret>,
+    found: Vec<Ret>,
     response: &Response,
     report: &mut Report,
 ) -> Result<Continuous<T>> {
     let g = op.geometry();
+    let mut applies = Applies::default();
+    let (found, _) = refine(op, y, found, response, &mut applies)?;
+    report.add_applies(applies);
+    let returns = returns_of(&found, g.m, g.n);
+    let x = returns.render::<T>(g.ks, response)?.as_slice().to_vec();
+    Ok(Continuous {
+        x,
+        returns,
+        report: report.clone(),
+    })
+}
+
+/// The least-squares fit of the returns `found` under `response` (the triangle's pair fit,
+/// then Gauss–Newton), without the returns whose amplitude fell to zero, and its squared
+/// residual.
+fn refine<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    mut found: Vec<Ret>,
+    response: &Response,
+    applies: &mut Applies,
+) -> Result<(Vec<Ret>, f64)> {
+    let g = op.geometry();
     let top = (g.ks - 1) as f64;
     let yy: f64 = dot(y, y);
-    let mut applies = Applies::default();
     if *response == Response::Triangle {
-        found = fit_pairs(op, y, found, g.ks, &mut applies)?;
+        found = fit_pairs(op, y, found, g.ks, applies)?;
     }
-    let mut rr = residual(op, y, &found, response, g.ks, &mut applies)?;
+    let mut rr = residual(op, y, &found, response, g.ks, applies)?;
     for _ in 0..GN_STEPS {
         if found.is_empty() || rr <= 1e-30 * yy {
             break;
         }
-        let step = gauss_newton_step(op, y, &found, response, g.ks, &mut applies)?;
+        let step = gauss_newton_step(op, y, &found, response, g.ks, applies)?;
         let mut scale = 1.0;
         let mut accepted = None;
         for _ in 0..=HALVINGS {
@@ -146,7 +169,7 @@ fn fit<T: Real>(
                     d: (r.d + scale * dd).clamp(0.0, top),
                 })
                 .collect();
-            let t = residual(op, y, &trial, response, g.ks, &mut applies)?;
+            let t = residual(op, y, &trial, response, g.ks, applies)?;
             if t < rr {
                 accepted = Some((trial, t));
                 break;
@@ -167,14 +190,7 @@ fn fit<T: Real>(
         }
     }
     found.retain(|r| r.a > 0.0);
-    report.add_applies(applies);
-    let returns = returns_of(&found, g.m, g.n);
-    let x = returns.render::<T>(g.ks, response)?.as_slice().to_vec();
-    Ok(Continuous {
-        x,
-        returns,
-        report: report.clone(),
-    })
+    Ok((found, rr))
 }
 
 /// Rounds of [`fit_pairs`] at most.
@@ -382,6 +398,34 @@ fn spread(found: &[Ret], response: &Response, ks: usize) -> Spread {
     (voxels, entries)
 }
 
+/// The operator on the voxels the returns reach ([`spread`]), with their entries, and the
+/// residual y − A·x(returns).
+type Misfit<'a, T> = (Box<dyn LinearOperator<T> + 'a>, Spread, Vec<T>);
+
+fn misfit<'a, T: Real>(
+    op: &'a dyn LidarOperator<T>,
+    y: &[T],
+    found: &[Ret],
+    response: &Response,
+    ks: usize,
+) -> Result<Misfit<'a, T>> {
+    let (voxels, entries) = spread(found, response, ks);
+    let mut xv = vec![0.0f64; voxels.len()];
+    for (r, e) in found.iter().zip(&entries) {
+        for &(i, v, _) in e {
+            xv[i] += r.a * v;
+        }
+    }
+    let xv: Vec<T> = xv.into_iter().map(T::of_f64).collect();
+    let a = op.restrict_columns(voxels.clone())?;
+    let mut r = vec![T::zero(); y.len()];
+    a.apply(&xv, &mut r);
+    for (ri, yi) in r.iter_mut().zip(y) {
+        *ri = T::of_f64(yi.as_f64() - ri.as_f64());
+    }
+    Ok((a, (voxels, entries), r))
+}
+
 /// ‖y − A·x(returns)‖².
 fn residual<T: Real>(
     op: &dyn LidarOperator<T>,
@@ -394,25 +438,9 @@ fn residual<T: Real>(
     if found.is_empty() {
         return Ok(dot(y, y));
     }
-    let (voxels, entries) = spread(found, response, ks);
-    let mut xv = vec![0.0f64; voxels.len()];
-    for (r, e) in found.iter().zip(&entries) {
-        for &(i, v, _) in e {
-            xv[i] += r.a * v;
-        }
-    }
-    let xv: Vec<T> = xv.into_iter().map(T::of_f64).collect();
-    let a = op.restrict_columns(voxels)?;
-    let mut ax = vec![T::zero(); y.len()];
-    a.apply(&xv, &mut ax);
+    let (_, _, r) = misfit(op, y, found, response, ks)?;
     applies.support += 1;
-    Ok(y.iter()
-        .zip(&ax)
-        .map(|(a, b)| {
-            let d = a.as_f64() - b.as_f64();
-            d * d
-        })
-        .sum())
+    Ok(dot(&r, &r))
 }
 
 /// The Gauss–Newton step (Δa, Δd) of every return: the least squares of the Jacobian against
@@ -426,27 +454,16 @@ fn gauss_newton_step<T: Real>(
     ks: usize,
     applies: &mut Applies,
 ) -> Result<Vec<(f64, f64)>> {
-    let (voxels, entries) = spread(found, response, ks);
+    let (a, (voxels, entries), r) = misfit(op, y, found, response, ks)?;
     let n = found.len();
-    let mut xv = vec![0.0f64; voxels.len()];
     let mut tri = sprs::TriMat::new((voxels.len(), 2 * n));
-    for (j, (r, e)) in found.iter().zip(&entries).enumerate() {
+    for (j, e) in entries.iter().enumerate() {
         for &(i, v, s) in e {
-            xv[i] += r.a * v;
             tri.add_triplet(i, 2 * j, T::of_f64(v));
             // ∂(a·g(k − d))/∂d = −a·g′(k − d): the column −g′ for the step a·Δd.
             tri.add_triplet(i, 2 * j + 1, T::of_f64(-s));
         }
     }
-    let a = op.restrict_columns(voxels)?;
-    let xv: Vec<T> = xv.into_iter().map(T::of_f64).collect();
-    let mut ax = vec![T::zero(); y.len()];
-    a.apply(&xv, &mut ax);
-    let r: Vec<T> = y
-        .iter()
-        .zip(&ax)
-        .map(|(a, b)| T::of_f64(a.as_f64() - b.as_f64()))
-        .collect();
     let j = a.compose(SparseMatrix::new(tri.to_csr())?)?;
     let mut delta = vec![T::zero(); 2 * n];
     let params = CglsParams {
@@ -489,9 +506,58 @@ pub(crate) fn returns_of(found: &[Ret], m: usize, n: usize) -> Returns {
     Returns { depth, amplitude }
 }
 
-/// Which methods pursue on the response's atoms; the others are fitted from their voxels.
-pub(crate) fn pursues(method: Method) -> bool {
-    matches!(method, Method::ModelBased)
+/// Of two continuous estimates of `auto`, the pursuit on the response's atoms (`atoms`) and
+/// the fit from the grid methods' returns (`grid`, with the method auto kept and its stages),
+/// the one whose data misfit ‖y − A·x‖ is smaller, with both told as stages.
+pub(crate) fn better_start<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    atoms: Continuous<T>,
+    grid: (Continuous<T>, Method, Vec<Stage>),
+) -> (Continuous<T>, Method, Vec<Stage>) {
+    let misfit = |x: &[T]| {
+        let mut ax = vec![T::zero(); y.len()];
+        op.apply(x, &mut ax);
+        let rr: f64 = y
+            .iter()
+            .zip(&ax)
+            .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
+            .sum();
+        (rr / dot(y, y).max(f64::MIN_POSITIVE)).sqrt()
+    };
+    let (grid, used, mut stages) = grid;
+    let (ra, rg) = (misfit(&atoms.x), misfit(&grid.x));
+    let keep_atoms = ra <= rg;
+    if keep_atoms {
+        stages.iter_mut().for_each(|s| s.kept = false);
+    }
+    let stage = |method, r: f64, c: &Continuous<T>, kept: bool, verdict: &str| Stage {
+        method,
+        relative_residual: r,
+        returns: c.returns.depth.iter().filter(|d| !d.is_nan()).count(),
+        report: Some(c.report.clone()),
+        kept,
+        verdict: verdict.to_string(),
+    };
+    stages.push(stage(
+        Method::ModelBased,
+        ra,
+        &atoms,
+        keep_atoms,
+        "continuous depths from the pursuit on the response's atoms",
+    ));
+    stages.push(stage(
+        used,
+        rg,
+        &grid,
+        !keep_atoms,
+        "continuous depths fitted from the grid methods' returns",
+    ));
+    if keep_atoms {
+        (atoms, Method::ModelBased, stages)
+    } else {
+        (grid, used, stages)
+    }
 }
 
 #[cfg(test)]
