@@ -442,6 +442,12 @@ fn bad_inputs_under_mpirun_end_every_process_with_one_error_line_and_no_output()
             .collect(),
             vec!["rdlidar simulate without --codes-format seed runs on one process"],
         ),
+        // Continuous depths run in one process.
+        (
+            2,
+            reconstruct(&["--kernel", "triangle"], "8"),
+            vec!["--kernel", "in one process", "without mpirun"],
+        ),
         // A command that does not split its work.
         (
             2,
@@ -559,6 +565,41 @@ fn reconstruct_deals_the_tiles_of_a_tiled_array_to_the_processes() {
             }
         }
     }
+    // Continuous depths: dealt tiles come back without their returns, so the job is refused
+    // before any work (one process fits them).
+    let acq = &sets[0];
+    let (pulse, codes, meas) = (
+        acq.file("pulse.npy"),
+        acq.file(acq.codes),
+        acq.file("meas.npy"),
+    );
+    let d = tmp.path("kernel-d.npy");
+    let mut args = vec![
+        "reconstruct",
+        "--pulse",
+        &pulse,
+        "--codes",
+        &codes,
+        "--meas",
+        &meas,
+        "--depth-bins",
+        "16",
+        "--solver",
+        "auto",
+        "--kernel",
+        "triangle",
+        "--out-depth",
+        s(&d),
+        "--out-scene",
+    ];
+    let x = tmp.path("kernel-x.npy");
+    args.push(s(&x));
+    args.extend_from_slice(&tiles);
+    crate::cli_support::assert_one_line_error(
+        &mpirun(2, &args),
+        &["--kernel", "in one process", "without mpirun"],
+    );
+    assert!(!d.exists() && !x.exists());
 }
 
 /// The process ids of the rank `rank` processes whose environment holds `mark`.

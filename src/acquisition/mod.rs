@@ -653,6 +653,15 @@ impl Acquisition {
                 None => tiled
                     .reconstruct_observed(y, method, options, observe, on_tile)
                     .map(Reconstructed::Tiled),
+                // A dealt tile comes back as its depth map and scene, not its returns.
+                Some(_) if !options.response.is_delta() => Err(Error::param(
+                    "kernel",
+                    format!(
+                        "continuous depths (`kernel={}`) are estimated in one process: run \
+                         without mpirun",
+                        options.response
+                    ),
+                )),
                 Some((share, mine)) => self.reconstruct_dealt(
                     &tiled,
                     share,

@@ -142,6 +142,9 @@ impl ReconstructRequest {
                 format!("`noise` photon, `background` {}", number(background))
             }
         });
+        if !o.response.is_delta() {
+            parts.push(format!("`kernel` {}", o.response));
+        }
         if let Some(c) = self.clipped {
             parts.push(match c {
                 Clipping::Top => "`clipped` top".to_string(),

@@ -232,6 +232,16 @@ fn continuous<T: Real>(
             ),
         ));
     }
+    if op.space().parts() > 1 {
+        return Err(Error::param(
+            "kernel",
+            format!(
+                "continuous depths (`kernel={}`) are estimated in one process: run without \
+                 mpirun, or split the array into tiles",
+                options.response
+            ),
+        ));
+    }
     let g = op.geometry();
     let from_grid = |observer: &mut dyn Observer<T>| -> Result<_> {
         let grid = ReconstructOptions {
