@@ -25,6 +25,7 @@ AVX-512: unset it (and ``OPENBLAS_L2_SIZE``) for this command only, as above.
 
 import argparse
 import json
+import math
 import os
 import shutil
 import statistics
@@ -111,13 +112,22 @@ def rdlidar_times(binary, size, kp, precision, repeats):
     return json.loads(out.stdout)
 
 
+def ratio_text(r):
+    """A ratio in three significant digits, without an exponent (0.00412, 5.96, 123)."""
+    if not (math.isfinite(r) and r > 0):
+        return f"{r:.2f}"
+    return f"{r:.{max(0, 2 - math.floor(math.log10(r)))}f}"
+
+
 def ratio_cells(ours, theirs):
     """The table cells of one operation: the medians of rdlidar's and numpy's times over the
     rounds, and the median of the rounds' ratios (with their range when there are several)."""
     ratios = [t / o for o, t in zip(ours, theirs)]
-    cell = f"{statistics.median(ratios):.2f}x"
+    # Three significant digits: a ratio far below 1 (a debug build, a loaded machine) is still
+    # printed as what it is, never as 0.00.
+    cell = f"{ratio_text(statistics.median(ratios))}x"
     if len(ratios) > 1:
-        cell += f" ({min(ratios):.2f}–{max(ratios):.2f})"
+        cell += f" ({ratio_text(min(ratios))}–{ratio_text(max(ratios))})"
     return (
         f"{statistics.median(ours) * 1e3:.1f} ms | {statistics.median(theirs) * 1e3:.1f} ms "
         f"| {cell}"
