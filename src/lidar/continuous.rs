@@ -5,11 +5,11 @@ use ndarray::{Array2, Array3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 use super::geometry::Geometry;
 use super::returns::Returns;
-use super::scenes::{checked, paper_layers};
+use super::scenes::{check_lit_fraction, checked, paper_layers};
 
 /// The closest spacing of two returns of a pixel of [`transparent_returns`], in bins.
 pub const TRANSPARENT_SPACING: f64 = 3.0;
@@ -43,18 +43,11 @@ pub fn paper_returns(g: Geometry) -> Result<Returns> {
 /// [0.2, 1.0], drawn from `seed`.
 ///
 /// # Errors
-/// [`Error::InvalidParameter`] if `lit_fraction` is not in [0, 1], or for the geometry.
+/// [`Error::InvalidParameter`](crate::Error::InvalidParameter) if `lit_fraction` is not in
+/// [0, 1], or for the geometry.
 pub fn random_returns(g: Geometry, lit_fraction: f64, seed: u64) -> Result<Returns> {
     let g = checked(g)?;
-    if !(0.0..=1.0).contains(&lit_fraction) {
-        return Err(Error::param(
-            "lit_fraction",
-            format!(
-                "must be in [0, 1], got {}",
-                crate::units::number(lit_fraction)
-            ),
-        ));
-    }
+    check_lit_fraction(lit_fraction)?;
     let top = (g.ks - 1) as f64;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut depth = Array2::from_elem((g.m, g.n), f64::NAN);

@@ -211,14 +211,8 @@ pub fn paper_scene<T: Real>(g: Geometry) -> Result<Scene<T>> {
     composite_nearest(&paper_surfaces::<T>(g)?)?.to_scene(g.ks)
 }
 
-/// A random opaque scene: each pixel is lit independently with probability `lit_fraction`, at a
-/// uniformly random depth bin in `[0, K_s)` with an amplitude uniform in `[0.2, 1.0]`.
-///
-/// # Errors
-/// [`Error::InvalidParameter`] if `lit_fraction` is not in `[0, 1]` (NaN included), a dimension of
-/// `g` is zero, the voxel count overflows or K_s exceeds `i32::MAX`.
-pub fn random_opaque_scene<T: Real>(g: Geometry, lit_fraction: f64, seed: u64) -> Result<Scene<T>> {
-    let g = checked(g)?;
+/// Checks a random scene's fraction of lit pixels: in [0, 1] (NaN refused).
+pub(crate) fn check_lit_fraction(lit_fraction: f64) -> Result<()> {
     if !(0.0..=1.0).contains(&lit_fraction) {
         return Err(Error::param(
             "lit_fraction",
@@ -228,6 +222,18 @@ pub fn random_opaque_scene<T: Real>(g: Geometry, lit_fraction: f64, seed: u64) -
             ),
         ));
     }
+    Ok(())
+}
+
+/// A random opaque scene: each pixel is lit independently with probability `lit_fraction`, at a
+/// uniformly random depth bin in `[0, K_s)` with an amplitude uniform in `[0.2, 1.0]`.
+///
+/// # Errors
+/// [`Error::InvalidParameter`] if `lit_fraction` is not in `[0, 1]` (NaN included), a dimension of
+/// `g` is zero, the voxel count overflows or K_s exceeds `i32::MAX`.
+pub fn random_opaque_scene<T: Real>(g: Geometry, lit_fraction: f64, seed: u64) -> Result<Scene<T>> {
+    let g = checked(g)?;
+    check_lit_fraction(lit_fraction)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut map = DepthMap {
         depth: Array2::from_elem((g.m, g.n), NO_RETURN),
