@@ -130,8 +130,7 @@ impl<'a, T: Real, A: VoxelOperator<T> + ?Sized> Atoms<'a, T, A> {
     pub fn voxels(&self, z: &[T]) -> Vec<T> {
         let (ks, l) = (self.dict.ks, self.dict.len());
         let mut x = vec![0.0f64; self.pixels * ks];
-        for (p, (col, zp)) in x.chunks_mut(ks).zip(z.chunks(l)).enumerate() {
-            let _ = p;
+        for (col, zp) in x.chunks_mut(ks).zip(z.chunks(l)) {
             for (c, a) in zp.iter().enumerate().filter(|(_, a)| **a != T::zero()) {
                 self.dict.add(c, a.as_f64(), col);
             }

@@ -240,30 +240,22 @@ fn fit_pairs<T: Real>(
     // The share of the largest gain a move needs; raised when a round's moves did not help.
     let mut share = 0.05;
     for _ in 0..PAIR_ROUNDS {
-        let columns: Vec<usize> = pixels
-            .iter()
-            .zip(&bins)
-            .flat_map(|(&p, &j)| [p * ks + j, p * ks + j + 1])
-            .collect();
-        let a = op.restrict_columns(columns)?;
+        let a = op.restrict_columns(pair_columns(&pixels, &bins, ks))?;
         let rep = cgls(&a, y, &mut w, &params, &mut ())?;
         applies.support += rep.forward_applies + rep.adjoint_applies + 2;
-        let mut r = vec![T::zero(); y.len()];
-        a.apply(&w, &mut r);
-        for (ri, yi) in r.iter_mut().zip(y) {
-            *ri = *yi - *ri;
-        }
+        let mut r = residual_through(&*a, y, &w);
         let rr = dot(&r, &r);
-        if let Some((b, bb, bw)) = best.as_ref().filter(|b| rr >= b.0) {
+        if let Some((_, bb, bw)) = best.as_ref().filter(|b| rr >= b.0) {
             // The moves did not help: back to the best pairs, and only the clearest moves.
             share *= 4.0;
             if share > 1.0 {
                 break;
             }
-            let _ = b;
             bins = bb.clone();
             w = bw.clone();
-            r = residual_of(op, y, &pixels, &bins, &w, ks)?;
+            let a = op.restrict_columns(pair_columns(&pixels, &bins, ks))?;
+            r = residual_through(&*a, y, &w);
+            applies.support += 1;
         } else {
             best = Some((rr, bins.clone(), w.clone()));
         }
@@ -347,27 +339,23 @@ fn fit_pairs<T: Real>(
         .collect())
 }
 
-/// y − A·x of the pairs `w` on the bins `bins` of `pixels`.
-fn residual_of<T: Real>(
-    op: &dyn LidarOperator<T>,
-    y: &[T],
-    pixels: &[usize],
-    bins: &[usize],
-    w: &[T],
-    ks: usize,
-) -> Result<Vec<T>> {
-    let columns: Vec<usize> = pixels
+/// The columns of the pairs: voxels j and j + 1 of each pixel, for its bin j.
+fn pair_columns(pixels: &[usize], bins: &[usize], ks: usize) -> Vec<usize> {
+    pixels
         .iter()
         .zip(bins)
         .flat_map(|(&p, &j)| [p * ks + j, p * ks + j + 1])
-        .collect();
-    let a = op.restrict_columns(columns)?;
+        .collect()
+}
+
+/// y − A·w.
+fn residual_through<T: Real>(a: &dyn LinearOperator<T>, y: &[T], w: &[T]) -> Vec<T> {
     let mut r = vec![T::zero(); y.len()];
     a.apply(w, &mut r);
     for (ri, yi) in r.iter_mut().zip(y) {
         *ri = *yi - *ri;
     }
-    Ok(r)
+    r
 }
 
 /// The voxels the returns reach, sorted, and each return's (voxel index, g, g′) entries.
@@ -418,11 +406,7 @@ fn misfit<'a, T: Real>(
     }
     let xv: Vec<T> = xv.into_iter().map(T::of_f64).collect();
     let a = op.restrict_columns(voxels.clone())?;
-    let mut r = vec![T::zero(); y.len()];
-    a.apply(&xv, &mut r);
-    for (ri, yi) in r.iter_mut().zip(y) {
-        *ri = T::of_f64(yi.as_f64() - ri.as_f64());
-    }
+    let r = residual_through(&*a, y, &xv);
     Ok((a, (voxels, entries), r))
 }
 
