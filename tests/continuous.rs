@@ -412,3 +412,128 @@ fn reconstruct_writes_continuous_depths_with_a_kernel_and_refuses_them_without()
         );
     }
 }
+
+#[test]
+fn reconstruct_compares_continuous_depths_with_the_truth_beside_the_bound() {
+    let tmp = TempDir::new("truth-range");
+    let dir = tmp.path("run");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "8x8x8",
+        "--pulse-len",
+        "900",
+        "--depth",
+        "continuous",
+        "--kernel",
+        "gaussian:0.8",
+        "--snr-db",
+        "20",
+        "--seed",
+        "3",
+        "--out",
+        s(&dir),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
+    let sigma = meta["noise"]["sigma"].as_f64().unwrap().to_string();
+    let files = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let base: Vec<String> = [
+        "reconstruct",
+        "--pulse",
+        &files("pulse.npy"),
+        "--codes",
+        &files("codes.npy"),
+        "--meas",
+        &files("meas.npy"),
+        "--depth-bins",
+        "8",
+        "--out-depth",
+        &files("d.npy"),
+        "--out-scene",
+        &files("x.npy"),
+        "--solver",
+        "auto",
+        "--truth-range",
+        &files("range.npy"),
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .collect();
+    let run = |extra: &[&str]| {
+        let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
+        args.extend(extra);
+        rdlidar(&args)
+    };
+    // Without a kernel there are no continuous depths to compare.
+    let out = run(&[]);
+    let e = stderr(&out);
+    assert!(
+        !out.status.success() && e.contains("--truth-range") && e.contains("--kernel"),
+        "{e}"
+    );
+    // With the true scene, the bound at the simulation's σ: the estimate is near it.
+    let scene = files("scene.npy");
+    let out = run(&[
+        "--kernel",
+        "gaussian:0.8",
+        "--truth",
+        &scene,
+        "--noise-sigma",
+        &sigma,
+        "--tau",
+        "1ns",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("versus the true depths:"))
+        .expect(&text);
+    let ratio: f64 = line
+        .split("RMSE/bound ")
+        .nth(1)
+        .and_then(|t| t.split(';').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!((0.5..2.0).contains(&ratio), "{line}");
+    assert!(line.contains(" mm)") && line.contains("given"), "{line}");
+    assert!(line.contains("missed 0 returns"), "{line}");
+    // Without σ it is estimated from the residual; without the true scene there is no bound.
+    let out = run(&["--kernel", "gaussian:0.8", "--truth", &scene]);
+    assert!(
+        stdout(&out).contains("estimated from the residual"),
+        "{}",
+        stdout(&out)
+    );
+    let out = run(&["--kernel", "gaussian:0.8"]);
+    let text = stdout(&out);
+    assert!(
+        text.contains("versus the true depths: depth RMSE") && !text.contains("bound"),
+        "{text}"
+    );
+    // Bad values name their flag or file.
+    let out = run(&["--kernel", "gaussian:0.8", "--noise-sigma", "-1"]);
+    assert!(stderr(&out).contains("--noise-sigma"), "{}", stderr(&out));
+    let out = run(&["--kernel", "gaussian:0.8", "--tau", "5"]);
+    assert!(stderr(&out).contains("--tau"), "{}", stderr(&out));
+    write_npy(dir.join("wide.npy"), &Array2::<f64>::zeros((8, 9))).unwrap();
+    std::fs::remove_file(dir.join("d.npy")).unwrap();
+    let mut args: Vec<String> = base.clone();
+    let at = args.iter().position(|a| a == "--truth-range").unwrap();
+    args[at + 1] = files("wide.npy");
+    args.extend(["--kernel".to_string(), "triangle".to_string()]);
+    let out = rdlidar(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let e = stderr(&out);
+    assert!(
+        !out.status.success() && e.contains("wide.npy") && e.contains("--truth-range"),
+        "{e}"
+    );
+    assert!(
+        !dir.join("d.npy").exists(),
+        "no output after a refused truth"
+    );
+}

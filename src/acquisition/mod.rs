@@ -39,6 +39,7 @@
 //! ```
 
 mod arrays;
+mod bound;
 mod censor;
 mod files;
 mod outcome;
@@ -71,6 +72,7 @@ use crate::recon::{
 use crate::solver::{Control, IterationInfo};
 
 pub use arrays::{code_array, CodeArray, CodeArrayView};
+pub use bound::RangeComparison;
 pub use censor::{at_top, Censoring, Clipping};
 pub use files::{AcquisitionFiles, InputNames};
 pub use outcome::{Outcome, Run, Summary, TileRun};

@@ -40,11 +40,11 @@ use crate::error::{Error, Result};
 
 pub use npy::{
     read_code_band, read_code_sets, read_codes, read_depth, read_header, read_measurement_rows,
-    read_measurements, read_pulse, read_response, read_scene, read_scene_rows, shape_text,
-    stage_array, stage_code_sets, stage_codes, stage_masked_codes, stage_packed_code_sets,
-    stage_packed_codes, write_array, write_code_sets, write_codes, write_depth, write_masked_codes,
-    write_measurements, write_packed_code_sets, write_packed_codes, write_pulse, write_scene,
-    NpyDtype, NpyHeader, ShapeExpectation,
+    read_measurements, read_pulse, read_range, read_response, read_scene, read_scene_rows,
+    shape_text, stage_array, stage_code_sets, stage_codes, stage_masked_codes,
+    stage_packed_code_sets, stage_packed_codes, write_array, write_code_sets, write_codes,
+    write_depth, write_masked_codes, write_measurements, write_packed_code_sets,
+    write_packed_codes, write_pulse, write_scene, NpyDtype, NpyHeader, ShapeExpectation,
 };
 #[cfg(feature = "images")]
 pub use png::{png_dimensions, returns_from_pngs, scene_from_pngs};

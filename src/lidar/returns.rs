@@ -97,6 +97,69 @@ impl Returns {
         Returns { depth, amplitude }
     }
 
+    /// The returns at the depths `range` (in bins, NaN where there is none: (M, N), or
+    /// (R, M, N) for several per pixel, as `range.npy` holds them) whose amplitudes best explain
+    /// `scene` under `response`: each pixel's amplitudes are the least squares of its column on
+    /// its returns' columns g(k − d) (exact for a scene rendered from such returns), negative
+    /// ones set to 0.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if `range` is not (M, N) or (R, M, N) on the scene's grid;
+    /// [`Error::InvalidParameter`] (`depth`) for an infinite depth or one outside
+    /// [0, K_s − 1].
+    pub fn fit_to_scene<T: Real>(
+        range: ArrayD<f64>,
+        scene: &Scene<T>,
+        response: &Response,
+    ) -> Result<Returns> {
+        let g = scene.geometry();
+        let depth = match range.ndim() {
+            2 => range.insert_axis(Axis(0)),
+            _ => range,
+        }
+        .into_dimensionality::<ndarray::Ix3>()
+        .map_err(|_| Error::shape("range: (M, N) or (R, M, N)", 3, 0))?;
+        let (r, m, n) = depth.dim();
+        if (m, n) != (g.m, g.n) {
+            return Err(Error::shape(
+                "range vs the scene's pixels",
+                g.m * g.n,
+                m * n,
+            ));
+        }
+        let top = (g.ks - 1) as f64;
+        if let Some(d) = depth
+            .iter()
+            .find(|d| !d.is_nan() && !(0.0..=top).contains(*d))
+        {
+            return Err(Error::param(
+                "depth",
+                format!("a depth of {d} bins is outside [0, {top}]"),
+            ));
+        }
+        let mut amplitude = Array3::zeros((r, m, n));
+        for p in 0..g.pixels() {
+            let (i, j) = (p / n, p % n);
+            let layers: Vec<usize> = (0..r).filter(|&q| !depth[[q, i, j]].is_nan()).collect();
+            if layers.is_empty() {
+                continue;
+            }
+            let column: Vec<f64> = scene.column(p).iter().map(|v| v.as_f64()).collect();
+            let a = nalgebra::DMatrix::from_fn(g.ks, layers.len(), |k, c| {
+                response.value(k as f64 - depth[[layers[c], i, j]])
+            });
+            let b = nalgebra::DVector::from_vec(column);
+            let fit = a
+                .svd(true, true)
+                .solve(&b, 1e-12)
+                .map_err(|e| Error::param("depth", format!("pixel ({i}, {j}): {e}")))?;
+            for (c, &q) in layers.iter().enumerate() {
+                amplitude[[q, i, j]] = fit[c].max(0.0);
+            }
+        }
+        Returns::new(depth, amplitude)
+    }
+
     /// Returns per pixel at most (R).
     pub fn layers(&self) -> usize {
         self.depth.dim().0
@@ -197,6 +260,40 @@ impl Returns {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn amplitudes_fitted_to_a_rendered_scene_are_its_own() {
+        let nan = f64::NAN;
+        let depth = ndarray::arr3(&[[[2.3, nan], [5.0, 1.7]], [[6.6, nan], [nan, nan]]]);
+        let amplitude = ndarray::arr3(&[[[1.5, 0.0], [0.4, 2.0]], [[0.7, 0.0], [0.0, 0.0]]]);
+        let truth = Returns::new(depth.clone(), amplitude).unwrap();
+        for response in [Response::Triangle, Response::gaussian(0.8).unwrap()] {
+            let scene = truth.render::<f64>(9, &response).unwrap();
+            let fitted =
+                Returns::fit_to_scene(depth.clone().into_dyn(), &scene, &response).unwrap();
+            for (a, b) in fitted.amplitude.iter().zip(truth.amplitude.iter()) {
+                assert!((a - b).abs() < 1e-12, "{response}: {a} vs {b}");
+            }
+        }
+        let flat = Returns::fit_to_scene(
+            depth.index_axis(Axis(0), 0).to_owned().into_dyn(),
+            &truth.render::<f64>(9, &Response::Triangle).unwrap(),
+            &Response::Triangle,
+        )
+        .unwrap();
+        assert_eq!(flat.layers(), 1);
+        let scene = truth.render::<f64>(9, &Response::Triangle).unwrap();
+        let mut far = depth.clone();
+        far[[0, 0, 0]] = 8.5;
+        assert!(matches!(
+            Returns::fit_to_scene(far.into_dyn(), &scene, &Response::Triangle),
+            Err(Error::InvalidParameter { name: "depth", .. })
+        ));
+        assert!(matches!(
+            Returns::fit_to_scene(ndarray::ArrayD::zeros(vec![2]), &scene, &Response::Triangle),
+            Err(Error::ShapeMismatch { .. })
+        ));
+    }
 
     #[test]
     fn grid_returns_render_to_the_scene_they_came_from() {

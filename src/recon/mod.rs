@@ -5,6 +5,7 @@
 
 mod atoms;
 mod auto;
+mod bound;
 mod coarse;
 mod detect;
 mod method;
@@ -14,12 +15,14 @@ mod options;
 mod peaks;
 mod photon;
 mod pursuit;
+mod range_metrics;
 mod reconstruct;
 mod refit;
 mod subbin;
 mod tiled;
 
 pub use auto::{Stage, COARSE_RESIDUAL, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
+pub use bound::{depth_bound, residual_sigma};
 pub use coarse::COARSE_BLOCK;
 pub use detect::{check_false_rate, normal_upper_quantile, DetectionTest};
 pub use method::{estimate_returns, Method, MAX_RETURNS_ESTIMATE};
@@ -30,6 +33,7 @@ pub use options::ReconstructOptions;
 pub use peaks::{PeakThreshold, PAPER_FRACTION, PAPER_QUANTILE};
 pub use photon::{NoiseModel, PhotonWeighting};
 pub use pursuit::explained_tolerance;
+pub use range_metrics::{compare_range, RangeMetrics};
 pub use reconstruct::{
     is_piecewise_smooth, reconstruct, reconstruct_observed, Reconstruction, SMOOTH_BINS,
     SMOOTH_FRACTION,

@@ -88,6 +88,20 @@ pub struct ReconstructArgs {
     /// The true scene (M, N, K_s): print how well the estimate matches it.
     #[arg(long, value_name = "SCENE")]
     pub truth: Option<PathBuf>,
+    /// With --kernel: the true continuous depths (`simulate`'s range.npy: bins, NaN where there
+    /// is no return, a leading axis of returns where there are several). Prints the depth
+    /// error over the true returns, the returns missed and false and, with --truth for the
+    /// true amplitudes, the Cramér–Rao bound beside it (RMSE/bound).
+    #[arg(long, value_name = "R.npy")]
+    pub truth_range: Option<PathBuf>,
+    /// The noise's standard deviation per sample that the bound of --truth-range assumes
+    /// (`simulate`'s meta.json, noise.sigma); by default the one the estimate's residual shows.
+    #[arg(long, value_name = "S", requires = "truth_range", allow_hyphen_values = true, value_parser = parse_noise_sigma)]
+    pub noise_sigma: Option<f64>,
+    /// The sampling period τ (200ps by default): one depth bin is c·τ/2, the unit of the
+    /// metres and millimetres that --truth and --truth-range print.
+    #[arg(long, value_name = "T", value_parser = parse_tau_flag)]
+    pub tau: Option<f64>,
     /// Which per-pixel peaks the backprojections keep: paper (0.4 times the 99th percentile of the
     /// per-pixel peaks, as in the paper's Fig. 2) or robust (median + 3σ of all values: fewer
     /// false returns on noisy or sparsely lit scenes).
@@ -154,6 +168,21 @@ fn parse_background(text: &str) -> Result<f64, String> {
         .validate()
         .map_err(|e| FrontEnd::CommandLine.reason(&e))?;
     Ok(b)
+}
+
+/// A `--noise-sigma` value: finite and ≥ 0.
+fn parse_noise_sigma(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s.is_finite() && s >= 0.0 => Ok(s),
+        _ => Err(format!("expected a finite number >= 0, got {text:?}")),
+    }
+}
+
+/// A `--tau` duration with its unit (200ps, 1ns).
+fn parse_tau_flag(text: &str) -> Result<f64, String> {
+    let tau = rdlidar::lidar::parse_tau(text).map_err(|e| FrontEnd::CommandLine.reason(&e))?;
+    depth_bin_m(tau).map_err(|e| FrontEnd::CommandLine.reason(&e))?;
+    Ok(tau)
 }
 
 /// A `--noise` model name.
@@ -255,15 +284,24 @@ pub fn run(a: &ReconstructArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     if let Some(png) = &a.png {
         outputs.push(("--png", png.as_path()));
     }
-    if let Some(range) = &a.out_range {
+    let continuous = [
+        ("--out-range", a.out_range.is_some()),
+        ("--truth-range", a.truth_range.is_some()),
+    ];
+    if let Some((flag, _)) = continuous.iter().find(|(_, given)| *given) {
         if a.kernel.as_ref().is_none_or(Response::is_delta) {
-            return Err(String::from(
-                "--out-range: continuous depths are estimated under a --kernel other than delta \
-                 (triangle, gaussian:S, measured:O:FILE)",
+            return Err(format!(
+                "{flag}: continuous depths are estimated under a --kernel other than delta \
+                 (triangle, gaussian:S, measured:O:FILE)"
             )
             .into());
         }
+    }
+    if let Some(range) = &a.out_range {
         outputs.push(("--out-range", range.as_path()));
+    }
+    if let Some(t) = &a.truth_range {
+        inputs.push((t, "--truth-range"));
     }
     for (flag, out) in &outputs {
         check_out_file(out, flag, &inputs)?;
@@ -318,6 +356,11 @@ fn reconstruct_files<T: Real + WritableElement>(
     let (acq, y, truth) = ranks.agree(read_inputs::<T>(a, ranks))?;
     let (acq, y, censoring) = censor_inputs(&request, ranks, acq, y)?;
     let g = acq.whole_geometry();
+    let tau = a.tau.unwrap_or(DEFAULT_TAU_S);
+    let truth_range = match &a.truth_range {
+        Some(path) if ranks.is_first() => Some(read_truth_range(path, g)?),
+        _ => None,
+    };
     let count = acq.rows().unwrap_or(1);
     let done = std::sync::atomic::AtomicUsize::new(0);
     let on_tile = |tile: &TileReconstruction<T>| {
@@ -349,34 +392,28 @@ fn reconstruct_files<T: Real + WritableElement>(
     // A coded aperture's blocked pixels reach no ADC: they are unobserved (−2 in the depth
     // map), judged apart from the observed ones, and filled from their neighbours on request.
     let observed: Vec<bool> = r.depth().depth.iter().map(|&d| d != UNOBSERVED).collect();
-    let unobserved = observed.iter().filter(|&&o| !o).count();
     let r = request.finish(r, &acq, censoring.as_ref());
-    let mut metrics = Vec::new();
-    if let (Some(t), Some(path)) = (&truth, &a.truth) {
-        let at_truth = |e: rdlidar::Error| format!("{} (--truth): {e}", path.display());
-        if unobserved == 0 {
-            let m = compare(t, &r.scene, DEFAULT_TAU_S).map_err(at_truth)?;
-            metrics.push(format!("versus the truth: {m}"));
-        } else {
-            let c = compare_observed(t, &r.scene, &r.depth.depth, &observed, DEFAULT_TAU_S)
-                .map_err(at_truth)?;
-            metrics.push(format!(
-                "versus the truth on the {} observed pixels: {}",
-                c.observed_pixels, c.observed
-            ));
-            let mut line = format!(
-                "{unobserved} pixels unobserved (all-zero codes), {} of them lit in the truth",
-                c.unobserved_lit
-            );
-            if a.fill_unobserved {
-                line.push_str(&format!(
-                    "; filled from their neighbours: {} of the {} lit at the exact depth, {} \
-                     within a bin, {} filled where the truth is empty",
-                    c.filled_exact, c.unobserved_lit, c.filled_near, c.filled_false
-                ));
-            }
-            metrics.push(line);
-        }
+    let mut metrics = truth_lines(a, &truth, &r, &observed)?;
+    if let Some(range) = truth_range {
+        let path = a
+            .truth_range
+            .as_deref()
+            .unwrap_or(std::path::Path::new("--truth-range"));
+        let c = acq
+            .compare_range(
+                &y,
+                (
+                    r.returns.as_ref().expect("estimated under a kernel"),
+                    &r.scene,
+                ),
+                range,
+                truth.as_ref(),
+                a.kernel.as_ref().unwrap_or(&Response::Delta),
+                a.noise_sigma,
+                depth_bin_m(tau)?,
+            )
+            .map_err(|e| format!("{} (--truth-range): {e}", path.display()))?;
+        metrics.push(format!("versus the true depths: {c}"));
     }
     // Stage every output, then rename them into place together; on an error the staged files
     // are dropped, which removes them.
@@ -388,7 +425,7 @@ fn reconstruct_files<T: Real + WritableElement>(
         staged.push(io::stage_array(path, &returns.range_map())?);
     }
     if let Some(png) = &a.png {
-        let bin_m = depth_bin_m(DEFAULT_TAU_S)?;
+        let bin_m = depth_bin_m(tau)?;
         let options = rdlidar::report::plot::DepthOptions::new(bin_m, "m")
             .title(format!("{} ({})", r.summary.run.method_used, g));
         let truth_depth = truth.as_ref().map(|t| t.depth_map().depth);
@@ -432,6 +469,65 @@ fn reconstruct_files<T: Real + WritableElement>(
         outln!("{line}");
     }
     Ok(())
+}
+
+/// The true depths of `--truth-range`, on the grid `g`.
+fn read_truth_range(
+    path: &std::path::Path,
+    g: rdlidar::lidar::Geometry,
+) -> CliResult<ndarray::ArrayD<f64>> {
+    let range = io::read_range(path)?;
+    let shape = range.shape();
+    if shape[shape.len() - 2..] != [g.m, g.n] {
+        return Err(format!(
+            "{} (--truth-range): depths of shape {} do not fit the {} × {} pixels of the codes",
+            path.display(),
+            io::shape_text(shape),
+            g.m,
+            g.n
+        )
+        .into());
+    }
+    Ok(range)
+}
+
+/// The lines that compare the estimate with `--truth`'s scene: over every pixel, or over the
+/// observed ones and apart the unobserved ones (with what filling them did).
+fn truth_lines<T: Real>(
+    a: &ReconstructArgs,
+    truth: &Option<Scene<T>>,
+    r: &rdlidar::acquisition::Outcome<T>,
+    observed: &[bool],
+) -> CliResult<Vec<String>> {
+    let (Some(t), Some(path)) = (truth, &a.truth) else {
+        return Ok(Vec::new());
+    };
+    let tau = a.tau.unwrap_or(DEFAULT_TAU_S);
+    let at_truth = |e: rdlidar::Error| format!("{} (--truth): {e}", path.display());
+    let unobserved = observed.iter().filter(|&&o| !o).count();
+    if unobserved == 0 {
+        let m = compare(t, &r.scene, tau).map_err(at_truth)?;
+        return Ok(vec![format!("versus the truth: {m}")]);
+    }
+    let c = compare_observed(t, &r.scene, &r.depth.depth, observed, tau).map_err(at_truth)?;
+    let mut line = format!(
+        "{unobserved} pixels unobserved (all-zero codes), {} of them lit in the truth",
+        c.unobserved_lit
+    );
+    if a.fill_unobserved {
+        line.push_str(&format!(
+            "; filled from their neighbours: {} of the {} lit at the exact depth, {} within a \
+             bin, {} filled where the truth is empty",
+            c.filled_exact, c.unobserved_lit, c.filled_near, c.filled_false
+        ));
+    }
+    Ok(vec![
+        format!(
+            "versus the truth on the {} observed pixels: {}",
+            c.observed_pixels, c.observed
+        ),
+        line,
+    ])
 }
 
 /// The acquisition and measurements with the samples `--clipped` names censored (the

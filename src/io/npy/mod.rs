@@ -47,7 +47,8 @@ pub use header::{escape_all, MAX_HEADER_BYTES, MAX_NESTING};
 
 pub use read::{
     read_code_band, read_code_sets, read_codes, read_depth, read_measurement_rows,
-    read_measurements, read_pulse, read_response, read_scene, read_scene_rows, ShapeExpectation,
+    read_measurements, read_pulse, read_range, read_response, read_scene, read_scene_rows,
+    ShapeExpectation,
 };
 pub use write::{
     stage_array, stage_code_sets, stage_codes, stage_masked_codes, stage_packed_code_sets,

@@ -535,3 +535,33 @@ pub fn read_response(spec: &str) -> Result<Response> {
         Ok(a.to_vec())
     })
 }
+
+/// Reads continuous depths as `range.npy` holds them: float32 or float64, (M, N) or (R, M, N)
+/// for several returns per pixel, in bins, NaN where there is no return; returned in f64.
+///
+/// # Errors
+/// [`Error::File`] naming `path` for a file that cannot be read or is not a `.npy` file, another
+/// dtype or number of dimensions, an empty axis, or an infinite value (named by its index).
+pub fn read_range(path: impl AsRef<Path>) -> Result<ArrayD<f64>> {
+    let path = path.as_ref();
+    let role = "a range map";
+    let opened = open_npy(path)?;
+    let h = opened.header.clone();
+    let ndim = if h.shape.len() == 3 { 3 } else { 2 };
+    check_ndim(path, role, &h, ndim, "(M, N) or (R, M, N)")?;
+    let a: ArrayD<f64> = match h.dtype {
+        NpyDtype::Float64 => read_data::<f64>(path, opened)?,
+        NpyDtype::Float32 => read_data::<f32>(path, opened)?.mapv(f64::from),
+        other => return Err(wrong_dtype(path, role, &other, "float32 or float64")),
+    };
+    if let Some((i, v)) = first_bad(&a, |v| !v.is_infinite()) {
+        return Err(file_error(
+            path,
+            format!(
+                "{role} holds the infinite value {v} at index {}",
+                index_text(&i)
+            ),
+        ));
+    }
+    Ok(a)
+}

@@ -1,0 +1,232 @@
+//! The Cramér–Rao bound and the noise level of a whole acquisition, tile by tile for a tiled
+//! array (each tile its own operator).
+
+use ndarray::{s, Array3};
+
+use super::*;
+use crate::lidar::{Response, Returns};
+use crate::recon::depth_bound;
+
+impl Acquisition {
+    /// The per-return Cramér–Rao bound on the depths of `truth` (R, M, N) under `response` and
+    /// white Gaussian noise of standard deviation `sigma` per sample, in bins, every other
+    /// pixel known ([`depth_bound`]): NaN where there is no return.
+    ///
+    /// # Errors
+    /// As [`depth_bound`]; [`Error::InvalidParameter`] (`kernel`) for an acquisition whose
+    /// pixels are split among processes.
+    pub fn depth_bound<T: Real>(
+        &self,
+        truth: &Returns,
+        response: &Response,
+        sigma: f64,
+    ) -> Result<Array3<f64>> {
+        self.refuse_split()?;
+        let places = self.tile_places();
+        if places.is_empty() {
+            return depth_bound(self.lidar_operator::<T>()?.as_ref(), truth, response, sigma);
+        }
+        let g = self.geometry;
+        if truth.depth.dim().1 != g.m || truth.depth.dim().2 != g.n {
+            return Err(Error::shape(
+                "returns vs the acquisition's pixels",
+                g.m * g.n,
+                truth.depth.dim().1 * truth.depth.dim().2,
+            ));
+        }
+        let mut bound = Array3::from_elem(truth.depth.dim(), f64::NAN);
+        for place in &places {
+            let (rows, cols) = (
+                place.row..place.row + place.geometry.m,
+                place.col..place.col + place.geometry.n,
+            );
+            let part = Returns::new(
+                truth
+                    .depth
+                    .slice(s![.., rows.clone(), cols.clone()])
+                    .to_owned(),
+                truth
+                    .amplitude
+                    .slice(s![.., rows.clone(), cols.clone()])
+                    .to_owned(),
+            )?;
+            let op = self.tile(place)?.lidar_operator::<T>()?;
+            let b = depth_bound(op.as_ref(), &part, response, sigma)?;
+            bound.slice_mut(s![.., rows, cols]).assign(&b);
+        }
+        Ok(bound)
+    }
+
+    /// The noise's standard deviation per sample that the residual of the estimate `scene`
+    /// shows, ‖y − A x‖/√(measurements − `unknowns`), `unknowns` being the parameters the
+    /// estimate fitted (two per return for continuous depths); `None` when the fit leaves no
+    /// degree of freedom.
+    ///
+    /// # Errors
+    /// [`Error::ShapeMismatch`] if `y` or `scene` do not fit the acquisition; as
+    /// [`depth_bound`](Self::depth_bound) for a split acquisition.
+    pub fn residual_sigma<T: Real>(
+        &self,
+        y: &[T],
+        scene: &Scene<T>,
+        unknowns: usize,
+    ) -> Result<Option<f64>> {
+        self.refuse_split()?;
+        if y.len() != self.measurements() {
+            return Err(Error::shape("meas", self.measurements(), y.len()));
+        }
+        if scene.geometry() != self.geometry {
+            return Err(Error::shape(
+                "scene vs the acquisition",
+                self.geometry.voxels(),
+                scene.data().len(),
+            ));
+        }
+        let mut squares = 0.0;
+        let places = self.tile_places();
+        let mut add = |op: &dyn LidarOperator<T>, x: &[T], y: &[T]| {
+            let mut ax = vec![T::zero(); op.nrows()];
+            op.apply(x, &mut ax);
+            squares += ax
+                .iter()
+                .zip(y)
+                .map(|(a, b)| (b.as_f64() - a.as_f64()).powi(2))
+                .sum::<f64>();
+        };
+        if places.is_empty() {
+            let x = scene.data().as_standard_layout();
+            add(
+                self.lidar_operator::<T>()?.as_ref(),
+                x.as_slice().expect("standard layout"),
+                y,
+            );
+        } else {
+            let k = self.samples();
+            for place in &places {
+                let (rows, cols) = (
+                    place.row..place.row + place.geometry.m,
+                    place.col..place.col + place.geometry.n,
+                );
+                let x = scene
+                    .data()
+                    .slice(s![rows, cols, ..])
+                    .as_standard_layout()
+                    .to_owned();
+                let op = self.tile(place)?.lidar_operator::<T>()?;
+                add(
+                    op.as_ref(),
+                    x.as_slice().expect("standard layout"),
+                    &y[place.index * k..(place.index + 1) * k],
+                );
+            }
+        }
+        Ok(crate::recon::residual_sigma(
+            squares.sqrt(),
+            y.len(),
+            unknowns,
+        ))
+    }
+
+    fn refuse_split(&self) -> Result<()> {
+        if self.share.is_some() {
+            return Err(Error::param(
+                "kernel",
+                "the bound on continuous depths is computed in one process: run without mpirun",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Continuous depths against the true ones, beside the Cramér–Rao bound: what
+/// `reconstruct --truth-range` prints.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct RangeComparison {
+    /// The errors, and the bound where the true amplitudes were known.
+    pub metrics: crate::recon::RangeMetrics,
+    /// The noise's standard deviation per sample the bound assumed.
+    pub sigma: Option<f64>,
+    /// Whether σ was given (`"given"`) or estimated from the estimate's residual
+    /// (`"residual"`).
+    pub sigma_source: &'static str,
+}
+
+impl std::fmt::Display for RangeComparison {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.metrics)?;
+        if let (Some(_), Some(sigma)) = (self.metrics.bound_bins, self.sigma) {
+            write!(
+                f,
+                " (bound at σ = {} per sample, {})",
+                if sigma >= 1e-3 {
+                    format!("{sigma:.4}")
+                } else {
+                    format!("{sigma:.3e}")
+                },
+                if self.sigma_source == "given" {
+                    "given"
+                } else {
+                    "estimated from the residual"
+                }
+            )?;
+        }
+        Ok(())
+    }
+}
+
+impl Acquisition {
+    /// Compares the continuous estimate `estimate` (the returns of an [`Outcome`], whose scene
+    /// is `scene`) with the true depths `truth_range` ((M, N) or (R, M, N) in bins, NaN where
+    /// there is none, as `range.npy` holds them). With the true scene `truth_scene` the true
+    /// amplitudes are known ([`Returns::fit_to_scene`]) and the Cramér–Rao bound is computed
+    /// under `response` at the noise level `sigma` or, without it, the level the residual of
+    /// `scene` shows on `y` (two unknowns per estimated return). `bin_m` is one bin's length.
+    ///
+    /// # Errors
+    /// As [`Returns::fit_to_scene`], [`depth_bound`](Self::depth_bound),
+    /// [`residual_sigma`](Self::residual_sigma) and [`compare_range`](crate::recon::compare_range).
+    #[allow(clippy::too_many_arguments)]
+    pub fn compare_range<T: Real>(
+        &self,
+        y: &[T],
+        estimate: (&Returns, &Scene<T>),
+        truth_range: ndarray::ArrayD<f64>,
+        truth_scene: Option<&Scene<T>>,
+        response: &Response,
+        sigma: Option<f64>,
+        bin_m: f64,
+    ) -> Result<RangeComparison> {
+        let (returns, scene) = estimate;
+        let truth = match truth_scene {
+            Some(t) => Returns::fit_to_scene(truth_range, t, response)?,
+            None => {
+                let depth = match truth_range.ndim() {
+                    2 => truth_range.insert_axis(ndarray::Axis(0)),
+                    _ => truth_range,
+                }
+                .into_dimensionality::<ndarray::Ix3>()
+                .map_err(|_| Error::shape("range: (M, N) or (R, M, N)", 3, 0))?;
+                let amplitude = depth.mapv(|d| if d.is_nan() { 0.0 } else { 1.0 });
+                Returns::new(depth, amplitude)?
+            }
+        };
+        let (sigma, sigma_source) = match sigma {
+            Some(s) => (Some(s), "given"),
+            None if truth_scene.is_some() => {
+                let unknowns = 2 * returns.depth.iter().filter(|d| !d.is_nan()).count();
+                (self.residual_sigma(y, scene, unknowns)?, "residual")
+            }
+            None => (None, "residual"),
+        };
+        let bound = match (truth_scene, sigma) {
+            (Some(_), Some(s)) => Some(self.depth_bound::<T>(&truth, response, s)?),
+            _ => None,
+        };
+        let metrics = crate::recon::compare_range(&truth, returns, bound.as_ref(), bin_m)?;
+        Ok(RangeComparison {
+            metrics,
+            sigma,
+            sigma_source,
+        })
+    }
+}
