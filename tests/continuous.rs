@@ -537,3 +537,136 @@ fn reconstruct_compares_continuous_depths_with_the_truth_beside_the_bound() {
         "no output after a refused truth"
     );
 }
+
+/// The points of a binary PLY file as `reconstruct --out-points` writes it: (x, y, z,
+/// intensity) and (row, col).
+fn read_ply(path: &std::path::Path) -> Vec<([f32; 4], (u32, u32))> {
+    let bytes = std::fs::read(path).unwrap();
+    let end = b"end_header\n";
+    let at = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+    let header = std::str::from_utf8(&bytes[..at]).unwrap();
+    assert!(
+        header.starts_with("ply\nformat binary_little_endian 1.0\n"),
+        "{header}"
+    );
+    let count: usize = header
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let body = &bytes[at..];
+    assert_eq!(body.len(), count * 24);
+    let word = |o: usize| -> [u8; 4] { body[o..o + 4].try_into().unwrap() };
+    (0..count)
+        .map(|p| {
+            let o = p * 24;
+            let v = [0, 4, 8, 12].map(|k| f32::from_le_bytes(word(o + k)));
+            (
+                v,
+                (
+                    u32::from_le_bytes(word(o + 16)),
+                    u32::from_le_bytes(word(o + 20)),
+                ),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn reconstruct_writes_the_returns_as_a_point_cloud_along_each_pixels_ray() {
+    let tmp = TempDir::new("points");
+    let dir = tmp.path("run");
+    let out = rdlidar(&[
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        "8x10x8",
+        "--pulse-len",
+        "900",
+        "--depth",
+        "continuous",
+        "--out",
+        s(&dir),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let files = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let base: Vec<String> = [
+        "reconstruct",
+        "--pulse",
+        &files("pulse.npy"),
+        "--codes",
+        &files("codes.npy"),
+        "--meas",
+        &files("meas.npy"),
+        "--depth-bins",
+        "8",
+        "--out-depth",
+        &files("d.npy"),
+        "--out-scene",
+        &files("x.npy"),
+        "--solver",
+        "auto",
+        "--out-points",
+        &files("p.ply"),
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .collect();
+    let run = |extra: &[&str]| {
+        let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
+        args.extend(extra);
+        rdlidar(&args)
+    };
+    // No camera, or an impossible one: refused by name, nothing written.
+    for (extra, flag) in [
+        (&[][..], "--out-points"),
+        (&["--fov", "200"][..], "--fov"),
+        (
+            &["--pixel-pitch", "0", "--focal-length", "1"][..],
+            "--pixel-pitch",
+        ),
+    ] {
+        let out = run(extra);
+        let e = stderr(&out);
+        assert!(!out.status.success() && e.contains(flag), "{extra:?}: {e}");
+        assert!(!dir.join("p.ply").exists() && !dir.join("d.npy").exists());
+    }
+    let out = run(&["--kernel", "triangle", "--fov", "40", "--tau", "1ns"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stdout(&out).contains("p.ply"), "{}", stdout(&out));
+    let range: Array2<f64> = read_npy(dir.join("range.npy")).unwrap();
+    let points = read_ply(&dir.join("p.ply"));
+    assert_eq!(points.len(), range.iter().filter(|d| !d.is_nan()).count());
+    let bin = 0.299_792_458 / 2.0;
+    let across = 2.0 * 20f64.to_radians().tan() / 10.0;
+    for ([x, y, z, intensity], (i, j)) in points {
+        let (x, y, z) = (x as f64, y as f64, z as f64);
+        let d = range[[i as usize, j as usize]];
+        let r = (x * x + y * y + z * z).sqrt();
+        assert!(
+            (r - d * bin).abs() < 1e-5 * r.max(1.0),
+            "({i}, {j}): {r} vs {}",
+            d * bin
+        );
+        // On the pixel's ray: x/z and y/z are its offsets from the centre times p/f.
+        assert!(
+            (x / z - (j as f64 - 4.5) * across).abs() < 1e-5,
+            "({i}, {j})"
+        );
+        assert!(
+            (y / z - (i as f64 - 3.5) * across).abs() < 1e-5,
+            "({i}, {j})"
+        );
+        assert!(intensity > 0.0);
+    }
+    // Without a kernel, every voxel of the estimate at its bin.
+    let out = run(&["--pixel-pitch", "10e-6", "--focal-length", "4e-3"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let x: Array3<f64> = read_npy(dir.join("x.npy")).unwrap();
+    assert_eq!(
+        read_ply(&dir.join("p.ply")).len(),
+        x.iter().filter(|v| **v != 0.0).count()
+    );
+}

@@ -39,6 +39,9 @@ __all__ = [
     "fista",
     "dot_test",
     "metrics",
+    "depth_bound",
+    "range_metrics",
+    "points",
     "SOLVERS",
     "CODES_FORMATS",
     "__version__",
@@ -447,7 +450,8 @@ class Simulation:
     (a dict); ``files`` the folder the files were written to, if any; ``range`` the true
     depths in bins of a scene at continuous depths or rendered by a kernel other than delta
     (float64 (M, N), or (R, M, N) with several returns per pixel, NaN where there is none;
-    None otherwise), as ``range.npy`` holds them.
+    None otherwise), as ``range.npy`` holds them, and ``amplitude`` their amplitudes in the
+    same shape (0 where there is none).
     """
 
     scene: np.ndarray
@@ -457,6 +461,7 @@ class Simulation:
     meta: dict = field(default_factory=dict)
     files: Optional[str] = None
     range: Optional[np.ndarray] = None
+    amplitude: Optional[np.ndarray] = None
 
     @property
     def tiles(self) -> Optional[Tuple[int, int]]:
@@ -594,7 +599,8 @@ def simulate(
     )
     meta = json.loads(d["meta"])
     files = None if out is None else os.fspath(out)
-    return Simulation(d["scene"], d["pulse"], d["codes"], d["meas"], meta, files, d["range"])
+    return Simulation(d["scene"], d["pulse"], d["codes"], d["meas"], meta, files, d["range"],
+                      d["amplitude"])
 
 
 def _choice(value, name, choices) -> str:
@@ -702,7 +708,8 @@ def reconstruct(
         on the grid, the default), "triangle", "gaussian:S" or "measured:O:PATH". With another
         kernel than delta every return's amplitude and continuous depth are estimated under
         it: the report's ``range`` holds the depths in bins (float64 (M, N), or (R, M, N) with
-        several returns per pixel; NaN where there is none), the scene is the returns
+        several returns per pixel; NaN where there is none) and ``amplitude`` their
+        amplitudes (0 where there is none), the scene is the returns
         rendered by the kernel and ``depth`` their nearest bins.
 
     Returns ``(depth, scene, report)``: ``depth`` (M, N) int32 depth bins (-1 where no return,
@@ -818,3 +825,91 @@ def metrics(truth, estimate, tau_s: Optional[float] = None) -> dict:
             f"estimate: expected two scenes of the same shape (M, N, K_s), got {t.shape} and {e.shape}"
         )
     return _rdlidar.metrics(t, e, _optional_float(tau_s, "tau_s"))
+
+
+def _range_array(a, what: str) -> np.ndarray:
+    """A float64 (M, N) or (R, M, N) array of depths, amplitudes or bounds (NaN allowed)."""
+    try:
+        r = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{what}: expected an array of numbers") from None
+    if r.ndim not in (2, 3) or r.size == 0:
+        raise ValueError(f"{what}: expected an (M, N) or (R, M, N) array, got shape {r.shape}")
+    return np.ascontiguousarray(r)
+
+
+def _returns(range, amplitude):
+    d = _range_array(range, "range")
+    a = _range_array(amplitude, "amplitude")
+    if a.shape != d.shape:
+        raise ValueError(f"amplitude: expected the shape of range {d.shape}, got {a.shape}")
+    return d, a
+
+
+def depth_bound(op: RdOperator, range, amplitude, kernel: str, sigma: float) -> np.ndarray:
+    """The Cramér–Rao bound on continuous depths, in bins (a standard deviation per return).
+
+    For the returns at depths ``range`` (bins, (M, N) or (R, M, N), NaN where there is none,
+    as ``Simulation.range``) with amplitudes ``amplitude`` (same shape), the system response
+    ``kernel`` (as ``reconstruct``'s, not "delta"), the operator ``op`` and white Gaussian
+    noise of standard deviation ``sigma`` per sample (``Simulation.meta["noise"]["sigma"]``):
+    the smallest RMSE any unbiased estimate of each depth can have when every other pixel is
+    known. Returns float64 (R, M, N): NaN where there is no return, inf where the data cannot
+    place it.
+    """
+    if not isinstance(op, RdOperator):
+        raise TypeError(f"op: expected an rdlidar.RdOperator, got {type(op).__name__}")
+    d, a = _returns(range, amplitude)
+    m, n, _ = op.scene_shape
+    if d.shape[-2:] != (m, n):
+        raise ValueError(f"range: expected the operator's ({m}, {n}) pixels, got shape {d.shape}")
+    return _rdlidar.depth_bound(op._core, d, a, _optional_str(kernel, "kernel") or "",
+                                _float(sigma, "sigma"))
+
+
+def range_metrics(truth, estimate, bound=None, tau_s: Optional[float] = None) -> dict:
+    """Continuous depths against the true ones: each true return paired with the nearest
+    estimated one of its pixel.
+
+    ``truth`` and ``estimate``: depths in bins, (M, N) or (R, M, N), NaN where there is none
+    (``Simulation.range`` and the report's ``range``); ``bound``: ``depth_bound``'s array for
+    the truth, to compare the RMSE with; ``tau_s`` the sampling period (default 200e-12).
+    Returns a dict: pixels, lit, empty, true_returns, paired, missed, false_returns,
+    missed_pixels, false_pixels, false_fraction_empty, rmse_bins, max_error_bins, bin_m,
+    rmse_m, bound_bins and rmse_over_bound (None without a bound).
+    """
+    t = _range_array(truth, "truth")
+    e = _range_array(estimate, "estimate")
+    if e.shape[-2:] != t.shape[-2:]:
+        raise ValueError(f"estimate: expected the truth's {t.shape[-2:]} pixels, got shape {e.shape}")
+    b = None if bound is None else _range_array(bound, "bound")
+    if b is not None and b.reshape((-1,) + b.shape[-2:]).shape != t.reshape((-1,) + t.shape[-2:]).shape:
+        raise ValueError(f"bound: expected the truth's shape {t.shape}, got {b.shape}")
+    return _rdlidar.range_metrics(t, e, b, _optional_float(tau_s, "tau_s"))
+
+
+def points(range, amplitude, *, fov=None, pixel_pitch: Optional[float] = None,
+           focal_length: Optional[float] = None, tau_s: Optional[float] = None,
+           pixels: bool = False):
+    """Returns as a point cloud, as ``reconstruct --out-points`` writes it.
+
+    Each return of ``range`` (bins, (M, N) or (R, M, N), NaN where there is none) becomes a
+    point at range d * c * tau_s / 2 metres along its pixel's ray, for a pinhole camera at the
+    origin looking along +z (x right, y down) of field of view ``fov`` (degrees across the N
+    columns, or (H, V)) or of ``pixel_pitch`` and ``focal_length`` (one unit for both); its
+    intensity is its ``amplitude``. Returns float64 (P, 4): x, y, z, intensity, pixels in
+    row-major order and each pixel's returns nearest first; with ``pixels=True`` also the
+    uint32 (P, 2) row and column of each point.
+    """
+    d, a = _returns(range, amplitude)
+    if fov is not None:
+        if isinstance(fov, (tuple, list)):
+            if len(fov) != 2:
+                raise ValueError(f"fov: expected H or (H, V) in degrees, got {fov!r}")
+            fov = (_float(fov[0], "fov"), _float(fov[1], "fov"))
+        else:
+            fov = (_float(fov, "fov"), None)
+    cloud, where = _rdlidar.points(d, a, fov, _optional_float(pixel_pitch, "pixel_pitch"),
+                                   _optional_float(focal_length, "focal_length"),
+                                   _optional_float(tau_s, "tau_s"))
+    return (cloud, where) if pixels else cloud

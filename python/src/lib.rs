@@ -6,6 +6,7 @@
 //! to call the user's callback and to let Ctrl-C interrupt them. Errors of the library become
 //! `ValueError` with its one-line message; arguments of the wrong type become `TypeError`.
 
+mod continuous;
 mod observer;
 mod operator;
 mod simulate;
@@ -121,6 +122,9 @@ fn _rdlidar(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(solve::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(solve::fista, m)?)?;
     m.add_function(wrap_pyfunction!(metrics, m)?)?;
+    m.add_function(wrap_pyfunction!(continuous::depth_bound, m)?)?;
+    m.add_function(wrap_pyfunction!(continuous::range_metrics, m)?)?;
+    m.add_function(wrap_pyfunction!(continuous::points, m)?)?;
     m.add_function(wrap_pyfunction!(solvers, m)?)?;
     m.add_function(wrap_pyfunction!(check_simulation_dir, m)?)?;
     Ok(())

@@ -133,6 +133,12 @@ fn fill_simulation<'py, T: Real + numpy::Element + ndarray_npy::WritableElement>
     d.set_item("codes", codes)?;
     d.set_item("meas", meas.into_pyarray(py))?;
     d.set_item("meta", json)?;
+    d.set_item(
+        "amplitude",
+        sim.returns
+            .as_ref()
+            .map(|r| r.amplitude_map().into_pyarray(py)),
+    )?;
     d.set_item("range", sim.returns.map(|r| r.range_map().into_pyarray(py)))?;
     Ok(())
 }

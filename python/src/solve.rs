@@ -185,6 +185,7 @@ fn run_reconstruct<'py, T: Real + numpy::Element>(
     report.set_item("request", FrontEnd::Python.words(&job.summary()))?;
     if let Some(returns) = outcome.returns {
         report.set_item("range", returns.range_map().into_pyarray(py))?;
+        report.set_item("amplitude", returns.amplitude_map().into_pyarray(py))?;
     }
     let depth = outcome.depth.depth.into_pyarray(py);
     let scene = outcome.scene.into_inner().into_pyarray(py);

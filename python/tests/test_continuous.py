@@ -105,3 +105,88 @@ def test_reconstruct_under_a_kernel_returns_the_continuous_depths(tmp_path, rdli
     with pytest.raises(ValueError) as e:
         rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 8, kernel=kernel, false_rate=0.01)
     assert "false_rate" in str(e.value)
+
+
+def test_the_bound_and_the_depth_errors_are_the_command_lines(tmp_path, rdlidar_bin):
+    sim = rdlidar.simulate("paper", size=(8, 8, 8), pulse_len=900, seed=3, depth="continuous",
+                           kernel="gaussian:0.8", snr_db=20, out=tmp_path / "s")
+    assert sim.amplitude.shape == sim.range.shape
+    assert np.array_equal(sim.amplitude > 0, ~np.isnan(sim.range))
+    sigma = sim.meta["noise"]["sigma"]
+    depth, scene, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 8,
+                                               kernel="gaussian:0.8")
+    assert report["amplitude"].shape == report["range"].shape
+    bound = rdlidar.depth_bound(sim.operator(), sim.range, sim.amplitude, "gaussian:0.8", sigma)
+    assert bound.shape == (1, 8, 8)
+    assert np.array_equal(np.isnan(bound[0]), np.isnan(sim.range))
+    lit = ~np.isnan(sim.range)
+    assert np.all((bound[0][lit] > 0) & np.isfinite(bound[0][lit]))
+    # Twice the noise, twice the bound.
+    twice = rdlidar.depth_bound(sim.operator(), sim.range, sim.amplitude, "gaussian:0.8",
+                                2 * sigma)
+    assert np.allclose(twice[0][lit], 2 * bound[0][lit], rtol=1e-12)
+    m = rdlidar.range_metrics(sim.range, report["range"], bound, tau_s=1e-9)
+    assert m["paired"] == lit.sum() and m["missed"] == 0
+    assert 0.5 < m["rmse_over_bound"] < 2.0
+    assert abs(m["rmse_m"] - m["rmse_bins"] * 0.299792458 / 2) < 1e-12
+    # The command line prints the same figures.
+    s = tmp_path / "s"
+    out = cli(rdlidar_bin, "reconstruct", "--pulse", s / "pulse.npy", "--codes", s / "codes.npy",
+              "--meas", s / "meas.npy", "--depth-bins", 8, "--solver", "auto", "--kernel",
+              "gaussian:0.8", "--out-depth", tmp_path / "d.npy", "--out-scene",
+              tmp_path / "x.npy", "--truth", s / "scene.npy", "--truth-range", s / "range.npy",
+              "--noise-sigma", repr(sigma))
+    assert out.returncode == 0, out.stderr
+    line = next(l for l in out.stdout.splitlines() if l.startswith("versus the true depths:"))
+    assert f"depth RMSE {m['rmse_bins']:.4f} bins" in line, line
+    assert f"Cramér–Rao bound {m['bound_bins']:.4f} bins" in line, line
+    assert f"RMSE/bound {m['rmse_over_bound']:.2f}" in line, line
+
+
+def test_points_are_the_ply_files_points(tmp_path, rdlidar_bin):
+    plyfile = pytest.importorskip("plyfile")
+    sim = rdlidar.simulate("transparent", size=(6, 7, 12), pulse_len=1500, seed=4,
+                           depth="continuous", out=tmp_path / "s")
+    s = tmp_path / "s"
+    out = cli(rdlidar_bin, "reconstruct", "--pulse", s / "pulse.npy", "--codes", s / "codes.npy",
+              "--meas", s / "meas.npy", "--depth-bins", 12, "--solver", "auto", "--kernel",
+              "triangle", "--returns", "auto", "--out-depth", tmp_path / "d.npy", "--out-scene",
+              tmp_path / "x.npy", "--out-range", tmp_path / "r.npy", "--out-points",
+              tmp_path / "p.ply", "--fov", "30x25", "--tau", "500ps")
+    assert out.returncode == 0, out.stderr
+    _, _, report = rdlidar.reconstruct(sim.pulse, sim.codes, sim.meas, 12, kernel="triangle")
+    assert np.array_equal(np.load(tmp_path / "r.npy"), report["range"], equal_nan=True)
+    cloud, where = rdlidar.points(report["range"], report["amplitude"], fov=(30, 25),
+                                  tau_s=500e-12, pixels=True)
+    assert cloud.shape == (np.count_nonzero(~np.isnan(report["range"])), 4)
+    assert where.shape == (cloud.shape[0], 2) and where.dtype == np.uint32
+    v = plyfile.PlyData.read(str(tmp_path / "p.ply"))["vertex"]
+    assert len(v) == cloud.shape[0]
+    for k, name in enumerate(["x", "y", "z", "intensity"]):
+        assert np.allclose(v[name], cloud[:, k].astype(np.float32), rtol=0, atol=0), name
+    assert np.array_equal(v["row"], where[:, 0]) and np.array_equal(v["col"], where[:, 1])
+    # The range of each point is its depth in metres.
+    r = np.linalg.norm(cloud[:, :3], axis=1)
+    d = report["range"] if report["range"].ndim == 3 else report["range"][None]
+    depths = np.concatenate([np.sort(d[:, i, j][~np.isnan(d[:, i, j])])
+                             for i in range(6) for j in range(7)])
+    assert np.allclose(r, depths * 299792458 * 500e-12 / 2, rtol=1e-12)
+
+
+@pytest.mark.parametrize("call,needle", [
+    (lambda r, a, op: rdlidar.points(r, a), "fov"),
+    (lambda r, a, op: rdlidar.points(r, a, fov=200), "fov"),
+    (lambda r, a, op: rdlidar.points(r, a, pixel_pitch=1e-5, focal_length=0), "focal_length"),
+    (lambda r, a, op: rdlidar.points(r, a[:, :4], fov=30), "amplitude"),
+    (lambda r, a, op: rdlidar.points(r, a, fov=30, tau_s=-1), "tau_s"),
+    (lambda r, a, op: rdlidar.depth_bound(op, r, a, "delta", 1.0), "kernel"),
+    (lambda r, a, op: rdlidar.depth_bound(op, r, a, "triangle", -1.0), "sigma"),
+    (lambda r, a, op: rdlidar.depth_bound(op, r + 20, a, "triangle", 1.0), "depth"),
+    (lambda r, a, op: rdlidar.range_metrics(r[0], r), "truth"),
+    (lambda r, a, op: rdlidar.range_metrics(r, r[:4]), "estimate"),
+])
+def test_bad_points_bounds_and_metrics_name_their_argument(call, needle):
+    sim = rdlidar.simulate("paper", size=(6, 6, 8), pulse_len=200, depth="continuous")
+    with pytest.raises(ValueError) as e:
+        call(sim.range, sim.amplitude, sim.operator())
+    assert str(e.value).startswith(needle), str(e.value)

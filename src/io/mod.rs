@@ -26,6 +26,7 @@
 
 pub mod meta;
 pub mod npy;
+mod ply;
 #[cfg(feature = "images")]
 mod png;
 
@@ -46,6 +47,7 @@ pub use npy::{
     write_depth, write_masked_codes, write_measurements, write_packed_code_sets,
     write_packed_codes, write_pulse, write_scene, NpyDtype, NpyHeader, ShapeExpectation,
 };
+pub use ply::{ply_bytes, stage_points};
 #[cfg(feature = "images")]
 pub use png::{png_dimensions, returns_from_pngs, scene_from_pngs};
 

@@ -232,6 +232,16 @@ impl Returns {
         }
     }
 
+    /// The amplitudes in the shape of [`range_map`](Self::range_map): (M, N) for one return per
+    /// pixel, (R, M, N) for several; 0 where there is none.
+    pub fn amplitude_map(&self) -> ArrayD<f64> {
+        if self.layers() == 1 {
+            self.amplitude.index_axis(Axis(0), 0).to_owned().into_dyn()
+        } else {
+            self.amplitude.clone().into_dyn()
+        }
+    }
+
     /// Each pixel's strongest return at its nearest bin (clamped to [0, `ks`)), as a depth map.
     pub fn nearest(&self, ks: usize) -> DepthMap<f64> {
         let (r, m, n) = self.depth.dim();

@@ -8,7 +8,9 @@ use rdlidar::acquisition::{
     Reconstructed, Use, RECONSTRUCT_SCENES,
 };
 use rdlidar::io::{self, StagedFile};
-use rdlidar::lidar::{depth_bin_m, Response, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED};
+use rdlidar::lidar::{
+    depth_bin_m, Camera, Response, Returns, Scene, TileSize, DEFAULT_TAU_S, UNOBSERVED,
+};
 use rdlidar::recon::{
     compare, compare_observed, Method, NoiseModel, PeakThreshold, ReconstructOptions,
     TileReconstruction, MAX_RETURNS_ESTIMATE,
@@ -98,8 +100,25 @@ pub struct ReconstructArgs {
     /// (`simulate`'s meta.json, noise.sigma); by default the one the estimate's residual shows.
     #[arg(long, value_name = "S", requires = "truth_range", allow_hyphen_values = true, value_parser = parse_noise_sigma)]
     pub noise_sigma: Option<f64>,
+    /// Write every return as a point cloud: a binary PLY file of x, y, z in metres (a pinhole
+    /// camera at the origin looking along +z, x right, y down) along each pixel's ray at the
+    /// range its depth gives, intensity its amplitude, and its pixel row and column. Needs the
+    /// camera: --fov, or --pixel-pitch and --focal-length. Continuous depths under --kernel,
+    /// otherwise every nonzero voxel of the estimate at its bin.
+    #[arg(long, value_name = "P.ply")]
+    pub out_points: Option<PathBuf>,
+    /// The field of view across the N pixel columns, in degrees, and down the M rows as HxV
+    /// (square pixels when only H is given), for --out-points.
+    #[arg(long, value_name = "H[xV]", value_parser = parse_fov, conflicts_with_all = ["pixel_pitch", "focal_length"])]
+    pub fov: Option<(f64, Option<f64>)>,
+    /// The pixel pitch, in the unit of --focal-length, for --out-points.
+    #[arg(long, value_name = "P", requires = "focal_length", value_parser = parse_length)]
+    pub pixel_pitch: Option<f64>,
+    /// The focal length, in the unit of --pixel-pitch, for --out-points.
+    #[arg(long, value_name = "F", requires = "pixel_pitch", value_parser = parse_length)]
+    pub focal_length: Option<f64>,
     /// The sampling period τ (200ps by default): one depth bin is c·τ/2, the unit of the
-    /// metres and millimetres that --truth and --truth-range print.
+    /// metres and millimetres that --truth and --truth-range print and of --out-points.
     #[arg(long, value_name = "T", value_parser = parse_tau_flag)]
     pub tau: Option<f64>,
     /// Which per-pixel peaks the backprojections keep: paper (0.4 times the 99th percentile of the
@@ -176,6 +195,50 @@ fn parse_noise_sigma(text: &str) -> Result<f64, String> {
         Ok(s) if s.is_finite() && s >= 0.0 => Ok(s),
         _ => Err(format!("expected a finite number >= 0, got {text:?}")),
     }
+}
+
+/// A `--fov` value: H or HxV degrees, each in (0, 180).
+fn parse_fov(text: &str) -> Result<(f64, Option<f64>), String> {
+    let angle = |t: &str| -> Result<f64, String> {
+        match t.trim().parse::<f64>() {
+            Ok(v) if v > 0.0 && v < 180.0 => Ok(v),
+            _ => Err(format!(
+                "expected an angle in degrees between 0 and 180, or HxV, got {text:?}"
+            )),
+        }
+    };
+    match text.split_once('x') {
+        Some((h, v)) => Ok((angle(h)?, Some(angle(v)?))),
+        None => Ok((angle(text)?, None)),
+    }
+}
+
+/// A `--pixel-pitch` or `--focal-length` value: finite and > 0.
+fn parse_length(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a length > 0, got {text:?}")),
+    }
+}
+
+const NO_CAMERA: &str = "--out-points: give the camera, --fov H[xV] (degrees) or \
+                         --pixel-pitch and --focal-length";
+
+/// The camera of `--fov` or `--pixel-pitch` and `--focal-length` for `--out-points`, on the
+/// grid `g`.
+fn camera_of(a: &ReconstructArgs, g: rdlidar::lidar::Geometry) -> CliResult<Camera> {
+    let camera = match (a.fov, a.pixel_pitch, a.focal_length) {
+        (Some((h, v)), _, _) => Camera::field_of_view(h, v, g.m, g.n),
+        (None, Some(p), Some(f)) => Camera::pinhole(p, f),
+        _ => return Err(NO_CAMERA.to_string().into()),
+    };
+    camera.map_err(|e| {
+        let flag = match &e {
+            rdlidar::Error::InvalidParameter { name: "fov", .. } => "--fov",
+            _ => "--pixel-pitch",
+        };
+        format!("{flag}: {}", FrontEnd::CommandLine.reason(&e)).into()
+    })
 }
 
 /// A `--tau` duration with its unit (200ps, 1ns).
@@ -300,6 +363,12 @@ pub fn run(a: &ReconstructArgs, globals: &Globals, ranks: &Ranks) -> CliResult {
     if let Some(range) = &a.out_range {
         outputs.push(("--out-range", range.as_path()));
     }
+    if let Some(points) = &a.out_points {
+        if a.fov.is_none() && a.pixel_pitch.is_none() {
+            return Err(NO_CAMERA.to_string().into());
+        }
+        outputs.push(("--out-points", points.as_path()));
+    }
     if let Some(t) = &a.truth_range {
         inputs.push((t, "--truth-range"));
     }
@@ -423,6 +492,19 @@ fn reconstruct_files<T: Real + WritableElement>(
     ];
     if let (Some(path), Some(returns)) = (&a.out_range, &r.returns) {
         staged.push(io::stage_array(path, &returns.range_map())?);
+    }
+    if let Some(path) = &a.out_points {
+        let grid;
+        let returns = match &r.returns {
+            Some(returns) => returns,
+            None => {
+                grid = Returns::of_scene(&r.scene);
+                &grid
+            }
+        };
+        let (cloud, pixels) =
+            rdlidar::lidar::points(returns, depth_bin_m(tau)?, &camera_of(a, g)?)?;
+        staged.push(io::stage_points(path, &cloud, &pixels)?);
     }
     if let Some(png) = &a.png {
         let bin_m = depth_bin_m(tau)?;
