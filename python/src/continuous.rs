@@ -79,6 +79,9 @@ pub(crate) fn range_metrics<'py>(
     Ok(pythonize(py, &m)?)
 }
 
+/// Points (P, 4) and their pixels (P, 2).
+type Cloud<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u32>>);
+
 /// Every return as a point (x, y, z, intensity) and its pixel (row, column).
 #[pyfunction]
 #[pyo3(signature = (range, amplitude, fov=None, pixel_pitch=None, focal_length=None, tau_s=None))]
@@ -90,7 +93,7 @@ pub(crate) fn points<'py>(
     pixel_pitch: Option<f64>,
     focal_length: Option<f64>,
     tau_s: Option<f64>,
-) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u32>>)> {
+) -> PyResult<Cloud<'py>> {
     let returns = returns_of(&range, Some(&amplitude), "range")?;
     let (_, m, n) = returns.depth.dim();
     let camera = match (fov, pixel_pitch, focal_length) {
@@ -105,13 +108,13 @@ pub(crate) fn points<'py>(
     }
     .map_err(value_error)?;
     let bin_m = depth_bin_m(tau_s.unwrap_or(DEFAULT_TAU_S)).map_err(value_error)?;
-    let (cloud, pixels) = rdlidar::lidar::points(&returns, bin_m, &camera).map_err(value_error)?;
-    let pixels = numpy::ndarray::Array2::from_shape_fn((pixels.len(), 2), |(p, c)| {
+    let cloud = rdlidar::lidar::points(&returns, bin_m, &camera).map_err(value_error)?;
+    let pixels = numpy::ndarray::Array2::from_shape_fn((cloud.pixels.len(), 2), |(p, c)| {
         if c == 0 {
-            pixels[p].0
+            cloud.pixels[p].0
         } else {
-            pixels[p].1
+            cloud.pixels[p].1
         }
     });
-    Ok((cloud.into_pyarray(py), pixels.into_pyarray(py)))
+    Ok((cloud.points.into_pyarray(py), pixels.into_pyarray(py)))
 }

@@ -4,21 +4,21 @@
 
 use std::path::Path;
 
-use ndarray::Array2;
-
 use crate::error::Result;
+use crate::lidar::PointCloud;
 
 use super::{stage_bytes, StagedFile};
 
-/// The bytes of a binary PLY file of the points `cloud` (P, 4): x, y, z, intensity, with each
-/// point's pixel (row, column) from `pixels`. Values are written as float32.
+/// The bytes of a binary PLY file of `cloud`: x, y, z, intensity (written as float32), and each
+/// point's pixel row and column.
 ///
 /// # Panics
-/// If `cloud` is not (P, 4) with P = `pixels.len()`: both come from
-/// [`points`](crate::lidar::points).
-pub fn ply_bytes(cloud: &Array2<f64>, pixels: &[(u32, u32)]) -> Vec<u8> {
+/// If `cloud.points` is not (P, 4) with P = `cloud.pixels.len()`, as
+/// [`points`](crate::lidar::points) makes it.
+pub fn ply_bytes(cloud: &PointCloud) -> Vec<u8> {
+    let pixels = &cloud.pixels;
     assert_eq!(
-        cloud.dim(),
+        cloud.points.dim(),
         (pixels.len(), 4),
         "one row of four values per pixel"
     );
@@ -31,7 +31,7 @@ pub fn ply_bytes(cloud: &Array2<f64>, pixels: &[(u32, u32)]) -> Vec<u8> {
     );
     let mut bytes = Vec::with_capacity(header.len() + pixels.len() * 24);
     bytes.extend_from_slice(header.as_bytes());
-    for (point, &(row, col)) in cloud.outer_iter().zip(pixels) {
+    for (point, &(row, col)) in cloud.points.outer_iter().zip(pixels) {
         for v in point {
             bytes.extend_from_slice(&(*v as f32).to_le_bytes());
         }
@@ -41,16 +41,12 @@ pub fn ply_bytes(cloud: &Array2<f64>, pixels: &[(u32, u32)]) -> Vec<u8> {
     bytes
 }
 
-/// Stages the PLY file of `cloud` and `pixels` at `path` ([`stage_bytes`]).
+/// Stages the PLY file of `cloud` at `path` ([`stage_bytes`]).
 ///
 /// # Errors
 /// [`Error::File`](crate::Error::File) naming `path` when it cannot be written.
-pub fn stage_points(
-    path: impl AsRef<Path>,
-    cloud: &Array2<f64>,
-    pixels: &[(u32, u32)],
-) -> Result<StagedFile> {
-    stage_bytes(path, &ply_bytes(cloud, pixels))
+pub fn stage_points(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<StagedFile> {
+    stage_bytes(path, &ply_bytes(cloud))
 }
 
 #[cfg(test)]
@@ -59,8 +55,11 @@ mod tests {
 
     #[test]
     fn the_header_counts_the_points_and_each_point_takes_24_bytes() {
-        let cloud = ndarray::arr2(&[[1.0, -2.0, 3.5, 0.25], [0.0, 0.0, 7.0, 1.0]]);
-        let bytes = ply_bytes(&cloud, &[(0, 1), (4, 2)]);
+        let cloud = PointCloud {
+            points: ndarray::arr2(&[[1.0, -2.0, 3.5, 0.25], [0.0, 0.0, 7.0, 1.0]]),
+            pixels: vec![(0, 1), (4, 2)],
+        };
+        let bytes = ply_bytes(&cloud);
         let end = b"end_header\n";
         let at = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
         let header = std::str::from_utf8(&bytes[..at]).unwrap();
@@ -75,6 +74,10 @@ mod tests {
             (1.0, -2.0, 3.5, 0.25, 0, 1)
         );
         assert_eq!((f(32), u(40), u(44)), (7.0, 4, 2));
-        assert!(ply_bytes(&Array2::zeros((0, 4)), &[]).ends_with(b"element vertex 0\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\nproperty uint row\nproperty uint col\nend_header\n"));
+        let empty = PointCloud {
+            points: ndarray::Array2::zeros((0, 4)),
+            pixels: Vec::new(),
+        };
+        assert!(ply_bytes(&empty).ends_with(b"element vertex 0\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\nproperty uint row\nproperty uint col\nend_header\n"));
     }
 }

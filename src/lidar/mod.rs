@@ -56,7 +56,7 @@ pub fn kernel_isa() -> &'static str {
 pub use composed::composed_operator;
 pub use footprint::{gather_limit, GatherLimit, KernelWork, OperatorWork};
 pub use kernels::ISA_VAR;
-pub use points::{points, Camera};
+pub use points::{points, Camera, PointCloud};
 pub use rdop::{ForwardPath, RdOperator};
 pub use sampling::{depth_bin_m, parse_tau, DEFAULT_TAU_S, SPEED_OF_LIGHT};
 pub use scene::{DepthMap, Scene, NO_RETURN, UNOBSERVED};

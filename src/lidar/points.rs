@@ -91,17 +91,22 @@ fn positive(name: &'static str, v: f64) -> Result<()> {
     }
 }
 
+/// Returns as points ([`points`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointCloud {
+    /// (P, 4): x, y, z in metres and the intensity (the return's amplitude).
+    pub points: Array2<f64>,
+    /// Each point's pixel (row, column).
+    pub pixels: Vec<(u32, u32)>,
+}
+
 /// Every return as a point: rows (x, y, z, intensity), x, y, z in metres along its pixel's ray
 /// at range d·`bin_m`, intensity its amplitude; the pixel row and column of each point beside.
 /// Pixels in row-major order, a pixel's returns nearest first.
 ///
 /// # Errors
 /// [`Error::InvalidParameter`] (`bin_m`) unless it is finite and > 0.
-pub fn points(
-    returns: &Returns,
-    bin_m: f64,
-    camera: &Camera,
-) -> Result<(Array2<f64>, Vec<(u32, u32)>)> {
+pub fn points(returns: &Returns, bin_m: f64, camera: &Camera) -> Result<PointCloud> {
     positive("bin_m", bin_m)?;
     let (layers, m, n) = returns.depth.dim();
     let mut rows = Vec::new();
@@ -122,8 +127,8 @@ pub fn points(
         }
     }
     let count = pixels.len();
-    let cloud = Array2::from_shape_vec((count, 4), rows).expect("four values per point");
-    Ok((cloud, pixels))
+    let points = Array2::from_shape_vec((count, 4), rows).expect("four values per point");
+    Ok(PointCloud { points, pixels })
 }
 
 #[cfg(test)]
@@ -141,7 +146,10 @@ mod tests {
         )
         .unwrap();
         let camera = Camera::field_of_view(60.0, None, 1, 3).unwrap();
-        let (cloud, pixels) = points(&returns, 0.03, &camera).unwrap();
+        let PointCloud {
+            points: cloud,
+            pixels,
+        } = points(&returns, 0.03, &camera).unwrap();
         assert_eq!(cloud.dim(), (3, 4));
         assert_eq!(pixels, [(0, 0), (0, 2), (0, 2)]);
         // Pixel (0, 2)'s returns nearest first.

@@ -502,9 +502,8 @@ fn reconstruct_files<T: Real + WritableElement>(
                 &grid
             }
         };
-        let (cloud, pixels) =
-            rdlidar::lidar::points(returns, depth_bin_m(tau)?, &camera_of(a, g)?)?;
-        staged.push(io::stage_points(path, &cloud, &pixels)?);
+        let cloud = rdlidar::lidar::points(returns, depth_bin_m(tau)?, &camera_of(a, g)?)?;
+        staged.push(io::stage_points(path, &cloud)?);
     }
     if let Some(png) = &a.png {
         let bin_m = depth_bin_m(tau)?;
