@@ -18,6 +18,7 @@ mod pursuit;
 mod range_metrics;
 mod reconstruct;
 mod refit;
+mod reseat;
 mod subbin;
 mod tiled;
 

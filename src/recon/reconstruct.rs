@@ -268,6 +268,7 @@ fn continuous<T: Real>(
         ),
         _ => from_grid(observer)?,
     };
+    let estimate = subbin::settle(op, y, estimate, &options.response)?;
     let scene = Scene::from_vec(g, estimate.x)?;
     let mut depth = estimate.returns.nearest(g.ks);
     if let Some(observed) = op.observed_pixels() {

@@ -26,7 +26,7 @@ use super::options::{model_params, ReconstructOptions};
 pub const ATOMS_PER_BIN: usize = 8;
 
 /// Gauss–Newton steps at most.
-const GN_STEPS: usize = 30;
+pub(super) const GN_STEPS: usize = 30;
 
 /// Halvings of a step that does not lower the residual before the fit stops.
 const HALVINGS: usize = 6;
@@ -39,11 +39,14 @@ pub(crate) struct Ret {
     pub d: f64,
 }
 
-/// What the continuous estimate is: the returns, their voxels, and the work.
+/// What the continuous estimate is: the returns, their voxels, the work, and the squared
+/// misfit of the fit.
 pub(crate) struct Continuous<T> {
     pub x: Vec<T>,
     pub returns: Returns,
     pub report: Report,
+    found: Vec<Ret>,
+    misfit: f64,
 }
 
 /// The pursuit on the response's atoms (model-based, one return per pixel unless `options`
@@ -122,27 +125,56 @@ fn fit<T: Real>(
     response: &Response,
     report: &mut Report,
 ) -> Result<Continuous<T>> {
-    let g = op.geometry();
     let mut applies = Applies::default();
-    let (found, _) = refine(op, y, found, response, &mut applies)?;
+    let (found, misfit) = refine(op, y, found, response, GN_STEPS, &mut applies)?;
     report.add_applies(applies);
+    continuous_of(op, found, misfit, response, report.clone())
+}
+
+fn continuous_of<T: Real>(
+    op: &dyn LidarOperator<T>,
+    found: Vec<Ret>,
+    misfit: f64,
+    response: &Response,
+    report: Report,
+) -> Result<Continuous<T>> {
+    let g = op.geometry();
     let returns = returns_of(&found, g.m, g.n);
     let x = returns.render::<T>(g.ks, response)?.as_slice().to_vec();
     Ok(Continuous {
         x,
         returns,
-        report: report.clone(),
+        report,
+        found,
+        misfit,
     })
+}
+
+/// The fitted estimate `c` after rounds of neighbour proposals
+/// ([`refine_with_neighbours`](super::reseat::refine_with_neighbours)).
+pub(crate) fn settle<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    c: Continuous<T>,
+    response: &Response,
+) -> Result<Continuous<T>> {
+    let mut applies = Applies::default();
+    let (found, misfit) =
+        super::reseat::refine_with_neighbours(op, y, (c.found, c.misfit), response, &mut applies)?;
+    let mut report = c.report;
+    report.add_applies(applies);
+    continuous_of(op, found, misfit, response, report)
 }
 
 /// The least-squares fit of the returns `found` under `response` (the triangle's pair fit,
 /// then Gauss–Newton), without the returns whose amplitude fell to zero, and its squared
 /// residual.
-fn refine<T: Real>(
+pub(super) fn refine<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
     mut found: Vec<Ret>,
     response: &Response,
+    steps: usize,
     applies: &mut Applies,
 ) -> Result<(Vec<Ret>, f64)> {
     let g = op.geometry();
@@ -152,7 +184,7 @@ fn refine<T: Real>(
         found = fit_pairs(op, y, found, g.ks, applies)?;
     }
     let mut rr = residual(op, y, &found, response, g.ks, applies)?;
-    for _ in 0..GN_STEPS {
+    for _ in 0..steps {
         if found.is_empty() || rr <= 1e-30 * yy {
             break;
         }
@@ -189,7 +221,9 @@ fn refine<T: Real>(
             break;
         }
     }
-    found.retain(|r| r.a > 0.0);
+    // Amplitudes at round-off of the largest are no return.
+    let largest = found.iter().map(|r| r.a).fold(0.0, f64::max);
+    found.retain(|r| r.a > 1e-9 * largest);
     Ok((found, rr))
 }
 
