@@ -253,22 +253,30 @@ fn continuous<T: Real>(
         let c = subbin::from_voxels(op, y, &x, &options.response, report)?;
         Ok((c, used, stages))
     };
+    let response = &options.response;
     let (estimate, method_used, stages) = match method {
         Method::ModelBased => (
-            subbin::pursue(op, y, options, observer)?,
+            subbin::settle(op, y, subbin::pursue(op, y, options, observer)?, response)?,
             Method::ModelBased,
             Vec::new(),
         ),
-        // Both starts, the one that explains the data better kept.
-        Method::Auto => subbin::better_start(
-            op,
-            y,
-            subbin::pursue(op, y, options, observer)?,
-            from_grid(observer)?,
-        ),
-        _ => from_grid(observer)?,
+        // The fit from the grid; where it leaves the data unexplained, the pursuit on the
+        // atoms too, and the one that explains the data better kept and settled.
+        Method::Auto => {
+            let (grid, used, stages) = from_grid(observer)?;
+            let atoms = if subbin::explains(y, &grid) {
+                None
+            } else {
+                Some(subbin::pursue(op, y, options, observer)?)
+            };
+            let (kept, used, stages) = subbin::better_start(y, atoms, (grid, used, stages));
+            (subbin::settle(op, y, kept, response)?, used, stages)
+        }
+        _ => {
+            let (grid, used, stages) = from_grid(observer)?;
+            (subbin::settle(op, y, grid, response)?, used, stages)
+        }
     };
-    let estimate = subbin::settle(op, y, estimate, &options.response)?;
     let scene = Scene::from_vec(g, estimate.x)?;
     let mut depth = estimate.returns.nearest(g.ks);
     if let Some(observed) = op.observed_pixels() {

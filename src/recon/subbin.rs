@@ -524,28 +524,19 @@ pub(crate) fn returns_of(found: &[Ret], m: usize, n: usize) -> Returns {
     Returns { depth, amplitude }
 }
 
-/// Of two continuous estimates of `auto`, the pursuit on the response's atoms (`atoms`) and
-/// the fit from the grid methods' returns (`grid`, with the method auto kept and its stages),
-/// the one whose data misfit ‖y − A·x‖ is smaller, with both told as stages.
+/// Of two continuous estimates of `auto`, the pursuit on the response's atoms (`atoms`, none
+/// when the fit from the grid explained the data) and the fit from the grid methods' returns
+/// (`grid`, with the method auto kept and its stages), the one whose data misfit ‖y − A·x‖ is
+/// smaller, with each told as a stage.
 pub(crate) fn better_start<T: Real>(
-    op: &dyn LidarOperator<T>,
     y: &[T],
-    atoms: Continuous<T>,
+    atoms: Option<Continuous<T>>,
     grid: (Continuous<T>, Method, Vec<Stage>),
 ) -> (Continuous<T>, Method, Vec<Stage>) {
-    let misfit = |x: &[T]| {
-        let mut ax = vec![T::zero(); y.len()];
-        op.apply(x, &mut ax);
-        let rr: f64 = y
-            .iter()
-            .zip(&ax)
-            .map(|(a, b)| (a.as_f64() - b.as_f64()).powi(2))
-            .sum();
-        (rr / dot(y, y).max(f64::MIN_POSITIVE)).sqrt()
-    };
     let (grid, used, mut stages) = grid;
-    let (ra, rg) = (misfit(&atoms.x), misfit(&grid.x));
-    let keep_atoms = ra <= rg;
+    let rg = relative_misfit(y, &grid);
+    let ra = atoms.as_ref().map(|a| relative_misfit(y, a));
+    let keep_atoms = ra.is_some_and(|ra| ra <= rg);
     if keep_atoms {
         stages.iter_mut().for_each(|s| s.kept = false);
     }
@@ -557,25 +548,36 @@ pub(crate) fn better_start<T: Real>(
         kept,
         verdict: verdict.to_string(),
     };
-    stages.push(stage(
-        Method::ModelBased,
-        ra,
-        &atoms,
-        keep_atoms,
-        "continuous depths from the pursuit on the response's atoms",
-    ));
-    stages.push(stage(
-        used,
-        rg,
-        &grid,
-        !keep_atoms,
-        "continuous depths fitted from the grid methods' returns",
-    ));
-    if keep_atoms {
-        (atoms, Method::ModelBased, stages)
-    } else {
-        (grid, used, stages)
+    if let (Some(a), Some(ra)) = (&atoms, ra) {
+        stages.push(stage(
+            Method::ModelBased,
+            ra,
+            a,
+            keep_atoms,
+            "continuous depths from the pursuit on the response's atoms",
+        ));
     }
+    let verdict = if atoms.is_some() {
+        "continuous depths fitted from the grid methods' returns"
+    } else {
+        "continuous depths fitted from the grid methods' returns explain the data: no pursuit \
+         on the response's atoms"
+    };
+    stages.push(stage(used, rg, &grid, !keep_atoms, verdict));
+    match atoms {
+        Some(a) if keep_atoms => (a, Method::ModelBased, stages),
+        _ => (grid, used, stages),
+    }
+}
+
+/// ‖y − A·x‖/‖y‖ of a fitted estimate.
+fn relative_misfit<T: Real>(y: &[T], c: &Continuous<T>) -> f64 {
+    (c.misfit / dot(y, y).max(f64::MIN_POSITIVE)).sqrt()
+}
+
+/// Whether a fitted estimate explains the data to round-off.
+pub(crate) fn explains<T: Real>(y: &[T], c: &Continuous<T>) -> bool {
+    relative_misfit(y, c) <= 1e-9
 }
 
 #[cfg(test)]

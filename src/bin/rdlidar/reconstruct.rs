@@ -96,9 +96,10 @@ pub struct ReconstructArgs {
     /// true amplitudes, the Cramér–Rao bound beside it (RMSE/bound).
     #[arg(long, value_name = "R.npy")]
     pub truth_range: Option<PathBuf>,
-    /// The noise's standard deviation per sample that the bound of --truth-range assumes
-    /// (`simulate`'s meta.json, noise.sigma); by default the one the estimate's residual shows.
-    #[arg(long, value_name = "S", requires = "truth_range", allow_hyphen_values = true, value_parser = parse_noise_sigma)]
+    /// With --truth and --truth-range: the noise's standard deviation per sample that the bound
+    /// assumes (`simulate`'s meta.json, noise.sigma); by default the one the estimate's residual
+    /// shows.
+    #[arg(long, value_name = "S", requires_all = ["truth_range", "truth"], allow_hyphen_values = true, value_parser = parse_noise_sigma)]
     pub noise_sigma: Option<f64>,
     /// Write every return as a point cloud: a binary PLY file of x, y, z in metres (a pinhole
     /// camera at the origin looking along +z, x right, y down) along each pixel's ray at the
