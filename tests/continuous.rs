@@ -409,26 +409,8 @@ fn reconstruct_writes_continuous_depths_with_a_kernel_and_refuses_them_without()
         s(&dir),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let files = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let base = [
-        "reconstruct".to_string(),
-        "--pulse".into(),
-        files("pulse.npy"),
-        "--codes".into(),
-        files("codes.npy"),
-        "--meas".into(),
-        files("meas.npy"),
-        "--depth-bins".into(),
-        "8".into(),
-        "--out-depth".into(),
-        files("d.npy"),
-        "--out-scene".into(),
-        files("x.npy"),
-        "--solver".into(),
-        "auto".into(),
-        "--out-range".into(),
-        files("r.npy"),
-    ];
+    let r = dir.join("r.npy");
+    let base = reconstruct_args(&dir, "8", "--out-range", r.to_str().unwrap());
     let args: Vec<&str> = base.iter().map(String::as_str).collect();
     let out = rdlidar(&args);
     let e = stderr(&out);

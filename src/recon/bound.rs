@@ -85,12 +85,13 @@ pub fn depth_bound<T: Real>(
             if rets.is_empty() {
                 return Vec::new();
             }
-            let cols = parameter_columns(&rets, response, g.ks);
-            let fisher = match &uniform {
-                Some(gram) => fisher_by_gram(gram, g.ks, &cols),
-                None => fisher_by_columns(op, p, &cols),
-            };
-            bounds_of(fisher, rets.len(), sigma)
+            match &uniform {
+                Some(gram) => pixel_bound(gram, g.ks, &rets, response, sigma),
+                None => {
+                    let cols = parameter_columns(&rets, response, g.ks);
+                    bounds_of(fisher_by_columns(op, p, &cols), rets.len(), sigma)
+                }
+            }
         })
         .collect();
     let mut bound = Array3::from_elem((layers, m, n), f64::NAN);
@@ -117,7 +118,20 @@ fn parameter_columns(rets: &[(f64, f64)], response: &Response, ks: usize) -> Vec
         .collect()
 }
 
-/// CᵀGC from the pixels' common Gram block `gram` (ks × ks, row-major).
+/// The bound on the depth of each of one pixel's returns `(a, d)` from its Gram block `gram`
+/// (ks × ks, row-major), the other pixels held.
+pub(super) fn pixel_bound(
+    gram: &[f64],
+    ks: usize,
+    rets: &[(f64, f64)],
+    response: &Response,
+    sigma: f64,
+) -> Vec<f64> {
+    let cols = parameter_columns(rets, response, ks);
+    bounds_of(fisher_by_gram(gram, ks, &cols), rets.len(), sigma)
+}
+
+/// CᵀGC from a pixel's Gram block `gram` (ks × ks, row-major).
 fn fisher_by_gram(gram: &[f64], ks: usize, cols: &[Vec<f64>]) -> nalgebra::DMatrix<f64> {
     let gc: Vec<Vec<f64>> = cols
         .iter()

@@ -5,8 +5,10 @@
 //! plane through two neighbours in a line continued to the pixel) and no return; a proposal is
 //! taken where it lowers the data misfit by more than the noise could (the pixel's own
 //! contribution added back to the residual, its amplitude by least squares, the change judged
-//! through the pixel's Gram block), the proposals are applied together (fewer when together
-//! they do not lower the misfit), and the fit runs again.
+//! through the pixel's Gram block), or, for a depth further from its neighbours' prediction
+//! than its scatter at the noise level, where a short fit of all the returns lowers it; the
+//! proposals are applied together (fewer when together they do not lower the misfit), and the
+//! fit runs again.
 
 use rayon::prelude::*;
 
@@ -59,24 +61,12 @@ impl Pixel<'_> {
     /// The Cramér–Rao bound on the depth of a return (a, d) at noise σ, the other pixels held
     /// (infinite where it cannot be placed).
     fn depth_bound(&self, a: f64, d: f64, sigma: f64) -> f64 {
-        let (mut value, mut slope) = (vec![0.0; self.ks], vec![0.0; self.ks]);
-        for k in self.response.voxels(d, self.ks) {
-            let (v, s) = self.response.eval(k as f64 - d);
-            value[k] = v;
-            slope[k] = -a * s;
-        }
-        let (gv, gs) = (self.times(&value), self.times(&slope));
-        let (faa, fad, fdd) = (dot(&value, &gv), dot(&value, &gs), dot(&slope, &gs));
-        let det = faa * fdd - fad * fad;
-        if det > 0.0 {
-            sigma * (faa / det).sqrt()
-        } else {
-            f64::INFINITY
-        }
+        super::bound::pixel_bound(self.gram, self.ks, &[(a, d)], self.response, sigma)[0]
     }
 
-    /// The least-squares amplitude a of a return at depth `d` against the pixel's correlations
-    /// `b`, and its misfit term −⟨g, b⟩²/‖A·g‖² (none when a would not be positive).
+    /// The misfit term −⟨g, b⟩²/‖A·g‖² of a return at depth `d` against the pixel's
+    /// correlations `b`, and its least-squares amplitude ⟨g, b⟩/‖A·g‖² (none when that would
+    /// not be positive).
     fn fit(&self, d: f64, b: &[f64]) -> Option<(f64, f64)> {
         let col = self.column(Some((1.0, d)));
         let (norm, gb) = (dot(&col, &self.times(&col)), dot(&col, b));
@@ -105,8 +95,9 @@ struct Proposal {
     pixel: usize,
     to: Option<(f64, f64)>,
     gain: f64,
-    /// Whether the pixel's depth is more than a bin from every depth its neighbours suggest:
-    /// proposed whatever the gain with the other returns held, for the fit of all may gain.
+    /// Whether the pixel's depth lies further from what its neighbours predict than its scatter
+    /// at the noise level: proposed whatever the gain with the other returns held, for the fit
+    /// of all may gain.
     outlier: bool,
 }
 
