@@ -287,6 +287,26 @@ fn simulated(
     (sim, acq)
 }
 
+/// `simulate --scene paper --size SIZE --pulse-len 900 --depth continuous` with `extra` into `dir`.
+fn simulate_paper(dir: &std::path::Path, size: &str, extra: &[&str]) {
+    let mut args = vec![
+        "simulate",
+        "--scene",
+        "paper",
+        "--size",
+        size,
+        "--pulse-len",
+        "900",
+        "--depth",
+        "continuous",
+        "--out",
+        s(dir),
+    ];
+    args.extend(extra);
+    let out = rdlidar(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
 /// `reconstruct` of the simulation in `dir` (K_s `ks`) with --solver auto, its outputs beside
 /// the inputs, and `flag value`.
 fn reconstruct_args(dir: &std::path::Path, ks: &str, flag: &str, value: &str) -> Vec<String> {
@@ -395,20 +415,7 @@ fn with_enough_measurements_continuous_depths_come_back_exact_under_each_kernel(
 fn reconstruct_writes_continuous_depths_with_a_kernel_and_refuses_them_without() {
     let tmp = TempDir::new("out-range");
     let dir = tmp.path("run");
-    let out = rdlidar(&[
-        "simulate",
-        "--scene",
-        "paper",
-        "--size",
-        "8x8x8",
-        "--pulse-len",
-        "900",
-        "--depth",
-        "continuous",
-        "--out",
-        s(&dir),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    simulate_paper(&dir, "8x8x8", &[]);
     let r = dir.join("r.npy");
     let base = reconstruct_args(&dir, "8", "--out-range", r.to_str().unwrap());
     let args: Vec<&str> = base.iter().map(String::as_str).collect();
@@ -437,26 +444,11 @@ fn reconstruct_writes_continuous_depths_with_a_kernel_and_refuses_them_without()
 fn reconstruct_compares_continuous_depths_with_the_truth_beside_the_bound() {
     let tmp = TempDir::new("truth-range");
     let dir = tmp.path("run");
-    let out = rdlidar(&[
-        "simulate",
-        "--scene",
-        "paper",
-        "--size",
+    simulate_paper(
+        &dir,
         "8x8x8",
-        "--pulse-len",
-        "900",
-        "--depth",
-        "continuous",
-        "--kernel",
-        "gaussian:0.8",
-        "--snr-db",
-        "20",
-        "--seed",
-        "3",
-        "--out",
-        s(&dir),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+        &["--kernel", "gaussian:0.8", "--snr-db", "20", "--seed", "3"],
+    );
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
     let sigma = meta["noise"]["sigma"].as_f64().unwrap().to_string();
@@ -576,20 +568,7 @@ fn read_ply(path: &std::path::Path) -> Vec<([f32; 4], (u32, u32))> {
 fn reconstruct_writes_the_returns_as_a_point_cloud_along_each_pixels_ray() {
     let tmp = TempDir::new("points");
     let dir = tmp.path("run");
-    let out = rdlidar(&[
-        "simulate",
-        "--scene",
-        "paper",
-        "--size",
-        "8x10x8",
-        "--pulse-len",
-        "900",
-        "--depth",
-        "continuous",
-        "--out",
-        s(&dir),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    simulate_paper(&dir, "8x10x8", &[]);
     let files = |f: &str| dir.join(f).to_str().unwrap().to_string();
     let base = reconstruct_args(&dir, "8", "--out-points", &files("p.ply"));
     let run = |extra: &[&str]| {
