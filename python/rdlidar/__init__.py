@@ -846,7 +846,8 @@ def _returns(range, amplitude):
     return d, a
 
 
-def depth_bound(op: RdOperator, range, amplitude, kernel: str, sigma: float) -> np.ndarray:
+def depth_bound(op: RdOperator, range, amplitude, kernel: str, sigma: float,
+                joint: bool = False) -> np.ndarray:
     """The Cramér–Rao bound on continuous depths, in bins (a standard deviation per return).
 
     For the returns at depths ``range`` (bins, (M, N) or (R, M, N), NaN where there is none,
@@ -854,17 +855,21 @@ def depth_bound(op: RdOperator, range, amplitude, kernel: str, sigma: float) -> 
     ``kernel`` (as ``reconstruct``'s, not "delta"), the operator ``op`` and white Gaussian
     noise of standard deviation ``sigma`` per sample (``Simulation.meta["noise"]["sigma"]``):
     the smallest RMSE any unbiased estimate of each depth can have when every other pixel is
-    known. Returns float64 (R, M, N): NaN where there is no return, inf where the data cannot
-    place it.
+    known or, with ``joint=True``, when every return's amplitude and depth are unknown at once
+    (the support known; never below the first, and the limit of a method that fits all returns;
+    for at most samples × (2·returns)² = 5e10 per tile). Returns float64 (R, M, N): NaN where
+    there is no return, inf where the data cannot place it.
     """
     if not isinstance(op, RdOperator):
         raise TypeError(f"op: expected an rdlidar.RdOperator, got {type(op).__name__}")
+    if not isinstance(joint, (bool, np.bool_)):
+        raise TypeError(f"joint: expected a bool, got {type(joint).__name__}")
     d, a = _returns(range, amplitude)
     m, n, _ = op.scene_shape
     if d.shape[-2:] != (m, n):
         raise ValueError(f"range: expected the operator's ({m}, {n}) pixels, got shape {d.shape}")
     return _rdlidar.depth_bound(op._core, d, a, _optional_str(kernel, "kernel") or "",
-                                _float(sigma, "sigma"))
+                                _float(sigma, "sigma"), bool(joint))
 
 
 def range_metrics(truth, estimate, bound=None, tau_s: Optional[float] = None) -> dict:

@@ -40,8 +40,10 @@ fn returns_of(
 }
 
 /// The per-return Cramér–Rao bound on the depths `range` with amplitudes `amplitude` under
-/// `kernel` and the noise level `sigma`, for the operator `op`.
+/// `kernel` and the noise level `sigma`, for the operator `op`: every other pixel known, or
+/// with `joint` every return unknown at once.
 #[pyfunction]
+#[pyo3(signature = (op, range, amplitude, kernel, sigma, joint=false))]
 pub(crate) fn depth_bound<'py>(
     py: Python<'py>,
     op: &PyOperator,
@@ -49,12 +51,19 @@ pub(crate) fn depth_bound<'py>(
     amplitude: PyReadonlyArrayDyn<'py, f64>,
     kernel: &str,
     sigma: f64,
+    joint: bool,
 ) -> PyResult<Bound<'py, numpy::PyArray3<f64>>> {
     let truth = returns_of(&range, Some(&amplitude), "range")?;
     let response = read_response(kernel).map_err(value_error)?;
     let acq = &op.acq;
     let bound = py
-        .detach(|| acq.depth_bound::<f64>(&truth, &response, sigma))
+        .detach(|| {
+            if joint {
+                acq.joint_depth_bound::<f64>(&truth, &response, sigma)
+            } else {
+                acq.depth_bound::<f64>(&truth, &response, sigma)
+            }
+        })
         .map_err(value_error)?;
     Ok(bound.into_pyarray(py))
 }

@@ -141,6 +141,18 @@ def test_the_bound_and_the_depth_errors_are_the_command_lines(tmp_path, rdlidar_
     assert f"depth RMSE {m['rmse_bins']:.4f} bins" in line, line
     assert f"Cramér–Rao bound {m['bound_bins']:.4f} bins" in line, line
     assert f"RMSE/bound {m['rmse_over_bound']:.2f}" in line, line
+    # With every return unknown at once: never below, and the command line's second figure.
+    joint = rdlidar.depth_bound(sim.operator(), sim.range, sim.amplitude, "gaussian:0.8", sigma,
+                                joint=True)
+    assert np.array_equal(np.isnan(joint), np.isnan(bound))
+    assert np.all(joint[0][lit] >= bound[0][lit] * (1 - 1e-9))
+    j = rdlidar.range_metrics(sim.range, report["range"], joint, tau_s=1e-9)
+    assert (f"with every return unknown at once the bound is {j['bound_bins']:.4f} bins" in line
+            and f"RMSE/bound {j['rmse_over_bound']:.2f}" in line), line
+    with pytest.raises(TypeError) as e:
+        rdlidar.depth_bound(sim.operator(), sim.range, sim.amplitude, "gaussian:0.8", sigma,
+                            joint="yes")
+    assert str(e.value).startswith("joint"), str(e.value)
 
 
 def test_points_are_the_ply_files_points(tmp_path, rdlidar_bin):

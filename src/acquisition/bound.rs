@@ -5,7 +5,10 @@ use ndarray::{s, Array3};
 
 use super::*;
 use crate::lidar::{Response, Returns};
-use crate::recon::depth_bound;
+use crate::recon::{depth_bound, joint_bound_fits, joint_depth_bound};
+
+/// A bound computed on one operator for its part of the returns.
+type TileBound<'a, T> = dyn Fn(&dyn LidarOperator<T>, &Returns) -> Result<Array3<f64>> + 'a;
 
 impl Acquisition {
     /// The per-return Cramér–Rao bound on the depths of `truth` (R, M, N) under `response` and
@@ -21,10 +24,68 @@ impl Acquisition {
         response: &Response,
         sigma: f64,
     ) -> Result<Array3<f64>> {
+        self.tile_by_tile::<T>(truth, &|op, part| depth_bound(op, part, response, sigma))
+    }
+
+    /// The per-return Cramér–Rao bound on the depths of `truth` with every return of a tile
+    /// (of the whole array where it is not tiled) unknown at once ([`joint_depth_bound`]): what
+    /// a method that fits all returns faces. NaN where there is no return.
+    ///
+    /// # Errors
+    /// As [`joint_depth_bound`] for each tile; as [`depth_bound`](Self::depth_bound) for a
+    /// split acquisition.
+    pub fn joint_depth_bound<T: Real>(
+        &self,
+        truth: &Returns,
+        response: &Response,
+        sigma: f64,
+    ) -> Result<Array3<f64>> {
+        self.tile_by_tile::<T>(truth, &|op, part| {
+            joint_depth_bound(op, part, response, sigma)
+        })
+    }
+
+    /// Whether [`joint_depth_bound`](Self::joint_depth_bound) takes `truth`: every tile's
+    /// returns within [`joint_bound_fits`].
+    pub fn joint_bound_fits(&self, truth: &Returns) -> bool {
+        let (_, m, n) = truth.depth.dim();
+        if (m, n) != (self.geometry.m, self.geometry.n) {
+            return false;
+        }
+        let places = self.tile_places();
+        let count = |rows: std::ops::Range<usize>, cols: std::ops::Range<usize>| {
+            truth
+                .depth
+                .slice(s![.., rows, cols])
+                .iter()
+                .filter(|d| !d.is_nan())
+                .count()
+        };
+        if places.is_empty() {
+            return joint_bound_fits(self.samples(), count(0..m, 0..n));
+        }
+        places.iter().all(|place| {
+            joint_bound_fits(
+                self.samples(),
+                count(
+                    place.row..place.row + place.geometry.m,
+                    place.col..place.col + place.geometry.n,
+                ),
+            )
+        })
+    }
+
+    /// `bound` on the whole acquisition or, for a tiled array, on each tile with its part of
+    /// `truth`, the results put together.
+    fn tile_by_tile<T: Real>(
+        &self,
+        truth: &Returns,
+        bound: &TileBound<'_, T>,
+    ) -> Result<Array3<f64>> {
         self.refuse_split()?;
         let places = self.tile_places();
         if places.is_empty() {
-            return depth_bound(self.lidar_operator::<T>()?.as_ref(), truth, response, sigma);
+            return bound(self.lidar_operator::<T>()?.as_ref(), truth);
         }
         let g = self.geometry;
         if truth.depth.dim().1 != g.m || truth.depth.dim().2 != g.n {
@@ -34,7 +95,7 @@ impl Acquisition {
                 truth.depth.dim().1 * truth.depth.dim().2,
             ));
         }
-        let mut bound = Array3::from_elem(truth.depth.dim(), f64::NAN);
+        let mut out = Array3::from_elem(truth.depth.dim(), f64::NAN);
         for place in &places {
             let (rows, cols) = (
                 place.row..place.row + place.geometry.m,
@@ -51,10 +112,10 @@ impl Acquisition {
                     .to_owned(),
             )?;
             let op = self.tile(place)?.lidar_operator::<T>()?;
-            let b = depth_bound(op.as_ref(), &part, response, sigma)?;
-            bound.slice_mut(s![.., rows, cols]).assign(&b);
+            let b = bound(op.as_ref(), &part)?;
+            out.slice_mut(s![.., rows, cols]).assign(&b);
         }
-        Ok(bound)
+        Ok(out)
     }
 
     /// The noise's standard deviation per sample that the residual of the estimate `scene`
@@ -149,6 +210,12 @@ pub struct RangeComparison {
     /// Whether σ was given (`"given"`) or estimated from the estimate's residual
     /// (`"residual"`).
     pub sigma_source: &'static str,
+    /// The root-mean-square bound over the same returns with every return of a tile unknown
+    /// at once ([`Acquisition::joint_depth_bound`]), where the bound was computed and the
+    /// returns are within [`joint_bound_fits`].
+    pub joint_bound_bins: Option<f64>,
+    /// `rmse_bins / joint_bound_bins` where that bound is positive.
+    pub rmse_over_joint_bound: Option<f64>,
 }
 
 impl std::fmt::Display for RangeComparison {
@@ -168,6 +235,13 @@ impl std::fmt::Display for RangeComparison {
                 } else {
                     "estimated from the residual"
                 }
+            )?;
+        }
+        if let (Some(b), Some(ratio)) = (self.joint_bound_bins, self.rmse_over_joint_bound) {
+            write!(
+                f,
+                "; with every return unknown at once the bound is {b:.4} bins ({}): RMSE/bound {ratio:.2}",
+                crate::recon::millimetres(b * self.metrics.bin_m)
             )?;
         }
         Ok(())
@@ -223,10 +297,24 @@ impl Acquisition {
             _ => None,
         };
         let metrics = crate::recon::compare_range(&truth, returns, bound.as_ref(), bin_m)?;
+        let joint = match (&bound, sigma) {
+            (Some(_), Some(s)) if self.joint_bound_fits(&truth) => {
+                let b = self.joint_depth_bound::<T>(&truth, response, s)?;
+                Some(crate::recon::compare_range(
+                    &truth,
+                    returns,
+                    Some(&b),
+                    bin_m,
+                )?)
+            }
+            _ => None,
+        };
         Ok(RangeComparison {
             metrics,
             sigma,
             sigma_source,
+            joint_bound_bins: joint.and_then(|j| j.bound_bins),
+            rmse_over_joint_bound: joint.and_then(|j| j.rmse_over_bound),
         })
     }
 }

@@ -39,6 +39,130 @@ pub fn depth_bound<T: Real>(
     use rayon::prelude::*;
     let g = op.geometry();
     let (layers, m, n) = truth.depth.dim();
+    check(op, truth, response, sigma)?;
+    // The Gram block where every pixel shares it; otherwise each pixel's columns.
+    let uniform = op.uniform_pixel_gram().then(|| op.pixel_gram(0));
+    let pixels: Vec<Vec<f64>> = (0..m * n)
+        .into_par_iter()
+        .map(|p| {
+            let (i, j) = (p / n, p % n);
+            let rets: Vec<(f64, f64)> = (0..layers)
+                .map(|r| (truth.amplitude[[r, i, j]], truth.depth[[r, i, j]]))
+                .filter(|(_, d)| !d.is_nan())
+                .collect();
+            if rets.is_empty() {
+                return Vec::new();
+            }
+            match &uniform {
+                Some(gram) => pixel_bound(gram, g.ks, &rets, response, sigma),
+                None => {
+                    let cols = parameter_columns(&rets, response, g.ks);
+                    bounds_of(fisher_by_columns(op, p, &cols), rets.len(), sigma)
+                }
+            }
+        })
+        .collect();
+    let mut bound = Array3::from_elem((layers, m, n), f64::NAN);
+    for (p, b) in pixels.into_iter().enumerate() {
+        for (r, v) in b.into_iter().enumerate() {
+            bound[[r, p / n, p % n]] = v;
+        }
+    }
+    Ok(bound)
+}
+
+/// The most multiply-adds, samples × (2·returns)², that [`joint_depth_bound`] spends on one
+/// operator's Fisher information (about ten seconds on two cores).
+pub const JOINT_BOUND_MAX_WORK: f64 = 5e10;
+
+/// Whether [`joint_depth_bound`] takes `returns` returns over `samples` measurements
+/// (samples × (2·returns)² ≤ [`JOINT_BOUND_MAX_WORK`]).
+pub fn joint_bound_fits(samples: usize, returns: usize) -> bool {
+    samples as f64 * (2.0 * returns as f64).powi(2) <= JOINT_BOUND_MAX_WORK
+}
+
+/// The per-return Cramér–Rao bound on the depths of `truth` with **every** return's amplitude
+/// and depth unknown at once (the support known), as a method that fits all returns to the
+/// data faces: the Fisher information is JᵀJ/σ² over all returns, J's columns A·g(· − d_r)
+/// and −a_r·A·g′(· − d_r) across pixels, and the bound on d_r is σ·√[(JᵀJ)⁻¹]_{d_r d_r}.
+/// It is never below [`depth_bound`]'s (which holds the other pixels known), and rises above
+/// it as measurements per return fall: in the compressive regime the pixels share the few
+/// measurements and their errors add. (R, M, N) as `truth`, NaN where there is no return;
+/// +∞ for every return where the returns together cannot be told apart from the data.
+///
+/// # Errors
+/// As [`depth_bound`]; [`Error::InvalidParameter`] (`returns`) where samples × (2·returns)²
+/// exceeds [`JOINT_BOUND_MAX_WORK`] ([`joint_bound_fits`]); [`Error::TooLarge`] where the
+/// Jacobian and the Fisher information do not fit in memory.
+pub fn joint_depth_bound<T: Real>(
+    op: &dyn LidarOperator<T>,
+    truth: &Returns,
+    response: &Response,
+    sigma: f64,
+) -> Result<Array3<f64>> {
+    check(op, truth, response, sigma)?;
+    let g = op.geometry();
+    let n = truth.depth.dim().2;
+    let rets: Vec<(usize, usize, f64, f64)> = truth
+        .depth
+        .indexed_iter()
+        .filter(|(_, d)| !d.is_nan())
+        .map(|((r, i, j), &d)| (r, i * n + j, truth.amplitude[[r, i, j]], d))
+        .collect();
+    let mut bound = Array3::from_elem(truth.depth.dim(), f64::NAN);
+    if rets.is_empty() {
+        return Ok(bound);
+    }
+    let (k, q) = (op.nrows(), 2 * rets.len());
+    if !joint_bound_fits(k, rets.len()) {
+        return Err(Error::param(
+            "returns",
+            format!(
+                "the joint bound of {} returns over {k} samples needs {:.1e} multiply-adds, \
+                 more than {JOINT_BOUND_MAX_WORK:.0e}: bound a part (a tile) or hold the other \
+                 pixels known (depth_bound)",
+                rets.len(),
+                k as f64 * (q as f64).powi(2)
+            ),
+        ));
+    }
+    crate::limits::MemoryPlan::new()
+        .add("Jacobian", (k * q) as u128, 8)
+        .add("Fisher information and its inverse", 2 * (q * q) as u128, 8)
+        .check(
+            &format!("the joint bound of {} returns", rets.len()),
+            "bound a part (a tile) or hold the other pixels known (depth_bound)",
+        )?;
+    let mut jacobian = nalgebra::DMatrix::<f64>::zeros(k, q);
+    for (c, &(_, p, a, d)) in rets.iter().enumerate() {
+        let cols = parameter_columns(&[(a, d)], response, g.ks);
+        for (which, col) in cols.iter().enumerate() {
+            let mut out = jacobian.column_mut(c * 2 + which);
+            for (kk, &w) in col.iter().enumerate().filter(|(_, w)| **w != 0.0) {
+                let (start, values) = op.column(p * g.ks + kk);
+                for (o, v) in out.rows_mut(start, values.len()).iter_mut().zip(&values) {
+                    *o += w * v;
+                }
+            }
+        }
+    }
+    let fisher = jacobian.tr_mul(&jacobian);
+    drop(jacobian);
+    for (&(r, p, _, _), b) in rets.iter().zip(bounds_of(fisher, rets.len(), sigma)) {
+        bound[[r, p / n, p % n]] = b;
+    }
+    Ok(bound)
+}
+
+/// The checks of [`depth_bound`] and [`joint_depth_bound`].
+fn check<T: Real>(
+    op: &dyn LidarOperator<T>,
+    truth: &Returns,
+    response: &Response,
+    sigma: f64,
+) -> Result<()> {
+    let g = op.geometry();
+    let (_, m, n) = truth.depth.dim();
     if (m, n) != (g.m, g.n) {
         return Err(Error::shape(
             "returns vs the operator's pixels",
@@ -72,35 +196,7 @@ pub fn depth_bound<T: Real>(
             ),
         ));
     }
-    // The Gram block where every pixel shares it; otherwise each pixel's columns.
-    let uniform = op.uniform_pixel_gram().then(|| op.pixel_gram(0));
-    let pixels: Vec<Vec<f64>> = (0..m * n)
-        .into_par_iter()
-        .map(|p| {
-            let (i, j) = (p / n, p % n);
-            let rets: Vec<(f64, f64)> = (0..layers)
-                .map(|r| (truth.amplitude[[r, i, j]], truth.depth[[r, i, j]]))
-                .filter(|(_, d)| !d.is_nan())
-                .collect();
-            if rets.is_empty() {
-                return Vec::new();
-            }
-            match &uniform {
-                Some(gram) => pixel_bound(gram, g.ks, &rets, response, sigma),
-                None => {
-                    let cols = parameter_columns(&rets, response, g.ks);
-                    bounds_of(fisher_by_columns(op, p, &cols), rets.len(), sigma)
-                }
-            }
-        })
-        .collect();
-    let mut bound = Array3::from_elem((layers, m, n), f64::NAN);
-    for (p, b) in pixels.into_iter().enumerate() {
-        for (r, v) in b.into_iter().enumerate() {
-            bound[[r, p / n, p % n]] = v;
-        }
-    }
-    Ok(bound)
+    Ok(())
 }
 
 /// The columns of C in voxel space: g(· − d_r) and −a_r·g′(· − d_r) for each return `(a, d)`.
@@ -406,5 +502,130 @@ mod tests {
         // Noise-free: a zero bound.
         let zero = depth_bound(&op, &truth, &Response::Triangle, 0.0).unwrap();
         assert_eq!(zero[[0, 0, 0]], 0.0);
+    }
+
+    /// A scene of `lit` pixels of a 4×4 grid at depths between bins.
+    fn scattered(lit: usize) -> Returns {
+        let mut depth = Array3::from_elem((1, 4, 4), f64::NAN);
+        let mut amplitude = Array3::zeros((1, 4, 4));
+        for p in 0..lit {
+            let q = (p * 7) % 16;
+            depth[[0, q / 4, q % 4]] = 2.3 + 0.61 * p as f64;
+            amplitude[[0, q / 4, q % 4]] = 1.0 + 0.1 * p as f64;
+        }
+        Returns::new(depth, amplitude).unwrap()
+    }
+
+    #[test]
+    fn the_joint_bound_is_the_pixels_bound_for_one_return_and_above_it_when_pixels_share() {
+        let g = Geometry::new(4, 4, 10).unwrap();
+        let response = Response::gaussian(0.8).unwrap();
+        for ternary in [false, true] {
+            let op = operator(g, 40, ternary);
+            let one = scattered(1);
+            let (alone, joint) = (
+                depth_bound(&op, &one, &response, 0.1).unwrap(),
+                joint_depth_bound(&op, &one, &response, 0.1).unwrap(),
+            );
+            for (a, j) in alone.iter().zip(&joint) {
+                assert!(a.is_nan() == j.is_nan());
+                assert!(a.is_nan() || (a - j).abs() <= 1e-9 * a, "{a} vs {j}");
+            }
+            // Eight returns over 49 samples: the joint bound is never below the pixels' own,
+            // and well above it on average.
+            let eight = scattered(8);
+            let alone = depth_bound(&op, &eight, &response, 0.1).unwrap();
+            let joint = joint_depth_bound(&op, &eight, &response, 0.1).unwrap();
+            let pairs: Vec<(f64, f64)> = alone
+                .iter()
+                .zip(&joint)
+                .filter(|(a, _)| !a.is_nan())
+                .map(|(a, j)| (*a, *j))
+                .collect();
+            assert_eq!(pairs.len(), 8);
+            assert!(
+                pairs.iter().all(|(a, j)| *j >= a * (1.0 - 1e-9)),
+                "{pairs:?}"
+            );
+            let mean = pairs.iter().map(|(a, j)| j / a).sum::<f64>() / 8.0;
+            assert!(mean > 1.1, "joint/alone {mean} ({pairs:?})");
+        }
+    }
+
+    #[test]
+    fn the_joint_fit_of_every_return_spreads_as_the_joint_bound_says() {
+        // Eight returns, 16 unknowns, 39 samples: Gauss–Newton on all (a, d) at once from the
+        // truth over many noise draws. Its RMS depth error is the joint bound's within the
+        // Monte Carlo error, and clearly above the bound with the other pixels known.
+        let g = Geometry::new(4, 4, 10).unwrap();
+        let op = operator(g, 30, false);
+        let response = Response::gaussian(0.8).unwrap();
+        let truth = scattered(8);
+        let clean = measure(&op, &truth, &response);
+        let sigma = 0.02;
+        let rms = |b: &Array3<f64>| {
+            let v: Vec<f64> = b.iter().filter(|v| !v.is_nan()).copied().collect();
+            (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+        };
+        let joint = rms(&joint_depth_bound(&op, &truth, &response, sigma).unwrap());
+        let alone = rms(&depth_bound(&op, &truth, &response, sigma).unwrap());
+        assert!(joint > 1.2 * alone, "joint {joint} vs alone {alone}");
+        let start: Vec<super::super::subbin::Ret> = truth
+            .depth
+            .indexed_iter()
+            .filter(|(_, d)| !d.is_nan())
+            .map(|((_, i, j), &d)| super::super::subbin::Ret {
+                pixel: i * 4 + j,
+                a: truth.amplitude[[0, i, j]],
+                d,
+            })
+            .collect();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        let noise = Normal::new(0.0, sigma).unwrap();
+        let draws = 300;
+        let mut squares = 0.0;
+        for _ in 0..draws {
+            let y: Vec<f64> = clean.iter().map(|v| v + noise.sample(&mut rng)).collect();
+            let mut applies = crate::operator::Applies::default();
+            let (fit, _) =
+                super::super::subbin::refine(&op, &y, start.clone(), &response, 30, &mut applies)
+                    .unwrap();
+            assert_eq!(fit.len(), 8);
+            for (f, t) in fit.iter().zip(&start) {
+                assert_eq!(f.pixel, t.pixel);
+                squares += (f.d - t.d).powi(2);
+            }
+        }
+        let rmse = (squares / (8 * draws) as f64).sqrt();
+        assert!(
+            (rmse / joint - 1.0).abs() < 0.12,
+            "RMSE {rmse} vs joint bound {joint} (alone {alone})"
+        );
+    }
+
+    #[test]
+    fn the_joint_bound_refuses_what_is_beyond_its_work_limit() {
+        assert!(joint_bound_fits(2000, 2000));
+        assert!(!joint_bound_fits(100_000, 1000));
+        let g = Geometry::new(2, 2, 6).unwrap();
+        let op = operator(g, 20, false);
+        let truth = Returns::single(
+            ndarray::arr2(&[[1.5, f64::NAN], [f64::NAN, 2.0]]),
+            ndarray::arr2(&[[1.0, 0.0], [0.0, 1.0]]),
+        )
+        .unwrap();
+        assert!(matches!(
+            joint_depth_bound(&op, &truth, &Response::Delta, 1.0),
+            Err(Error::InvalidParameter { name: "kernel", .. })
+        ));
+        let none = Returns::single(
+            ndarray::Array2::from_elem((2, 2), f64::NAN),
+            ndarray::Array2::zeros((2, 2)),
+        )
+        .unwrap();
+        assert!(joint_depth_bound(&op, &none, &Response::Triangle, 1.0)
+            .unwrap()
+            .iter()
+            .all(|v| v.is_nan()));
     }
 }

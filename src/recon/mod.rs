@@ -23,7 +23,9 @@ mod subbin;
 mod tiled;
 
 pub use auto::{Stage, COARSE_RESIDUAL, SEVERAL_RETURNS_SHARE, TV_RESIDUAL_MARGIN};
-pub use bound::{depth_bound, residual_sigma};
+pub use bound::{
+    depth_bound, joint_bound_fits, joint_depth_bound, residual_sigma, JOINT_BOUND_MAX_WORK,
+};
 pub use coarse::COARSE_BLOCK;
 pub use detect::{check_false_rate, normal_upper_quantile, DetectionTest};
 pub use method::{estimate_returns, Method, MAX_RETURNS_ESTIMATE};
@@ -34,6 +36,7 @@ pub use options::ReconstructOptions;
 pub use peaks::{PeakThreshold, PAPER_FRACTION, PAPER_QUANTILE};
 pub use photon::{NoiseModel, PhotonWeighting};
 pub use pursuit::explained_tolerance;
+pub(crate) use range_metrics::millimetres;
 pub use range_metrics::{compare_range, RangeMetrics};
 pub use reconstruct::{
     is_piecewise_smooth, reconstruct, reconstruct_observed, Reconstruction, SMOOTH_BINS,

@@ -222,7 +222,7 @@ impl std::fmt::Display for RangeMetrics {
 }
 
 /// A length in metres written in millimetres, three significant digits below 1 mm.
-fn millimetres(m: f64) -> String {
+pub(crate) fn millimetres(m: f64) -> String {
     let mm = m * 1e3;
     if mm != 0.0 && mm.abs() < 1.0 {
         format!("{mm:.3} mm")
