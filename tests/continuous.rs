@@ -701,3 +701,29 @@ fn a_gaussian_response_at_twenty_db_comes_back_at_the_joint_bound_with_five_meas
         );
     }
 }
+
+#[test]
+fn an_estimate_that_explains_noise_free_data_to_round_off_has_no_noise_to_bound() {
+    // The triangle, noise-free, 8×8×8 with many measurements: the estimate is exact, its
+    // residual at round-off, and the bound from that residual is 0, not a ratio of round-off.
+    let tmp = TempDir::new("round-off");
+    let dir = tmp.path("run");
+    simulate_paper(&dir, "8x8x8", &["--seed", "2"]);
+    let files = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let mut args = reconstruct_args(&dir, "8", "--truth-range", &files("range.npy"));
+    args.extend(
+        ["--kernel", "triangle", "--truth", &files("scene.npy")]
+            .iter()
+            .map(|a| a.to_string()),
+    );
+    let out = rdlidar(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("versus the true depths:"))
+        .expect(&text);
+    assert!(line.contains("depth RMSE 0.0000 bins"), "{line}");
+    assert!(line.contains("Cramér–Rao bound 0 (no noise)"), "{line}");
+    assert!(!line.contains("RMSE/bound"), "{line}");
+}

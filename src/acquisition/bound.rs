@@ -7,6 +7,10 @@ use super::*;
 use crate::lidar::{Response, Returns};
 use crate::recon::{depth_bound, joint_bound_fits, joint_depth_bound};
 
+/// The residual's noise level, relative to the measurements' RMS, below which the estimate
+/// explains the data to round-off and the noise is taken as zero.
+const ROUND_OFF: f64 = 1e-10;
+
 /// A bound computed on one operator for its part of the returns.
 type TileBound<'a, T> = dyn Fn(&dyn LidarOperator<T>, &Returns) -> Result<Array3<f64>> + 'a;
 
@@ -288,7 +292,19 @@ impl Acquisition {
             Some(s) => (Some(s), "given"),
             None if truth_scene.is_some() => {
                 let unknowns = 2 * returns.depth.iter().filter(|d| !d.is_nan()).count();
-                (self.residual_sigma(y, scene, unknowns)?, "residual")
+                // A residual at round-off is no noise: the bound is 0, not a ratio of
+                // round-off errors.
+                let rms = (y.iter().map(|v| v.as_f64().powi(2)).sum::<f64>()
+                    / y.len().max(1) as f64)
+                    .sqrt();
+                let sigma = self.residual_sigma(y, scene, unknowns)?.map(|s| {
+                    if s <= ROUND_OFF * rms {
+                        0.0
+                    } else {
+                        s
+                    }
+                });
+                (sigma, "residual")
             }
             None => (None, "residual"),
         };
