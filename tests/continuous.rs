@@ -727,3 +727,49 @@ fn an_estimate_that_explains_noise_free_data_to_round_off_has_no_noise_to_bound(
     assert!(line.contains("Cramér–Rao bound 0 (no noise)"), "{line}");
     assert!(!line.contains("RMSE/bound"), "{line}");
 }
+
+#[test]
+fn the_demo_runs_the_paper_scene_between_bins_with_its_depth_error_in_bins() {
+    // `demo --scene paper-continuous`: every method estimates continuous depths under the
+    // triangle, and the depth RMSE column is against the true continuous depths (below the
+    // 0.29-bin floor of rounding to the grid for an exact estimate).
+    let tmp = TempDir::new("demo-continuous");
+    let out_dir = tmp.path("run");
+    let out = rdlidar(&[
+        "demo",
+        "--tiny",
+        "--scene",
+        "paper-continuous",
+        "--solvers",
+        "backprojection,auto",
+        "--pulse-lens",
+        "100,1000",
+        "--out",
+        s(&out_dir),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let csv = std::fs::read_to_string(out_dir.join("results.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    for r in &rows {
+        assert_eq!(r[col("scene")], "paper-continuous");
+        assert_eq!(r[col("status")], "ok", "{csv}");
+    }
+    let rmse = |solver: &str, kp: &str| -> f64 {
+        rows.iter()
+            .find(|r| r[col("solver")] == solver && r[col("pulse_len")] == kp)
+            .unwrap()[col("depth_rmse_bins")]
+        .parse()
+        .unwrap()
+    };
+    // Redundant: exact between bins. Compressive: the backprojection is far off.
+    assert!(rmse("auto", "1000") < 1e-3, "{csv}");
+    assert!(rmse("backprojection", "1000") < 1e-3, "{csv}");
+    assert!(rmse("backprojection", "100") > 0.29, "{csv}");
+}

@@ -461,15 +461,20 @@ mod tests {
         );
     }
 
-    #[test]
-    fn bad_requests_are_refused_by_name() {
-        let g = Geometry::new(2, 2, 6).unwrap();
-        let op = operator(g, 20, false);
+    /// A 2×2×6 operator and two returns on its diagonal.
+    fn two_returns() -> (RdOperator<f64>, Returns) {
+        let op = operator(Geometry::new(2, 2, 6).unwrap(), 20, false);
         let truth = Returns::single(
             ndarray::arr2(&[[1.5, f64::NAN], [f64::NAN, 2.0]]),
             ndarray::arr2(&[[1.0, 0.0], [0.0, 1.0]]),
         )
         .unwrap();
+        (op, truth)
+    }
+
+    #[test]
+    fn bad_requests_are_refused_by_name() {
+        let (op, truth) = two_returns();
         let name = |r: Result<Array3<f64>>| match r {
             Err(Error::InvalidParameter { name, .. }) => name,
             other => panic!("{other:?}"),
@@ -607,13 +612,7 @@ mod tests {
     fn the_joint_bound_refuses_what_is_beyond_its_work_limit() {
         assert!(joint_bound_fits(2000, 2000));
         assert!(!joint_bound_fits(100_000, 1000));
-        let g = Geometry::new(2, 2, 6).unwrap();
-        let op = operator(g, 20, false);
-        let truth = Returns::single(
-            ndarray::arr2(&[[1.5, f64::NAN], [f64::NAN, 2.0]]),
-            ndarray::arr2(&[[1.0, 0.0], [0.0, 1.0]]),
-        )
-        .unwrap();
+        let (op, truth) = two_returns();
         assert!(matches!(
             joint_depth_bound(&op, &truth, &Response::Delta, 1.0),
             Err(Error::InvalidParameter { name: "kernel", .. })

@@ -39,8 +39,10 @@ pub struct ExperimentArgs {
     /// K_p 50,211,800).
     #[arg(long)]
     pub tiny: bool,
-    /// Scene: paper (the default), random, or transparent (1 to 3 returns per pixel); several,
-    /// comma-separated, run one after the other with their own tables and figures.
+    /// Scene: paper (the default), random, transparent (1 to 3 returns per pixel), or
+    /// paper-continuous (the paper's scene between bins under the triangle response, every
+    /// method estimating continuous depths, the depth RMSE in bins against the true ones);
+    /// several, comma-separated, run one after the other with their own tables and figures.
     #[arg(long, value_name = "LIST", value_parser = parse_scenes)]
     pub scene: Option<ExpScenes>,
     /// Scene grid MxNxKS (at most 1024 rows and columns, 2^26 voxels).

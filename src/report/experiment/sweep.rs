@@ -7,9 +7,12 @@ use std::time::{Duration, Instant};
 use ndarray::Array2;
 
 use crate::error::Result;
-use crate::lidar::{simulate, RdOperator, Scene, SceneSpec, SimulationSpec, DEFAULT_TAU_S};
+use crate::lidar::{
+    depth_bin_m, paper_returns, simulate, simulate_supplied, RdOperator, Response, Returns, Scene,
+    SceneSpec, SimulationSpec, DEFAULT_TAU_S,
+};
 use crate::real::Real;
-use crate::recon::{compare, reconstruct, Method, ReconstructOptions};
+use crate::recon::{compare, compare_range, reconstruct, Method, ReconstructOptions};
 
 use super::{
     estimated_work, snake_case, Case, Event, ExperimentConfig, ExperimentObserver, Row, Run,
@@ -19,6 +22,8 @@ use super::{
 /// The truth, the operator and the measurements of one [`Case`].
 struct Problem<T: Real> {
     truth: Scene<T>,
+    /// The true continuous returns of a scene at continuous depths.
+    returns: Option<Returns>,
     op: RdOperator<T>,
     y: Vec<T>,
 }
@@ -27,7 +32,7 @@ struct Problem<T: Real> {
 fn simulate_case<T: Real>(config: &ExperimentConfig, case: &Case) -> Result<Problem<T>> {
     let spec = SimulationSpec {
         scene: match case.scene {
-            SceneKind::Paper => SceneSpec::Paper,
+            SceneKind::Paper | SceneKind::PaperContinuous => SceneSpec::Paper,
             SceneKind::Random => SceneSpec::Random {
                 lit_fraction: config.lit_fraction,
             },
@@ -36,10 +41,22 @@ fn simulate_case<T: Real>(config: &ExperimentConfig, case: &Case) -> Result<Prob
         snr_db: case.snr_db,
         ..SimulationSpec::new(config.size, case.pulse_len, case.seed)
     };
-    let sim = simulate::<T>(&spec)?;
+    let (sim, returns) = match case.scene {
+        SceneKind::PaperContinuous => {
+            let returns = paper_returns(config.size)?;
+            let scene = returns.render::<T>(config.size.ks, &Response::Triangle)?;
+            let spec = SimulationSpec {
+                scene: SceneSpec::Supplied,
+                ..spec
+            };
+            (simulate_supplied::<T>(&spec, scene)?, Some(returns))
+        }
+        _ => (simulate::<T>(&spec)?, None),
+    };
     Ok(Problem {
         op: sim.single_operator()?,
         truth: sim.scene,
+        returns,
         y: sim.meas,
     })
 }
@@ -109,14 +126,27 @@ fn run_one<T: Real>(
         progress: false,
         seed: case.seed,
         power_iterations: config.power_iterations,
+        response: match problem.returns {
+            Some(_) => Response::Triangle,
+            None => Response::Delta,
+        },
         ..ReconstructOptions::default()
     };
     let start = Instant::now();
-    let result = reconstruct(&problem.op, &problem.y, method, &options)
-        .and_then(|r| compare(&problem.truth, &r.scene, DEFAULT_TAU_S).map(|m| (r, m)));
+    let result = reconstruct(&problem.op, &problem.y, method, &options).and_then(|r| {
+        let m = compare(&problem.truth, &r.scene, DEFAULT_TAU_S)?;
+        // At continuous depths, the depth error is the continuous estimate's.
+        let range = match (&problem.returns, &r.returns) {
+            (Some(truth), Some(estimate)) => {
+                Some(compare_range(truth, estimate, None, depth_bin_m(DEFAULT_TAU_S)?)?.rmse_bins)
+            }
+            _ => None,
+        };
+        Ok((r, m, range))
+    });
     row.time_s = start.elapsed().as_secs_f64();
     match result {
-        Ok((r, m)) => {
+        Ok((r, m, range)) => {
             row.time_s = r.elapsed.as_secs_f64();
             row.method_used = r.method_used.name().into();
             row.exact = Some(m.exact);
@@ -126,7 +156,7 @@ fn run_one<T: Real>(
             row.true_returns = m.true_returns;
             row.returns_exact = Some(m.returns_exact);
             row.returns_false = Some(m.returns_false);
-            row.depth_rmse_bins = Some(m.depth_rmse_bins);
+            row.depth_rmse_bins = Some(range.unwrap_or(m.depth_rmse_bins));
             row.relative_error = Some(m.relative_error);
             if let Some(rep) = &r.report {
                 row.iterations = Some(rep.iterations);

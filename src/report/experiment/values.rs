@@ -49,15 +49,20 @@ pub enum SceneKind {
     /// A semi-transparent scene ([`crate::lidar::semi_transparent_scene`]) drawn from SEED+3
     /// for each seed: every pixel has 1 to min(3, K_s) returns.
     Transparent,
+    /// The paper's scene at continuous depths ([`crate::lidar::paper_returns`]) under the ideal
+    /// system's `triangle` response: every method estimates continuous depths under it, and
+    /// the depth RMSE is against the true continuous depths.
+    PaperContinuous,
 }
 
 impl SceneKind {
-    /// `"paper"`, `"random"` or `"transparent"`.
+    /// `"paper"`, `"random"`, `"transparent"` or `"paper-continuous"`.
     pub fn name(self) -> &'static str {
         match self {
             SceneKind::Paper => "paper",
             SceneKind::Random => "random",
             SceneKind::Transparent => "transparent",
+            SceneKind::PaperContinuous => "paper-continuous",
         }
     }
 }
@@ -70,9 +75,13 @@ impl std::str::FromStr for SceneKind {
             "paper" => Ok(SceneKind::Paper),
             "random" => Ok(SceneKind::Random),
             "transparent" => Ok(SceneKind::Transparent),
+            "paper-continuous" => Ok(SceneKind::PaperContinuous),
             _ => Err(Error::param(
                 "scene",
-                format!("unknown scene {s:?}; expected paper, random or transparent"),
+                format!(
+                    "unknown scene {s:?}; expected paper, random, transparent or \
+                     paper-continuous"
+                ),
             )),
         }
     }
