@@ -136,14 +136,8 @@ pub fn joint_depth_bound<T: Real>(
     let mut jacobian = nalgebra::DMatrix::<f64>::zeros(k, q);
     for (c, &(_, p, a, d)) in rets.iter().enumerate() {
         let cols = parameter_columns(&[(a, d)], response, g.ks);
-        for (which, col) in cols.iter().enumerate() {
-            let mut out = jacobian.column_mut(c * 2 + which);
-            for (kk, &w) in col.iter().enumerate().filter(|(_, w)| **w != 0.0) {
-                let (start, values) = op.column(p * g.ks + kk);
-                for (o, v) in out.rows_mut(start, values.len()).iter_mut().zip(&values) {
-                    *o += w * v;
-                }
-            }
+        for (which, image) in images(op, p, &cols).into_iter().enumerate() {
+            jacobian.column_mut(c * 2 + which).copy_from_slice(&image);
         }
     }
     let fisher = jacobian.tr_mul(&jacobian);
@@ -249,6 +243,14 @@ fn fisher_by_columns<T: Real>(
     p: usize,
     cols: &[Vec<f64>],
 ) -> nalgebra::DMatrix<f64> {
+    let image = images(op, p, cols);
+    let q = cols.len();
+    nalgebra::DMatrix::from_fn(q, q, |i, j| crate::linalg::dot(&image[i], &image[j]))
+}
+
+/// A_p·c for each of pixel `p`'s voxel-space columns `cols`, each of `op`'s voxel columns
+/// read once.
+fn images<T: Real>(op: &dyn LidarOperator<T>, p: usize, cols: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let ks = op.column_len();
     let mut image = vec![vec![0.0; op.nrows()]; cols.len()];
     for k in 0..ks {
@@ -264,8 +266,7 @@ fn fisher_by_columns<T: Real>(
             }
         }
     }
-    let q = cols.len();
-    nalgebra::DMatrix::from_fn(q, q, |i, j| crate::linalg::dot(&image[i], &image[j]))
+    image
 }
 
 /// σ·√[F⁻¹]_{d_r d_r} for each of `returns` returns of the Fisher information `fisher` (σ
