@@ -120,6 +120,10 @@ where
         self.inner.column_len()
     }
 
+    fn columns_per_bin(&self) -> usize {
+        self.inner.columns_per_bin()
+    }
+
     fn correlate(&self, r: &[T], u: &mut [T]) {
         if self.cancelled() {
             u.fill(T::zero());

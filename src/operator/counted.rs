@@ -193,6 +193,9 @@ impl<T: Real, A: VoxelOperator<T>> VoxelOperator<T> for Counted<A> {
     fn column_len(&self) -> usize {
         self.inner.column_len()
     }
+    fn columns_per_bin(&self) -> usize {
+        self.inner.columns_per_bin()
+    }
     fn correlate(&self, r: &[T], u: &mut [T]) {
         self.adjoint.fetch_add(1, Ordering::Relaxed);
         self.inner.correlate(r, u)

@@ -111,6 +111,9 @@ impl<T: Real, A: VoxelOperator<T>> VoxelOperator<T> for Part<A> {
     fn column_len(&self) -> usize {
         self.inner.column_len()
     }
+    fn columns_per_bin(&self) -> usize {
+        self.inner.columns_per_bin()
+    }
     fn correlate(&self, r: &[T], u: &mut [T]) {
         self.inner.correlate(r, u)
     }

@@ -17,6 +17,14 @@ pub trait VoxelOperator<T: Real>: LinearOperator<T> {
     /// Number of consecutive columns that make one pixel (K_s).
     fn column_len(&self) -> usize;
 
+    /// Columns per depth bin (default 1): a pixel's column c lies at depth c / `columns_per_bin`
+    /// bins. The per-pixel solvers' surface rules (neighbours within one bin, windows of a few
+    /// bins) count in bins through it, so that a dictionary of responses shifted by a fraction
+    /// of a bin keeps the meaning of a bin.
+    fn columns_per_bin(&self) -> usize {
+        1
+    }
+
     /// The correlation that proposes candidate depths: u = Aᵀr by default. An operator may use a
     /// better matched filter (the lidar operator correlates with the zero-mean pulse).
     fn correlate(&self, r: &[T], u: &mut [T]) {
@@ -74,6 +82,9 @@ macro_rules! forward_voxel {
         impl<T: Real, A: VoxelOperator<T> + ?Sized> VoxelOperator<T> for $ty {
             fn column_len(&self) -> usize {
                 (**self).column_len()
+            }
+            fn columns_per_bin(&self) -> usize {
+                (**self).columns_per_bin()
             }
             fn correlate(&self, r: &[T], u: &mut [T]) {
                 (**self).correlate(r, u)

@@ -21,7 +21,7 @@ use super::method::{run, Method};
 use super::options::ReconstructOptions;
 use super::peaks::returns;
 use super::photon::{photon_weights, NoiseModel, PhotonWeighting};
-use super::subbin;
+use super::subbin::{self, AtomStart};
 
 /// Fraction of the lit pixels of a depth map that must have a lit 4-neighbour within
 /// [`SMOOTH_BINS`] of their depth for the map to count as piecewise smooth
@@ -255,21 +255,25 @@ fn continuous<T: Real>(
     };
     let response = &options.response;
     let (estimate, method_used, stages) = match method {
-        Method::ModelBased => (
-            subbin::settle(op, y, subbin::pursue(op, y, options, observer)?, response)?,
-            Method::ModelBased,
-            Vec::new(),
-        ),
-        // The fit from the grid; where it leaves the data unexplained, the pursuit on the
-        // atoms too, and the one that explains the data better kept and settled.
-        Method::Auto => {
-            let (grid, used, stages) = from_grid(observer)?;
-            let atoms = if subbin::explains(y, &grid) {
-                None
+        Method::ModelBased | Method::Tv => {
+            let start = if method == Method::Tv {
+                AtomStart::Surfaces
             } else {
-                Some(subbin::pursue(op, y, options, observer)?)
+                AtomStart::Pursuit
             };
-            let (kept, used, stages) = subbin::better_start(y, atoms, (grid, used, stages));
+            let c = subbin::pursue(op, y, options, start, observer)?;
+            (subbin::settle(op, y, c, response)?, method, Vec::new())
+        }
+        // TV over the response's atoms; where it leaves the data unexplained, the fit from the
+        // grid methods too, and the one that explains the data better kept and settled.
+        Method::Auto => {
+            let surfaces = subbin::pursue(op, y, options, AtomStart::Surfaces, observer)?;
+            let (kept, used, stages) = if subbin::explains(y, &surfaces) {
+                subbin::better_start(y, (surfaces, Method::Tv), None)
+            } else {
+                let grid = from_grid(observer)?;
+                subbin::better_start(y, (surfaces, Method::Tv), Some(grid))
+            };
             (subbin::settle(op, y, kept, response)?, used, stages)
         }
         _ => {

@@ -77,7 +77,9 @@ pub struct ReconstructArgs {
     /// fills its voxel column with a·g(k − d)): delta (depths on the grid, the default),
     /// triangle, gaussian:S or measured:O:FILE, as `simulate --kernel` takes it. With a kernel
     /// other than delta every return's amplitude and continuous depth are estimated under it
-    /// (--out-range).
+    /// (--out-range): model-based and tv pick each pixel's return from the response shifted by
+    /// 1/8 bin (tv with its neighbours' surfaces), the other methods start from their grid
+    /// estimate, auto runs tv and, where it leaves the data unexplained, the grid's start too.
     #[arg(long, value_name = "SPEC", value_parser = crate::simulate::parse_kernel)]
     pub kernel: Option<Response>,
     /// With --kernel: write the estimated depths in bins, float64 (M, N), NaN where there is no

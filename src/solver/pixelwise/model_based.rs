@@ -270,7 +270,14 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
         let mut keep: Vec<bool> = stat.iter().map(|s| *s >= z).collect();
         if let Some(rule) = self.surface {
             let lenient: Vec<bool> = stat.iter().map(|s| *s >= rule.z).collect();
-            let near = on_surface(op.space(), rule.grid, self.ks, voxels, &lenient);
+            let near = on_surface(
+                op.space(),
+                rule.grid,
+                self.ks,
+                voxels,
+                &lenient,
+                op.columns_per_bin(),
+            );
             for (((k, l), &count), s) in keep.iter_mut().zip(&lenient).zip(&near).zip(&stat) {
                 *k |= *l && count >= rule.neighbours;
                 if last && count == 0 && *s < rule.isolated_z {
@@ -401,7 +408,15 @@ impl<'w, T: Real> ModelBasedIteration<'w, T> {
                     .iter()
                     .map(|z| *z >= self.params.final_z)
                     .collect();
-                surface_depths(op.space(), rule.grid, ks, &self.voxels, &strong, rule.join)
+                surface_depths(
+                    op.space(),
+                    rule.grid,
+                    ks,
+                    &self.voxels,
+                    &strong,
+                    rule.join,
+                    op.columns_per_bin(),
+                )
             }
             _ => vec![None; first.len()],
         };

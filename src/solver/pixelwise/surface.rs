@@ -77,9 +77,10 @@ fn neighbour_depths(
     (out, count)
 }
 
-/// How many of `depths` lie within one bin of `d`.
-fn within_one(depths: &[f64], d: f64) -> usize {
-    depths.iter().filter(|e| (**e - d).abs() <= 1.0).count()
+/// How many of `depths` (in columns) lie within one bin (`per_bin` columns) of `d`.
+fn within_one(depths: &[f64], d: f64, per_bin: usize) -> usize {
+    let reach = per_bin as f64;
+    depths.iter().filter(|e| (**e - d).abs() <= reach).count()
 }
 
 /// For each voxel of `voxels` (at most one per pixel of `ks` voxels), how many of its pixel's
@@ -92,6 +93,7 @@ pub(crate) fn on_surface(
     ks: usize,
     voxels: &[usize],
     passing: &[bool],
+    per_bin: usize,
 ) -> Vec<usize> {
     let n = grid.1;
     let (map, first, all_rows) = depth_rows(space, grid, ks, voxels, passing);
@@ -100,7 +102,7 @@ pub(crate) fn on_surface(
         .map(|&v| {
             let p = v / ks;
             let (near, count) = neighbour_depths(&map, (p / n + first, p % n), n, all_rows);
-            within_one(&near[..count], (v % ks) as f64)
+            within_one(&near[..count], (v % ks) as f64, per_bin)
         })
         .collect()
 }
@@ -116,6 +118,7 @@ pub(crate) fn surface_depths(
     voxels: &[usize],
     passing: &[bool],
     need: usize,
+    per_bin: usize,
 ) -> Vec<Option<usize>> {
     let (rows, n) = grid;
     let (map, first, all_rows) = depth_rows(space, grid, ks, voxels, passing);
@@ -125,7 +128,7 @@ pub(crate) fn surface_depths(
             let near = &near[..count];
             let mut best: Option<(usize, f64)> = None;
             for &d in near {
-                let c = within_one(near, d);
+                let c = within_one(near, d, per_bin);
                 if best.is_none_or(|(bc, bd)| c > bc || c == bc && d < bd) {
                     best = Some((c, d));
                 }
@@ -154,21 +157,21 @@ mod tests {
             at(1, 2, 6),
         ];
         let all = vec![true; voxels.len()];
-        let got = surface_depths(&Whole, (3, 3), ks, &voxels, &all, 3);
+        let got = surface_depths(&Whole, (3, 3), ks, &voxels, &all, 3, 1);
         // The centre: 5, 5, 6, 6 lie within one bin of 5 (and of 6); the shallower wins.
         assert_eq!(got[4], Some(5));
         assert_eq!(
-            surface_depths(&Whole, (3, 3), ks, &voxels, &all, 5)[4],
+            surface_depths(&Whole, (3, 3), ks, &voxels, &all, 5, 1)[4],
             None
         );
         // (2, 1) sees (1, 0) at 2 and (1, 2) at 6 only: one each.
         assert_eq!(got[7], None);
         assert_eq!(
-            surface_depths(&Whole, (3, 3), ks, &voxels, &all, 1)[7],
+            surface_depths(&Whole, (3, 3), ks, &voxels, &all, 1, 1)[7],
             Some(2)
         );
         // Need 0 means no rule.
-        assert!(surface_depths(&Whole, (3, 3), ks, &voxels, &all, 0)
+        assert!(surface_depths(&Whole, (3, 3), ks, &voxels, &all, 0, 1)
             .iter()
             .all(Option::is_none));
     }
@@ -181,7 +184,7 @@ mod tests {
         let centre = at(1, 1, 2);
         let voxels = vec![at(0, 0, 1), at(0, 1, 3), at(0, 2, 0), at(1, 0, 2), centre];
         let all = vec![true; voxels.len()];
-        let got = on_surface(&Whole, (3, 3), ks, &voxels, &all);
+        let got = on_surface(&Whole, (3, 3), ks, &voxels, &all, 1);
         // The centre's neighbours within one bin: depths 1, 3 and 2 (not 0).
         assert_eq!(got[4], 3);
         // The corner (0, 0) at depth 1 sees (0, 1) at 3 (no), (1, 0) at 2 and the centre at 2;
@@ -191,8 +194,37 @@ mod tests {
         // A neighbour that does not pass does not count, wherever it is.
         let mut some = all.clone();
         some[1] = false;
-        assert_eq!(on_surface(&Whole, (3, 3), ks, &voxels, &some)[4], 2);
+        assert_eq!(on_surface(&Whole, (3, 3), ks, &voxels, &some, 1)[4], 2);
         some[4] = false;
-        assert_eq!(on_surface(&Whole, (3, 3), ks, &voxels, &some)[0], 1);
+        assert_eq!(on_surface(&Whole, (3, 3), ks, &voxels, &some, 1)[0], 1);
+    }
+
+    /// With 4 columns per bin (a dictionary of responses shifted by a quarter bin), one bin is
+    /// 4 columns: the same scene with every depth times 4 counts the same neighbours, and its
+    /// surface depths are the same depths times 4.
+    #[test]
+    fn one_bin_is_columns_per_bin_columns() {
+        let ks = 4;
+        let at = |i: usize, j: usize, d: usize, ks: usize| (i * 3 + j) * ks + d;
+        let scene = [(0, 0, 1), (0, 1, 3), (0, 2, 0), (1, 0, 2), (1, 1, 2)];
+        let voxels: Vec<usize> = scene.iter().map(|&(i, j, d)| at(i, j, d, ks)).collect();
+        let fine: Vec<usize> = scene
+            .iter()
+            .map(|&(i, j, d)| at(i, j, 4 * d, 4 * ks))
+            .collect();
+        let all = vec![true; voxels.len()];
+        assert_eq!(
+            on_surface(&Whole, (3, 3), ks, &voxels, &all, 1),
+            on_surface(&Whole, (3, 3), 4 * ks, &fine, &all, 4)
+        );
+        // Counted in columns, only the centre's neighbour at its own depth is within one.
+        assert_eq!(on_surface(&Whole, (3, 3), 4 * ks, &fine, &all, 1)[4], 1);
+        let coarse = surface_depths(&Whole, (3, 3), ks, &voxels, &all, 2, 1);
+        let scaled: Vec<Option<usize>> = coarse.iter().map(|d| d.map(|d| 4 * d)).collect();
+        assert!(coarse.iter().any(Option::is_some));
+        assert_eq!(
+            surface_depths(&Whole, (3, 3), 4 * ks, &fine, &all, 2, 4),
+            scaled
+        );
     }
 }

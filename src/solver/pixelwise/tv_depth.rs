@@ -198,6 +198,7 @@ where
         floor: params.neighbour_floor,
         reference: (mean, var.max(1e-6 * mean * mean).max(f64::MIN_POSITIVE)),
         gate: params.neighbour_gate,
+        per_bin: op.columns_per_bin(),
     };
     let mut last = x.to_vec();
     let y2 = crate::linalg::dot(y, y);
@@ -561,8 +562,10 @@ where
     O: Observer<T> + ?Sized,
 {
     let ks = op.column_len();
+    // λ and the windows in bins, the depths in columns.
+    let per_bin = op.columns_per_bin();
     let tv = TvParams {
-        lambda: params.lambda,
+        lambda: params.lambda * per_bin as f64,
         ..params.tv
     };
     let windowed = ModelBasedParams {
@@ -587,8 +590,8 @@ where
             .iter()
             .map(|&c| {
                 (
-                    c.saturating_sub(params.window),
-                    (c + params.window).min(ks - 1),
+                    c.saturating_sub(params.window * per_bin),
+                    (c + params.window * per_bin).min(ks - 1),
                 )
             })
             .collect();

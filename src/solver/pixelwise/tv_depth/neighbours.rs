@@ -18,6 +18,8 @@ pub(super) struct Neighbourhood {
     pub(super) reference: (f64, f64),
     /// Neighbours whose expected amplitude is below `gate · reference.0` count as empty.
     pub(super) gate: f64,
+    /// Columns per depth bin: the depth distribution spreads over ± this many columns.
+    pub(super) per_bin: usize,
 }
 
 /// The neighbourhood prior of every pixel from the posteriors of the others:
@@ -99,10 +101,11 @@ pub(super) fn neighbour_priors(
                     hood.reference
                 });
                 // Each depth's neighbours summed, then spread over ±1 bin (slanted surfaces).
-                for d in 0..ks {
-                    let below = if d > 0 { h[d - 1] } else { 0.0 };
-                    let above = if d + 1 < ks { h[d + 1] } else { 0.0 };
-                    spread[d] = below + h[d] + above;
+                let reach = hood.per_bin;
+                for (d, s) in spread.iter_mut().enumerate() {
+                    *s = h[d.saturating_sub(reach)..(d + reach + 1).min(ks)]
+                        .iter()
+                        .sum();
                 }
                 let total: f64 = spread.iter().sum();
                 depth.extend(spread.iter().map(|&v| {
