@@ -208,6 +208,27 @@ fn parameter_columns(rets: &[(f64, f64)], response: &Response, ks: usize) -> Vec
         .collect()
 }
 
+/// Each pixel's Gram block: computed once where every pixel shares it, per pixel otherwise.
+pub(super) struct Grams<'a, T> {
+    op: &'a dyn LidarOperator<T>,
+    uniform: Option<Vec<f64>>,
+}
+
+impl<'a, T: Real> Grams<'a, T> {
+    pub(super) fn new(op: &'a dyn LidarOperator<T>) -> Self {
+        let uniform = op.uniform_pixel_gram().then(|| op.pixel_gram(0));
+        Grams { op, uniform }
+    }
+
+    /// Pixel `p`'s Gram block, K_s × K_s by rows.
+    pub(super) fn of(&self, p: usize) -> std::borrow::Cow<'_, [f64]> {
+        match &self.uniform {
+            Some(g) => std::borrow::Cow::Borrowed(g),
+            None => std::borrow::Cow::Owned(self.op.pixel_gram(p)),
+        }
+    }
+}
+
 /// The bound on the depth of each of one pixel's returns `(a, d)` from its Gram block `gram`
 /// (ks × ks, row-major), the other pixels held.
 pub(super) fn pixel_bound(

@@ -14,6 +14,7 @@ mod names;
 mod options;
 mod peaks;
 mod photon;
+mod prior;
 mod pursuit;
 mod range_metrics;
 mod reconstruct;

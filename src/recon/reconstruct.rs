@@ -243,15 +243,9 @@ fn continuous<T: Real>(
         ));
     }
     let g = op.geometry();
-    let from_grid = |observer: &mut dyn Observer<T>| -> Result<_> {
-        let grid = ReconstructOptions {
-            response: crate::lidar::Response::Delta,
-            ..options.clone()
-        };
-        let (x, used, report, stages) = solve(op, y, method, &grid, observer)?;
-        let report = report.unwrap_or_else(|| Report::empty(used.name()));
-        let c = subbin::from_voxels(op, y, &x, &options.response, report)?;
-        Ok((c, used, stages))
+    let grid = ReconstructOptions {
+        response: crate::lidar::Response::Delta,
+        ..options.clone()
     };
     let response = &options.response;
     let (estimate, method_used, stages) = match method {
@@ -262,23 +256,41 @@ fn continuous<T: Real>(
                 AtomStart::Pursuit
             };
             let c = subbin::pursue(op, y, options, start, observer)?;
-            (subbin::settle(op, y, c, response)?, method, Vec::new())
+            (
+                subbin::settle(op, y, c, response, None)?,
+                method,
+                Vec::new(),
+            )
         }
-        // TV over the response's atoms; where it leaves the data unexplained, the fit from the
-        // grid methods too, and the one that explains the data better kept and settled.
+        // TV over the response's atoms; where it leaves the data unexplained, the grid methods
+        // too, whose returns are proposed where they differ from TV's.
         Method::Auto => {
             let surfaces = subbin::pursue(op, y, options, AtomStart::Surfaces, observer)?;
-            let (kept, used, stages) = if subbin::explains(y, &surfaces) {
-                subbin::better_start(y, (surfaces, Method::Tv), None)
+            if subbin::explains(y, &surfaces) {
+                let stages = subbin::atom_stages(y, &surfaces, None, 0);
+                (
+                    subbin::settle(op, y, surfaces, response, None)?,
+                    Method::Tv,
+                    stages,
+                )
             } else {
-                let grid = from_grid(observer)?;
-                subbin::better_start(y, (surfaces, Method::Tv), Some(grid))
-            };
-            (subbin::settle(op, y, kept, response)?, used, stages)
+                let (x, used, _, grid_stages) = solve(op, y, method, &grid, observer)?;
+                let others = subbin::returns_in(&x, response, g.ks);
+                let hints: Vec<Option<f64>> = others.iter().map(|r| r.map(|r| r.d)).collect();
+                let (start, added) = match subbin::filled(op, y, &surfaces, &others, response)? {
+                    Some((f, added)) if subbin::fits_better(&f, &surfaces) => (f, added),
+                    _ => (surfaces, 0),
+                };
+                let stages = subbin::atom_stages(y, &start, Some((grid_stages, used)), added);
+                let settled = subbin::settle(op, y, start, response, Some(&hints))?;
+                (settled, Method::Tv, stages)
+            }
         }
         _ => {
-            let (grid, used, stages) = from_grid(observer)?;
-            (subbin::settle(op, y, grid, response)?, used, stages)
+            let (x, used, report, stages) = solve(op, y, method, &grid, observer)?;
+            let report = report.unwrap_or_else(|| Report::empty(used.name()));
+            let c = subbin::from_voxels(op, y, &x, response, report)?;
+            (subbin::settle(op, y, c, response, None)?, used, stages)
         }
     };
     let scene = Scene::from_vec(g, estimate.x)?;

@@ -49,7 +49,7 @@ pub(super) const REFIT_TARGET: f64 = 1e-12;
 /// iteration; a rise can only be round-off and ends the refit too. The rule reads the objective
 /// ½‖r‖², the same on every process of a split operator, so every process stops at the same
 /// iteration.
-const ROUND_OFF_WINDOW: usize = 3;
+pub(super) const ROUND_OFF_WINDOW: usize = 3;
 
 /// [`refit_support`] to the relative residual `target` instead of [`REFIT_TARGET`].
 ///

@@ -2,7 +2,8 @@
 //! bin off (or missing, or false) cannot move them, for the response's slope does not reach
 //! that far, and their misfit spreads over every measurement. Each round proposes, for every
 //! pixel beside a lit one, the depths its neighbours suggest (a neighbour's depth, and the
-//! plane through two neighbours in a line continued to the pixel) and no return; a proposal is
+//! plane through two neighbours in a line continued to the pixel, and the pixel's depth in
+//! another estimate where one is given: `auto`'s grid methods') and no return; a proposal is
 //! taken where it lowers the data misfit by more than the noise could (the pixel's own
 //! contribution added back to the residual, its amplitude by least squares, the change judged
 //! through the pixel's Gram block), or, for a depth further from its neighbours' prediction
@@ -27,7 +28,7 @@ const TRIAL_STEPS: usize = 4;
 const ROUNDS: usize = 8;
 
 /// Standard deviations of the noise in a proposal's gain it must exceed.
-const NOISE_MARGIN: f64 = 3.0;
+pub(super) const NOISE_MARGIN: f64 = 3.0;
 
 /// How far (in bins) a depth may lie from what its neighbours predict before the prediction is
 /// proposed whatever its gain.
@@ -108,6 +109,7 @@ pub(super) fn refine_with_neighbours<T: Real>(
     y: &[T],
     (mut found, mut rr): (Vec<Ret>, f64),
     response: &Response,
+    hints: Option<&[Option<f64>]>,
     applies: &mut Applies,
 ) -> Result<(Vec<Ret>, f64)> {
     let yy = dot(y, y);
@@ -115,7 +117,7 @@ pub(super) fn refine_with_neighbours<T: Real>(
         if rr <= 1e-28 * yy {
             break;
         }
-        let proposals = propose(op, y, &found, response, rr, applies)?;
+        let proposals = propose(op, y, &found, response, rr, hints, applies)?;
         if proposals.is_empty() {
             break;
         }
@@ -201,6 +203,7 @@ fn propose<T: Real>(
     found: &[Ret],
     response: &Response,
     rr: f64,
+    hints: Option<&[Option<f64>]>,
     applies: &mut Applies,
 ) -> Result<Vec<Proposal>> {
     let g = op.geometry();
@@ -228,7 +231,7 @@ fn propose<T: Real>(
     applies.adjoint += 1;
     let unknowns = 2 * found.len();
     let sigma = (rr / y.len().saturating_sub(unknowns).max(1) as f64).sqrt();
-    let uniform = op.uniform_pixel_gram().then(|| op.pixel_gram(0));
+    let grams = super::bound::Grams::new(op);
     let depth = |i: isize, j: isize| -> Option<f64> {
         if i < 0 || j < 0 || i >= m as isize || j >= n as isize {
             return None;
@@ -270,23 +273,24 @@ fn propose<T: Real>(
                 &lines
             } else {
                 &neighbours
-            })?;
-            let own;
-            let gram = match &uniform {
-                Some(gram) => gram,
-                None => {
-                    own = op.pixel_gram(p);
-                    &own
-                }
+            });
+            let hint = hints.and_then(|h| h[p]);
+            if prediction.is_none() && hint.is_none() {
+                return None;
+            }
+            let gram = grams.of(p);
+            let pixel = Pixel {
+                gram: &gram,
+                ks,
+                response,
             };
-            let pixel = Pixel { gram, ks, response };
             let old = pixel.column(state[p]);
             let g_old = pixel.times(&old);
             // b: the pixel's correlations with its own contribution added back.
             let b: Vec<f64> = (0..ks).map(|k| u[p * ks + k].as_f64() + g_old[k]).collect();
             let j_old = dot(&old, &g_old) - 2.0 * dot(&old, &b);
             let mut best: (f64, Option<(f64, f64)>) = (0.0, None);
-            for &d in neighbours.iter().chain(&lines) {
+            for &d in neighbours.iter().chain(&lines).chain(&hint) {
                 if let Some((j_new, a)) = pixel.fit(d, &b) {
                     if j_new < best.0 {
                         best = (j_new, Some((a, d)));
@@ -319,6 +323,7 @@ fn propose<T: Real>(
             // A depth the neighbours do not predict: proposed whatever the gain with the
             // other returns held.
             let (a0, d0) = state[p]?;
+            let prediction = prediction?;
             let scatter = NOISE_MARGIN * 5f64.sqrt() * pixel.depth_bound(a0, d0, sigma);
             if (d0 - prediction).abs() <= OUTLIER_BINS.max(scatter) {
                 return None;

@@ -15,7 +15,7 @@ use crate::linalg::dot;
 use crate::operator::{Applies, LinearOperator, OperatorExt, SparseMatrix};
 use crate::real::Real;
 use crate::solver::{
-    cgls, model_based, tv_depth, CglsParams, Observer, Report, Stopping, TvDepthParams,
+    cgls, model_based, tv_depth, CglsParams, Observer, Report, Stagnation, Stopping, TvDepthParams,
 };
 
 use super::atoms::{Atoms, Dictionary};
@@ -118,9 +118,33 @@ pub(crate) fn pursue<T: Real>(
     fit(op, y, found, &options.response, &mut report)
 }
 
-/// Each pixel's returns of the voxel estimate `x` (a method's on the grid) as continuous ones:
-/// per pixel, the response's atom that best explains its column (largest ⟨g_d, col⟩²/‖g_d‖²
-/// over depths 1/Q bin apart), then the continuous fit.
+/// Per pixel of the voxel estimate `x` (a method's on the grid), the response's atom that best
+/// explains its column (largest ⟨g_d, col⟩²/‖g_d‖² over depths 1/Q bin apart) and its weight;
+/// none for a pixel with no voxel or none that correlates positively.
+fn best_atoms<T: Real>(dict: &Dictionary, x: &[T]) -> Vec<Option<(usize, f64)>> {
+    let mut col = vec![0.0f64; dict.ks];
+    x.chunks(dict.ks)
+        .map(|xp| {
+            if xp.iter().all(|v| *v == T::zero()) {
+                return None;
+            }
+            for (c, v) in col.iter_mut().zip(xp) {
+                *c = v.as_f64();
+            }
+            // Unit atoms: the best has the largest inner product.
+            (0..dict.len())
+                .map(|c| {
+                    let (start, v) = dict.atom(c);
+                    (c, dot(v, &col[start..start + v.len()]))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .filter(|b| b.1 > 0.0)
+        })
+        .collect()
+}
+
+/// Each pixel's returns of the voxel estimate `x` (a method's on the grid) as continuous ones
+/// ([`best_atoms`]), then the continuous fit.
 pub(crate) fn from_voxels<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
@@ -128,33 +152,100 @@ pub(crate) fn from_voxels<T: Real>(
     response: &Response,
     mut report: Report,
 ) -> Result<Continuous<T>> {
-    let g = op.geometry();
-    let dict = Dictionary::new(response, g.ks, ATOMS_PER_BIN);
-    let mut found = Vec::new();
-    let mut col = vec![0.0f64; g.ks];
-    for (p, xp) in x.chunks(g.ks).enumerate() {
-        if xp.iter().all(|v| *v == T::zero()) {
-            continue;
-        }
-        for (c, v) in col.iter_mut().zip(xp) {
-            *c = v.as_f64();
-        }
-        // Unit atoms: the best has the largest inner product.
-        let best = (0..dict.len())
-            .map(|c| {
-                let (start, v) = dict.atom(c);
-                (c, dot(v, &col[start..start + v.len()]))
-            })
-            .max_by(|a, b| a.1.total_cmp(&b.1));
-        if let Some((c, ip)) = best.filter(|b| b.1 > 0.0) {
-            found.push(Ret {
+    let found = returns_in(x, response, op.geometry().ks)
+        .into_iter()
+        .flatten()
+        .collect();
+    fit(op, y, found, response, &mut report)
+}
+
+/// Each pixel's return in the voxel estimate `x` (a method's on the grid): the response's atom
+/// that best explains its column ([`best_atoms`]); none where the pixel has no return.
+pub(crate) fn returns_in<T: Real>(x: &[T], response: &Response, ks: usize) -> Vec<Option<Ret>> {
+    let dict = Dictionary::new(response, ks, ATOMS_PER_BIN);
+    best_atoms(&dict, x)
+        .into_iter()
+        .enumerate()
+        .map(|(p, b)| {
+            b.map(|(c, ip)| Ret {
                 pixel: p,
                 a: dict.amplitude(c, ip),
                 d: dict.depth(c),
-            });
-        }
+            })
+        })
+        .collect()
+}
+
+/// TV's fit is filled from another estimate when that one has returns in more
+/// than this share of TV's lit pixels' count where TV has none.
+const FILL_SHARE: f64 = 0.01;
+
+/// The fit `c` with the returns of `other` (per pixel, [`returns_in`]) added in the pixels where
+/// `c` has none, fitted, those the data do not hold above the noise taken out and the rest
+/// fitted again, and the number added; none when they are at most [`FILL_SHARE`] of `c`'s
+/// returns (then proposed one by one in [`settle`], which judges each against the noise) or
+/// none holds.
+pub(crate) fn filled<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    c: &Continuous<T>,
+    other: &[Option<Ret>],
+    response: &Response,
+) -> Result<Option<(Continuous<T>, usize)>> {
+    let mut lit = vec![false; other.len()];
+    for r in &c.found {
+        lit[r.pixel] = true;
     }
-    fit(op, y, found, response, &mut report)
+    let extra: Vec<Ret> = other
+        .iter()
+        .flatten()
+        .filter(|r| !lit[r.pixel])
+        .copied()
+        .collect();
+    if extra.len() as f64 <= FILL_SHARE * c.found.len() as f64 {
+        return Ok(None);
+    }
+    let mut report = c.report.clone();
+    let mut applies = Applies::default();
+    let mut found = c.found.clone();
+    found.extend(extra.iter().copied());
+    found.sort_by_key(|r| r.pixel);
+    let (mut found, mut misfit) = refine(op, y, found, response, GN_STEPS, &mut applies)?;
+    // The added returns the data do not hold: those whose column A·a·g(· − d) is not above the
+    // noise by the margin the proposals ask of a change (the noise from the filled fit's
+    // residual, which no longer holds the returns TV missed).
+    let dof = y.len().saturating_sub(2 * found.len()).max(1);
+    let sigma = (misfit / dof as f64).sqrt();
+    let ks = op.geometry().ks;
+    let grams = super::bound::Grams::new(op);
+    let weak = |r: &Ret| {
+        let gram = grams.of(r.pixel);
+        let mut col = vec![0.0; ks];
+        response.add_to(r.a, r.d, &mut col);
+        let energy: f64 = (0..ks)
+            .map(|k| col[k] * dot(&gram[k * ks..(k + 1) * ks], &col))
+            .sum();
+        energy.max(0.0).sqrt() <= 2.0 * super::reseat::NOISE_MARGIN * sigma
+    };
+    let before = found.len();
+    found.retain(|r| lit[r.pixel] || !weak(r));
+    if found.len() < before {
+        (found, misfit) = refine(op, y, found, response, GN_STEPS, &mut applies)?;
+    }
+    let added = found.iter().filter(|r| !lit[r.pixel]).count();
+    report.add_applies(applies);
+    if added == 0 {
+        return Ok(None);
+    }
+    Ok(Some((
+        continuous_of(op, found, misfit, response, report)?,
+        added,
+    )))
+}
+
+/// Whether `a`'s squared misfit is below `b`'s.
+pub(crate) fn fits_better<T>(a: &Continuous<T>, b: &Continuous<T>) -> bool {
+    a.misfit < b.misfit
 }
 
 /// The fit of the returns `found` ([`refine`]), then their voxels and [`Returns`].
@@ -190,20 +281,44 @@ fn continuous_of<T: Real>(
     })
 }
 
-/// The fitted estimate `c` after rounds of neighbour proposals
-/// ([`refine_with_neighbours`](super::reseat::refine_with_neighbours)).
+/// The fitted estimate `c` after rounds of proposals
+/// ([`refine_with_neighbours`](super::reseat::refine_with_neighbours): the depths its
+/// neighbours suggest, and each pixel's depth in `hints`, another estimate's, where given),
+/// then refitted with the prior on the depth map ([`with_prior`](super::prior::with_prior)).
 pub(crate) fn settle<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
     c: Continuous<T>,
     response: &Response,
+    hints: Option<&[Option<f64>]>,
 ) -> Result<Continuous<T>> {
     let mut applies = Applies::default();
-    let (found, misfit) =
-        super::reseat::refine_with_neighbours(op, y, (c.found, c.misfit), response, &mut applies)?;
+    let settled = super::reseat::refine_with_neighbours(
+        op,
+        y,
+        (c.found, c.misfit),
+        response,
+        hints,
+        &mut applies,
+    )?;
+    let (found, misfit) = super::prior::with_prior(op, y, settled, response, &mut applies)?;
     let mut report = c.report;
     report.add_applies(applies);
     continuous_of(op, found, misfit, response, report)
+}
+
+/// The returns `found` moved by `scale` times `step` (amplitudes kept nonnegative, depths within
+/// [0, top]).
+pub(super) fn stepped(found: &[Ret], step: &[(f64, f64)], scale: f64, top: f64) -> Vec<Ret> {
+    found
+        .iter()
+        .zip(step)
+        .map(|(r, (da, dd))| Ret {
+            pixel: r.pixel,
+            a: (r.a + scale * da).max(0.0),
+            d: (r.d + scale * dd).clamp(0.0, top),
+        })
+        .collect()
 }
 
 /// The least-squares fit of the returns `found` under `response` (the triangle's pair fit,
@@ -232,15 +347,7 @@ pub(super) fn refine<T: Real>(
         let mut scale = 1.0;
         let mut accepted = None;
         for _ in 0..=HALVINGS {
-            let trial: Vec<Ret> = found
-                .iter()
-                .zip(&step)
-                .map(|(r, (da, dd))| Ret {
-                    pixel: r.pixel,
-                    a: (r.a + scale * da).max(0.0),
-                    d: (r.d + scale * dd).clamp(0.0, top),
-                })
-                .collect();
+            let trial = stepped(&found, &step, scale, top);
             let t = residual(op, y, &trial, response, g.ks, applies)?;
             if t < rr {
                 accepted = Some((trial, t));
@@ -312,17 +419,22 @@ fn fit_pairs<T: Real>(
         })
         .collect();
     // The rounds decide the moves on a fit to 1e-6 of the first gradient; the pairs they end on
-    // are fitted to 1e-12.
+    // are fitted to 1e-12, or until the misfit stirs only round-off (in `f32` long before).
+    let yy = dot(y, y);
     let solve = |tolerance: f64| CglsParams {
         damp: 0.0,
         stopping: Stopping {
             max_iter: 500,
             rel_residual: Some(tolerance),
+            stagnation: Some(Stagnation {
+                rel: 0.0,
+                window: super::refit::ROUND_OFF_WINDOW,
+                floor: 0.5 * T::EPS * T::EPS * yy,
+            }),
             ..Stopping::default()
         },
     };
     let (params, tight) = (solve(1e-6), solve(1e-12));
-    let yy = dot(y, y);
     let mut best: Option<(f64, Vec<usize>, Vec<T>)> = None;
     // The share of the largest gain a move needs; raised when a round's moves did not help.
     let mut share = 0.05;
@@ -505,7 +617,7 @@ fn misfit<'a, T: Real>(
 }
 
 /// ‖y − A·x(returns)‖².
-fn residual<T: Real>(
+pub(super) fn residual<T: Real>(
     op: &dyn LidarOperator<T>,
     y: &[T],
     found: &[Ret],
@@ -521,17 +633,19 @@ fn residual<T: Real>(
     Ok(dot(&r, &r))
 }
 
-/// The Gauss–Newton step (Δa, Δd) of every return: the least squares of the Jacobian against
-/// the residual. The depth's column is taken as −A·g′ (the step in a·d) so that both columns
-/// of a return have the scale of its response.
-fn gauss_newton_step<T: Real>(
-    op: &dyn LidarOperator<T>,
+/// The Jacobian of the returns' measurements in the step variables (Δa, a·Δd) of each return
+/// (columns A·g(· − d) and −A·g′(· − d): the depth's column taken as −A·g′, the step in a·d, so
+/// that both columns of a return have the scale of its response), and the residual
+/// y − A·x(returns).
+pub(super) type Jacobian<'a, T> = (Box<dyn LinearOperator<T> + 'a>, Vec<T>);
+
+pub(super) fn jacobian<'a, T: Real>(
+    op: &'a dyn LidarOperator<T>,
     y: &[T],
     found: &[Ret],
     response: &Response,
     ks: usize,
-    applies: &mut Applies,
-) -> Result<Vec<(f64, f64)>> {
+) -> Result<Jacobian<'a, T>> {
     let (a, (voxels, entries), r) = misfit(op, y, found, response, ks)?;
     let n = found.len();
     let mut tri = sprs::TriMat::new((voxels.len(), 2 * n));
@@ -542,19 +656,25 @@ fn gauss_newton_step<T: Real>(
             tri.add_triplet(i, 2 * j + 1, T::of_f64(-s));
         }
     }
-    let j = a.compose(SparseMatrix::new(tri.to_csr())?)?;
-    let mut delta = vec![T::zero(); 2 * n];
-    let params = CglsParams {
+    let j: Box<dyn LinearOperator<T> + 'a> = Box::new(a.compose(SparseMatrix::new(tri.to_csr())?)?);
+    Ok((j, r))
+}
+
+/// The CGLS settings of a Gauss–Newton step's least squares.
+pub(super) fn step_solve() -> CglsParams {
+    CglsParams {
         damp: 0.0,
         stopping: Stopping {
             max_iter: GN_SOLVE_ITERATIONS,
             rel_residual: Some(GN_SOLVE_TOLERANCE),
             ..Stopping::default()
         },
-    };
-    let rep = cgls(&j, &r, &mut delta, &params, &mut ())?;
-    applies.support += 1 + rep.forward_applies + rep.adjoint_applies;
-    Ok(found
+    }
+}
+
+/// The step variables (Δa, a·Δd) of every return as (Δa, Δd).
+pub(super) fn step_of<T: Real>(found: &[Ret], delta: &[T]) -> Vec<(f64, f64)> {
+    found
         .iter()
         .enumerate()
         .map(|(i, ret)| {
@@ -562,7 +682,24 @@ fn gauss_newton_step<T: Real>(
             let ad = delta[2 * i + 1].as_f64();
             (da, if ret.a > 0.0 { ad / ret.a } else { 0.0 })
         })
-        .collect())
+        .collect()
+}
+
+/// The Gauss–Newton step (Δa, Δd) of every return: the least squares of the [`jacobian`]
+/// against the residual.
+fn gauss_newton_step<T: Real>(
+    op: &dyn LidarOperator<T>,
+    y: &[T],
+    found: &[Ret],
+    response: &Response,
+    ks: usize,
+    applies: &mut Applies,
+) -> Result<Vec<(f64, f64)>> {
+    let (j, r) = jacobian(op, y, found, response, ks)?;
+    let mut delta = vec![T::zero(); 2 * found.len()];
+    let rep = cgls(&j, &r, &mut delta, &step_solve(), &mut ())?;
+    applies.support += 1 + rep.forward_applies + rep.adjoint_applies;
+    Ok(step_of(found, &delta))
 }
 
 /// The returns as [`Returns`] on an `m`×`n` grid, each pixel's returns nearest first.
@@ -584,59 +721,43 @@ pub(crate) fn returns_of(found: &[Ret], m: usize, n: usize) -> Returns {
     Returns { depth, amplitude }
 }
 
-/// Of `auto`'s continuous estimates, the one over the response's atoms (`atoms`, with the
-/// method that picked them) and the fit from the grid methods' returns (`grid`, with the method
-/// auto kept and its stages; none when the first explained the data), the one whose data misfit
-/// ‖y − A·x‖ is smaller, with each told as a stage.
-pub(crate) fn better_start<T: Real>(
+/// `auto`'s stages under a response: TV over the response's atoms (`atoms`, its fit), then,
+/// where that left the data unexplained, the grid methods' stages (`grid`, with the method auto
+/// chose among them), whose returns the settling proposes, none of them kept as they are.
+pub(crate) fn atom_stages<T: Real>(
     y: &[T],
-    atoms: (Continuous<T>, Method),
-    grid: Option<(Continuous<T>, Method, Vec<Stage>)>,
-) -> (Continuous<T>, Method, Vec<Stage>) {
-    let (atoms, picked) = atoms;
-    let ra = relative_misfit(y, &atoms);
-    let rg = grid.as_ref().map(|g| relative_misfit(y, &g.0));
-    let keep_atoms = rg.is_none_or(|rg| ra <= rg);
-    let stage = |method, r: f64, c: &Continuous<T>, kept: bool, verdict: &str| Stage {
-        method,
-        relative_residual: r,
-        returns: c.returns.depth.iter().filter(|d| !d.is_nan()).count(),
-        report: Some(c.report.clone()),
-        kept,
-        verdict: verdict.to_string(),
+    atoms: &Continuous<T>,
+    grid: Option<(Vec<Stage>, Method)>,
+    added: usize,
+) -> Vec<Stage> {
+    let over = "continuous depths from TV on the depth map over the response's atoms";
+    let verdict = match &grid {
+        Some((_, used)) if added > 0 => format!(
+            "{over}, with the grid methods' {} returns added in the {added} pixels it left \
+             empty and proposed where they differ",
+            used.name()
+        ),
+        Some((_, used)) => format!(
+            "{over}, with the grid methods' {} returns proposed where they differ",
+            used.name()
+        ),
+        None => format!("{over} explain the data: no grid method"),
     };
-    let over = match picked {
-        Method::Tv => "TV on the depth map over the response's atoms",
-        _ => "the pursuit on the response's atoms",
-    };
-    let verdict = if grid.is_some() {
-        format!("continuous depths from {over}")
-    } else {
-        format!("continuous depths from {over} explain the data: no grid method")
-    };
-    let mut stages = vec![stage(picked, ra, &atoms, keep_atoms, &verdict)];
-    match grid {
-        Some((grid, used, grid_stages)) => {
-            let rg = rg.expect("a grid estimate");
-            stages.extend(grid_stages.into_iter().map(|mut s| {
-                s.kept &= !keep_atoms;
-                s
-            }));
-            stages.push(stage(
-                used,
-                rg,
-                &grid,
-                !keep_atoms,
-                "continuous depths fitted from the grid methods' returns",
-            ));
-            if keep_atoms {
-                (atoms, picked, stages)
-            } else {
-                (grid, used, stages)
-            }
-        }
-        None => (atoms, picked, stages),
+    let mut stages = vec![Stage {
+        method: Method::Tv,
+        relative_residual: relative_misfit(y, atoms),
+        returns: atoms.returns.depth.iter().filter(|d| !d.is_nan()).count(),
+        report: Some(atoms.report.clone()),
+        kept: true,
+        verdict,
+    }];
+    if let Some((grid, _)) = grid {
+        stages.extend(grid.into_iter().map(|mut s| {
+            s.kept = false;
+            s
+        }));
     }
+    stages
 }
 
 /// ‖y − A·x‖/‖y‖ of a fitted estimate.
