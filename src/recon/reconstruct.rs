@@ -274,16 +274,32 @@ fn continuous<T: Real>(
                     stages,
                 )
             } else {
-                let (x, used, _, grid_stages) = solve(op, y, method, &grid, observer)?;
+                let (x, used, report, grid_stages) = solve(op, y, method, &grid, observer)?;
                 let others = subbin::returns_in(&x, response, g.ks);
-                let hints: Vec<Option<f64>> = others.iter().map(|r| r.map(|r| r.d)).collect();
                 let (start, added) = match subbin::filled(op, y, &surfaces, &others, response)? {
                     Some((f, added)) if subbin::fits_better(&f, &surfaces) => (f, added),
                     _ => (surfaces, 0),
                 };
-                let stages = subbin::atom_stages(y, &start, Some((grid_stages, used)), added);
+                // The grid methods' returns fitted on their own, kept where TV's surfaces
+                // stalled so far that even filled they explain less.
+                let report = report.unwrap_or_else(|| Report::empty(used.name()));
+                let alone = subbin::from_voxels(op, y, &x, response, report)?;
+                let from_grid = subbin::fits_better(&alone, &start);
+                let stages = subbin::atom_stages(
+                    y,
+                    &start,
+                    Some((grid_stages, used, &alone, from_grid)),
+                    added,
+                );
+                // Each pixel's depth in the start not kept is proposed in its place.
+                let (start, other, picked) = if from_grid {
+                    (alone, start, used)
+                } else {
+                    (start, alone, Method::Tv)
+                };
+                let hints = subbin::depths_by_pixel(&other, g.m * g.n);
                 let settled = subbin::settle(op, y, start, response, Some(&hints))?;
-                (settled, Method::Tv, stages)
+                (settled, picked, stages)
             }
         }
         _ => {

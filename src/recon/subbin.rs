@@ -176,6 +176,15 @@ pub(crate) fn returns_in<T: Real>(x: &[T], response: &Response, ks: usize) -> Ve
         .collect()
 }
 
+/// Each pixel's depth in `c` (its first return's), none where it has no return.
+pub(crate) fn depths_by_pixel<T>(c: &Continuous<T>, pixels: usize) -> Vec<Option<f64>> {
+    let mut out = vec![None; pixels];
+    for r in c.found.iter().rev() {
+        out[r.pixel] = Some(r.d);
+    }
+    out
+}
+
 /// TV's fit is filled from another estimate when that one has returns in more
 /// than this share of TV's lit pixels' count where TV has none.
 const FILL_SHARE: f64 = 0.01;
@@ -727,17 +736,18 @@ pub(crate) fn returns_of(found: &[Ret], m: usize, n: usize) -> Returns {
 pub(crate) fn atom_stages<T: Real>(
     y: &[T],
     atoms: &Continuous<T>,
-    grid: Option<(Vec<Stage>, Method)>,
+    grid: Option<(Vec<Stage>, Method, &Continuous<T>, bool)>,
     added: usize,
 ) -> Vec<Stage> {
     let over = "continuous depths from TV on the depth map over the response's atoms";
+    let from_grid = grid.as_ref().is_some_and(|g| g.3);
     let verdict = match &grid {
-        Some((_, used)) if added > 0 => format!(
+        Some((_, used, ..)) if added > 0 => format!(
             "{over}, with the grid methods' {} returns added in the {added} pixels it left \
              empty and proposed where they differ",
             used.name()
         ),
-        Some((_, used)) => format!(
+        Some((_, used, ..)) => format!(
             "{over}, with the grid methods' {} returns proposed where they differ",
             used.name()
         ),
@@ -748,14 +758,24 @@ pub(crate) fn atom_stages<T: Real>(
         relative_residual: relative_misfit(y, atoms),
         returns: atoms.returns.depth.iter().filter(|d| !d.is_nan()).count(),
         report: Some(atoms.report.clone()),
-        kept: true,
+        kept: !from_grid,
         verdict,
     }];
-    if let Some((grid, _)) = grid {
+    if let Some((grid, used, alone, _)) = grid {
         stages.extend(grid.into_iter().map(|mut s| {
-            s.kept = false;
+            s.kept &= from_grid;
             s
         }));
+        stages.push(Stage {
+            method: used,
+            relative_residual: relative_misfit(y, alone),
+            returns: alone.returns.depth.iter().filter(|d| !d.is_nan()).count(),
+            report: Some(alone.report.clone()),
+            kept: from_grid,
+            verdict: "continuous depths fitted from the grid methods' returns alone, with \
+                      TV's proposed where they differ"
+                .to_string(),
+        });
     }
     stages
 }
