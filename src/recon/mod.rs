@@ -12,6 +12,7 @@ mod method;
 mod metrics;
 mod names;
 mod options;
+mod pairs;
 mod peaks;
 mod photon;
 mod prior;
